@@ -1,0 +1,68 @@
+"""``python -m derivation SCENE [--formulation F] [--out DIR] [--check]``.
+
+Derives a scene's equations of motion and renders them into ``generated/<scene>_<F>/``;
+with ``--check``, compares instead of writing and exits 1 when anything is stale.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+from pathlib import Path
+
+from flexbody.paths import generated_root, model_dir_name
+from flexbody.scene import FORMULATIONS, SceneError, load_scene
+
+from .writer import check_model, render_scene, write_model
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="flexbody derive", description=__doc__.splitlines()[2].strip())
+    parser.add_argument("scene", help="scene file or bundled scene name")
+    parser.add_argument("--formulation", choices=FORMULATIONS, action="append",
+                        help="particles or floating (repeatable; default: both)")
+    parser.add_argument("--out", type=Path, help="parent folder (default: the project's generated/)")
+    parser.add_argument("--check", action="store_true", help="fail if generated files are stale; write nothing")
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = _parser().parse_args(argv)
+    if os.environ.get("PYTHONHASHSEED") != "0":
+        # SymPy's CSE output can depend on hash order: run with a fixed seed for byte-stable files.
+        import subprocess
+
+        env = dict(os.environ, PYTHONHASHSEED="0")
+        return subprocess.call([sys.executable, "-m", "derivation", *(argv or sys.argv[1:])], env=env)
+    try:
+        scene = load_scene(args.scene)
+    except SceneError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    root = args.out or generated_root()
+    stale = 0
+    for formulation in args.formulation or FORMULATIONS:
+        name = args.scene if Path(args.scene).suffix == "" else str(args.scene)
+        start = time.perf_counter()
+        files = render_scene(scene, formulation, source=name,
+                             command=f"flexbody derive {name} --formulation {formulation}")
+        seconds = time.perf_counter() - start
+        folder = root / model_dir_name(scene.name, formulation)
+        if args.check:
+            problems = check_model(files, folder)
+            stale += bool(problems)
+            print(f"{folder}: {'STALE' if problems else 'fresh'} (derived in {seconds:.1f} s)")
+            for problem in problems:
+                print(problem)
+        else:
+            write_model(files, folder)
+            print(f"wrote {folder} ({formulation}, derived and rendered in {seconds:.1f} s)")
+    if stale:
+        print("generated code is stale: regenerate with `flexbody derive SCENE` and commit it", file=sys.stderr)
+    return 1 if stale else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

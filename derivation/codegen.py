@@ -1,0 +1,227 @@
+"""Code generation: SymbolicModel -> one CSE pass -> printed blocks -> jinja2 templates.
+
+The math (CSE, printing) happens here in Python; the templates in ``templates/`` only
+lay the printed blocks out.  Output is deterministic: no timestamps, symbols in manifest
+order, CSE with ``order='none'`` over all outputs together.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import jinja2
+import sympy as sp
+
+from flexbody.topology import GENERATOR_VERSION
+
+from .mechanics import ENERGY_NAMES, SymbolicModel
+from .printers import CPrinter, PyPrinter
+
+TEMPLATES = Path(__file__).parent / "templates"
+#: Rendered files: template name -> output file name.
+FILES = {
+    "model.py.jinja": "model.py",
+    "model.c.jinja": "model.c",
+    "model.h.jinja": "model.h",
+    "eom.md.jinja": "eom.md",
+}
+#: Generated functions in the order they appear, with one-line descriptions.
+FUNCTIONS = {
+    "mass_matrix": "Mass matrix M(q, p) of M u' = F.",
+    "forcing": "Forcing F(q, u, p) of M u' = F: springs, dampers, gravity and velocity terms.",
+    "energies": "Kinetic, spring and gravity energy (J) and damping power (W, >= 0).",
+    "damping_power": "Power dissipated by the dampers (W, >= 0).",
+    "positions": "Particle positions in N (m).",
+    "velocities": "Particle velocities in N (m/s).",
+    "gaps": "Ground gap of every contact (particle * n_grounds + ground), m; < 0 is penetration.",
+    "gap_jacobian": "d gaps / dq (with q' = u, gap rates are gap_jacobian @ u).",
+    "gap_bias": "d/dt(gap_jacobian) @ u: gap accelerations are gap_jacobian @ u' + gap_bias.",
+    "jacobian_q": "d(F - M a)/dq at acceleration a.",
+    "jacobian_u": "dF/du.",
+}
+
+
+@dataclass
+class Block:
+    """One generated function: CSE temporaries it needs and its nonzero output entries."""
+
+    name: str
+    doc: str
+    shape: tuple[int, ...]
+    inputs: list[str]  # the argument groups it reads, subset of q, u, p, a
+    unpack: list[tuple[str, str, int]]  # (symbol, group, index) for the Python module
+    temporaries: list[tuple[str, str, str]]  # (name, C expression, Python expression)
+    entries: list[tuple[int, tuple[int, ...], str, str]]  # (flat index, index, C, Python)
+    ops: int
+
+
+def _cse(model: SymbolicModel) -> tuple[list[tuple[sp.Symbol, sp.Expr]], dict[str, list[sp.Expr]]]:
+    """One CSE pass over every output together; returns temporaries and reduced outputs."""
+    flat: list[sp.Expr] = []
+    spans: dict[str, tuple[int, int]] = {}
+    for name in FUNCTIONS:
+        entries = list(model.outputs[name])
+        spans[name] = (len(flat), len(flat) + len(entries))
+        flat.extend(entries)
+    temporaries, reduced = sp.cse(flat, symbols=sp.numbered_symbols("w"), order="none")
+    return temporaries, {name: reduced[a:b] for name, (a, b) in spans.items()}
+
+
+def _check_coverage(model: SymbolicModel) -> None:
+    """Every free symbol of every output must be an input (q, u, p or a)."""
+    inputs = set(model.q) | set(model.u) | set(model.p) | set(model.a)
+    missing = {
+        name: sorted(str(s) for s in matrix.free_symbols - inputs) for name, matrix in model.outputs.items()
+    }
+    missing = {k: v for k, v in missing.items() if v}
+    if missing:
+        raise RuntimeError(f"outputs use symbols that are not inputs (q, u, p, a): {missing}")
+
+
+def build_blocks(model: SymbolicModel) -> list[Block]:
+    """CSE all outputs once, then give each function the temporaries it depends on."""
+    _check_coverage(model)
+    temporaries, reduced = _cse(model)
+    groups = {"q": model.q, "u": model.u, "p": model.p, "a": model.a}
+    where = {s: (g, i) for g, syms in groups.items() for i, s in enumerate(syms)}
+    c_printer = CPrinter({s.name: f"{g}[{i}]" for s, (g, i) in where.items()})
+    py_printer = PyPrinter()
+    defined = dict(temporaries)
+    order = {t: k for k, (t, _) in enumerate(temporaries)}
+    blocks = []
+    for name, doc in FUNCTIONS.items():
+        exprs = reduced[name]
+        shape = model.outputs[name].shape
+        shape = (shape[0],) if shape[1] == 1 and name not in ("positions", "velocities") else shape
+        needed: set[sp.Symbol] = set()
+        stack = [s for e in exprs for s in e.free_symbols if s in defined]
+        while stack:
+            t = stack.pop()
+            if t not in needed:
+                needed.add(t)
+                stack.extend(s for s in defined[t].free_symbols if s in defined)
+        used_temps = sorted(needed, key=order.__getitem__)
+        free = set().union(*(e.free_symbols for e in exprs), *(defined[t].free_symbols for t in used_temps))
+        inputs = sorted({where[s][0] for s in free if s in where}, key="qupa".index)
+        unpack = sorted(((s.name, *where[s]) for s in free if s in where), key=lambda x: ("qupa".index(x[1]), x[2]))
+        cols = shape[1] if len(shape) == 2 else 1
+        entries = [
+            (k, divmod(k, cols) if len(shape) == 2 else (k,), c_printer.doprint(e), py_printer.doprint(e))
+            for k, e in enumerate(exprs)
+            if e != 0
+        ]
+        blocks.append(
+            Block(
+                name=name,
+                doc=doc,
+                shape=tuple(shape),
+                inputs=inputs,
+                unpack=unpack,
+                temporaries=[
+                    (t.name, c_printer.doprint(defined[t]), py_printer.doprint(defined[t])) for t in used_temps
+                ],
+                entries=entries,
+                ops=int(sp.count_ops([defined[t] for t in used_temps] + list(exprs))),
+            )
+        )
+    return blocks
+
+
+def _environment() -> jinja2.Environment:
+    return jinja2.Environment(
+        loader=jinja2.FileSystemLoader(str(TEMPLATES)),
+        undefined=jinja2.StrictUndefined,
+        trim_blocks=True,
+        lstrip_blocks=True,
+        keep_trailing_newline=True,
+        autoescape=False,
+    )
+
+
+def _equations(model: SymbolicModel) -> list[dict[str, str]]:
+    """Readable equations of motion, row by row: sum_j M_rj u_j' = F_r."""
+    M, F = model.outputs["mass_matrix"], model.outputs["forcing"]
+    rows = []
+    for r, speed in enumerate(model.u):
+        lhs = sum((M[r, j] * sp.Symbol(f"{model.u[j].name}'") for j in range(M.cols) if M[r, j] != 0), sp.S.Zero)
+        rows.append(
+            {
+                "speed": speed.name,
+                "text": f"{lhs} = {F[r]}",
+                "latex": f"{sp.latex(lhs)} = {sp.latex(F[r])}",
+            }
+        )
+    return rows
+
+
+def render(model: SymbolicModel, *, source: str, command: str) -> dict[str, str]:
+    """Render every generated file of ``model`` to text.
+
+    Parameters
+    ----------
+    model : SymbolicModel
+    source : str
+        The scene the model was derived from, named in each file's header.
+    command : str
+        The command that regenerates the files, named in each file's header.
+
+    Returns
+    -------
+    dict
+        File name -> text, including ``manifest.json``.
+    """
+    import jinja2 as _jinja2  # for the version only
+
+    blocks = build_blocks(model)
+    top = model.topology
+    digest = top.digest(model.formulation)
+    contacts = [(i, g) for i in range(top.n_particles) for g in range(top.n_grounds)]
+    context = {
+        "source": source,
+        "command": command,
+        "digest": digest,
+        "formulation": model.formulation,
+        "q_names": tuple(s.name for s in model.q),
+        "u_names": tuple(s.name for s in model.u),
+        "p_names": tuple(s.name for s in model.p),
+        "descriptions": model.descriptions,
+        "nq": len(model.q),
+        "nu": len(model.u),
+        "np_": len(model.p),
+        "nc": len(contacts),
+        "n_particles": top.n_particles,
+        "n_links": top.n_links,
+        "n_grounds": top.n_grounds,
+        "energy_names": ENERGY_NAMES,
+        "diagonal": model.mass_matrix_is_diagonal,
+        "blocks": blocks,
+        "equations": _equations(model),
+    }
+    env = _environment()
+    files = {}
+    for template, out in FILES.items():
+        files[out] = env.get_template(template).render(template=template, **context)
+    manifest = {
+        "model": f"flexbody model {digest}",
+        "digest": digest,
+        "formulation": model.formulation,
+        "source": source,
+        "regenerate": command,
+        "topology": json.loads(top.to_json()),
+        "q_names": context["q_names"],
+        "u_names": context["u_names"],
+        "p_names": context["p_names"],
+        "n_particles": top.n_particles,
+        "n_contacts": len(contacts),
+        "contacts": contacts,
+        "energy_names": list(ENERGY_NAMES),
+        "mass_matrix_diagonal": model.mass_matrix_is_diagonal,
+        "functions": {b.name: {"shape": list(b.shape), "ops_after_cse": b.ops} for b in blocks},
+        "versions": {"generator": GENERATOR_VERSION, "sympy": sp.__version__, "jinja2": _jinja2.__version__},
+        "sha256": {name: hashlib.sha256(text.encode()).hexdigest() for name, text in sorted(files.items())},
+    }
+    files["manifest.json"] = json.dumps(manifest, indent=1) + "\n"
+    return files

@@ -1,0 +1,233 @@
+"""Equations of motion of a particle-spring-damper system by Kane's method.
+
+Build time only (SymPy).  :func:`derive` turns a :class:`~flexbody.topology.Topology` and a
+formulation into a :class:`SymbolicModel`: the mass matrix ``M(q, p)`` and forcing
+``F(q, u, p)`` of ``M u' = F``, ``q' = u``, plus energies, particle positions and
+velocities in N, ground gaps with their Jacobian and bias, and the forcing Jacobians an
+implicit integrator needs.  Parameters (masses, stiffness, damping, rest lengths,
+gravity, ground placement) stay symbols, so changing their values needs no regeneration.
+
+Formulations
+------------
+``particles``
+    q are the particle coordinates in N; M is constant and diagonal.
+``floating`` (the thesis's)
+    Per body, q1, q2 place T's origin in N, q3 is T's angle about N3, and the remaining
+    coordinates are particle positions in T.  Gauge: the anchor particle is pinned at
+    T's origin and the reference particle lies on T's x-axis (its y in T is not a
+    coordinate), see :func:`flexbody.topology.gauge_particles`.  This removes the three
+    rigid-motion redundancies, so M is nonsingular.
+
+Never inverts M symbolically: the runtime solves ``M u' = F`` numerically.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import sympy as sp
+from sympy.physics.mechanics import KanesMethod, Particle, Point, ReferenceFrame, dynamicsymbols
+
+from flexbody.topology import Topology
+
+#: Energies, in this order, returned by the generated ``energies`` function.
+ENERGY_NAMES = ("kinetic", "spring", "gravity", "damping_power")
+
+
+@dataclass
+class SymbolicModel:
+    """Everything the code generator prints, in plain symbols (no functions of time)."""
+
+    formulation: str
+    topology: Topology
+    q: list[sp.Symbol]
+    u: list[sp.Symbol]
+    p: list[sp.Symbol]
+    a: list[sp.Symbol]  # accelerations, inputs of the forcing Jacobian
+    outputs: dict[str, sp.Matrix]  # name -> matrix, see OUTPUTS in codegen
+    descriptions: dict[str, str]  # symbol name -> meaning, for eom.md
+
+    @property
+    def mass_matrix_is_diagonal(self) -> bool:
+        M = self.outputs["mass_matrix"]
+        return all(M[i, j] == 0 for i in range(M.rows) for j in range(M.cols) if i != j)
+
+
+def _parameters(top: Topology) -> tuple[list[sp.Symbol], dict[str, str]]:
+    n, nl = top.n_particles, top.n_links
+    p: list[sp.Symbol] = []
+    text: dict[str, str] = {}
+    for i in range(n):
+        p.append(sp.Symbol(f"m{i}", positive=True))
+        text[f"m{i}"] = f"mass of particle {i} (kg)"
+    for prefix, meaning in (("k", "stiffness (N/m)"), ("c", "damping (N s/m)"), ("L", "rest length (m)")):
+        for l_ in range(nl):
+            p.append(sp.Symbol(f"{prefix}{l_}", real=True))
+            text[f"{prefix}{l_}"] = f"{meaning} of link {l_}"
+    for axis in "xy"[: top.dim]:
+        p.append(sp.Symbol(f"g_{axis}", real=True))
+        text[f"g_{axis}"] = f"gravity, {axis} component (m/s^2)"
+    for j in range(top.n_grounds):
+        for prefix, meaning in (("P", "a point of"), ("n", "unit normal of")):
+            for axis in "xy":
+                p.append(sp.Symbol(f"{prefix}{j}_{axis}", real=True))
+                text[f"{prefix}{j}_{axis}"] = f"{meaning} ground {j}, {axis} component"
+    return p, text
+
+
+class _Builder:
+    """Collects coordinates, speeds, points and particles for one formulation."""
+
+    def __init__(self) -> None:
+        self.N = ReferenceFrame("N")
+        self.origin = Point("O")
+        self.origin.set_vel(self.N, 0)
+        self.q: list = []
+        self.u: list = []
+        self.text: dict[str, str] = {}
+
+    def coordinate(self, name: str, speed: str, meaning: str):
+        q, u = dynamicsymbols(f"{name} {speed}")
+        self.q.append(q)
+        self.u.append(u)
+        self.text[name] = meaning
+        self.text[speed] = f"time derivative of {name}"
+        return q, u
+
+    def particles_in_n(self, top: Topology) -> list[Point]:
+        N, points = self.N, []
+        for i in range(top.n_particles):
+            x, vx = self.coordinate(f"x{i}", f"vx{i}", f"x of particle {i} in N (m)")
+            y, vy = self.coordinate(f"y{i}", f"vy{i}", f"y of particle {i} in N (m)")
+            P = self.origin.locatenew(f"P{i}", x * N.x + y * N.y)
+            P.set_vel(N, vx * N.x + vy * N.y)
+            points.append(P)
+        return points
+
+    def particles_floating(self, top: Topology) -> list[Point]:
+        N, points = self.N, []
+        first = 0
+        for b, body in enumerate(top.bodies):
+            X, vX = self.coordinate(f"X{b}", f"vX{b}", f"x of T{b}'s origin in N (q1, m)")
+            Y, vY = self.coordinate(f"Y{b}", f"vY{b}", f"y of T{b}'s origin in N (q2, m)")
+            O = self.origin.locatenew(f"O{b}", X * N.x + Y * N.y)
+            O.set_vel(N, vX * N.x + vY * N.y)
+            T = ReferenceFrame(f"T{b}")
+            anchor, reference = body.gauge
+            if body.n_particles > 1:
+                th, w = self.coordinate(f"theta{b}", f"omega{b}", f"angle of T{b} about N3 (q3, rad)")
+                T.orient_axis(N, N.z, th)
+                T.set_ang_vel(N, w * N.z)
+            else:
+                T.orient_axis(N, N.z, 0)
+            for i in range(body.n_particles):
+                g = first + i
+                if i == anchor:
+                    P = O.locatenew(f"P{g}", 0 * T.x)
+                    P.set_vel(N, O.vel(N))
+                    points.append(P)
+                    continue
+                xi, vxi = self.coordinate(f"xi{g}", f"vxi{g}", f"x of particle {g} in T{b} (m)")
+                if i == reference:
+                    eta, veta = sp.S.Zero, sp.S.Zero
+                else:
+                    eta, veta = self.coordinate(f"eta{g}", f"veta{g}", f"y of particle {g} in T{b} (m)")
+                P = O.locatenew(f"P{g}", xi * T.x + eta * T.y)
+                P.set_vel(T, vxi * T.x + veta * T.y)
+                P.v1pt_theory(O, N, T)
+                points.append(P)
+            first += body.n_particles
+        return points
+
+
+def derive(top: Topology, formulation: str) -> SymbolicModel:
+    """Derive the equations of motion and every generated output for one topology.
+
+    Parameters
+    ----------
+    top : Topology
+    formulation : {"particles", "floating"}
+
+    Returns
+    -------
+    SymbolicModel
+    """
+    if formulation not in ("particles", "floating"):
+        raise ValueError(f"`formulation` = {formulation!r}: must be 'particles' or 'floating'")
+    p, text = _parameters(top)
+    sym = {s.name: s for s in p}
+    build = _Builder()
+    N = build.N
+    points = build.particles_in_n(top) if formulation == "particles" else build.particles_floating(top)
+    masses = [sym[f"m{i}"] for i in range(top.n_particles)]
+    gravity = sym["g_x"] * N.x + sym["g_y"] * N.y
+
+    loads = [(P, m * gravity) for P, m in zip(points, masses)]
+    spring_energy = damping_power = sp.S.Zero
+    link, first = 0, 0
+    for body in top.bodies:
+        for i, j in body.links:
+            Pi, Pj = points[first + i], points[first + j]
+            k, c, rest = sym[f"k{link}"], sym[f"c{link}"], sym[f"L{link}"]
+            d = Pi.pos_from(Pj)  # P_ij = x_i - x_j, thesis eq. 3.7
+            length = sp.sqrt(d.dot(d))
+            e = d / length
+            dv = Pj.vel(N) - Pi.vel(N)  # V_j - V_i
+            if body.damper == "relative":  # thesis eq. 3.8
+                f_damp = c * dv
+                damping_power += c * dv.dot(dv)
+            else:
+                f_damp = c * dv.dot(e) * e
+                damping_power += c * dv.dot(e) ** 2
+            f = k * (rest - length) * e + f_damp  # force on i; j gets -f
+            loads += [(Pi, f), (Pj, -f)]
+            spring_energy += k * (length - rest) ** 2 / 2
+            link += 1
+        first += body.n_particles
+
+    q, u = build.q, build.u
+    kane = KanesMethod(N, q_ind=q, u_ind=u, kd_eqs=[qi.diff() - ui for qi, ui in zip(q, u)])
+    kane.kanes_equations([Particle(f"pa{i}", P, m) for i, (P, m) in enumerate(zip(points, masses))], loads)
+
+    positions = [P.pos_from(build.origin).express(N) for P in points]
+    velocities = [P.vel(N).express(N) for P in points]
+    kinetic = sum((m * v.dot(v) for m, v in zip(masses, velocities)), sp.S.Zero) / 2
+    gravity_energy = -sum((m * r.dot(gravity) for m, r in zip(masses, positions)), sp.S.Zero)
+    gaps = []
+    for r in positions:  # contact c = particle * n_grounds + ground
+        for g in range(top.n_grounds):
+            point = sym[f"P{g}_x"] * N.x + sym[f"P{g}_y"] * N.y
+            normal = sym[f"n{g}_x"] * N.x + sym[f"n{g}_y"] * N.y
+            gaps.append((r - point).dot(normal))
+
+    # Replace functions of time by plain symbols: q(t) -> q, u(t) -> u.
+    qs = [sp.Symbol(s.name, real=True) for s in (qi.func for qi in q)]
+    us = [sp.Symbol(s.name, real=True) for s in (ui.func for ui in u)]
+    plain = dict(zip(q, qs)) | dict(zip(u, us))
+    plain |= {qi.diff(): ui for qi, ui in zip(q, us)}
+
+    def to_plain(expr):
+        return sp.sympify(expr).xreplace(plain)
+
+    M = kane.mass_matrix.xreplace(plain)
+    F = kane.forcing.xreplace(plain)
+    a = [sp.Symbol(f"a{r}", real=True) for r in range(len(us))]
+    gap_vec = sp.Matrix([to_plain(g) for g in gaps])
+    Jg = gap_vec.jacobian(qs) if gaps else sp.zeros(0, len(qs))
+    bias = (Jg * sp.Matrix(us)).jacobian(qs) * sp.Matrix(us) if gaps else sp.zeros(0, 1)
+    outputs = {
+        "mass_matrix": M,
+        "forcing": F,
+        "energies": sp.Matrix([to_plain(e) for e in (kinetic, spring_energy, gravity_energy, damping_power)]),
+        "damping_power": sp.Matrix([to_plain(damping_power)]),
+        "positions": sp.Matrix([[to_plain(r.dot(N.x)), to_plain(r.dot(N.y))] for r in positions]),
+        "velocities": sp.Matrix([[to_plain(v.dot(N.x)), to_plain(v.dot(N.y))] for v in velocities]),
+        "gaps": gap_vec,
+        "gap_jacobian": Jg,
+        "gap_bias": bias,
+        # d(F - M a)/dq and dF/du: with q' = u these give the Jacobian of the first-order RHS.
+        "jacobian_q": F.jacobian(qs) - (M * sp.Matrix(a)).jacobian(qs),
+        "jacobian_u": F.jacobian(us),
+    }
+    text |= build.text | {f"a{r}": f"acceleration input {r} of the forcing Jacobian" for r in range(len(a))}
+    return SymbolicModel(formulation, top, qs, us, p, a, outputs, text)

@@ -1,0 +1,62 @@
+"""Compile a generated C model into a shared library, cached by the hash of its source.
+
+The key covers the C source, its header, the compiler and the flags, so a changed model
+or toolchain never reuses a stale library.  A compiler error is raised with the
+compiler's full output.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import shutil
+import subprocess
+import tempfile
+from pathlib import Path
+
+from .paths import cache_root
+
+FLAGS = ("-O2", "-shared", "-fPIC", "-std=c99")
+
+
+class CompilationError(RuntimeError):
+    """The C compiler failed or is missing; the message carries its full output."""
+
+
+def compiler() -> str:
+    cc = os.environ.get("CC", "cc")
+    if shutil.which(cc) is None:
+        raise CompilationError(
+            f"no C compiler found (looked for `{cc}`; set CC to choose one). "
+            "Install one (e.g. `apt-get install gcc`) or use backend='numpy'."
+        )
+    return cc
+
+
+def _compiler_identity(cc: str) -> str:
+    run = subprocess.run([cc, "--version"], capture_output=True, text=True, check=False)
+    return run.stdout.splitlines()[0] if run.stdout else cc
+
+
+def library_path(model_dir: Path) -> Path:
+    """Compile ``model_dir/model.c`` if needed and return the cached library's path."""
+    model_dir = Path(model_dir)
+    cc = compiler()
+    source = (model_dir / "model.c").read_bytes() + (model_dir / "model.h").read_bytes()
+    key = hashlib.sha256(source + _compiler_identity(cc).encode() + " ".join(FLAGS).encode()).hexdigest()[:24]
+    target = cache_root() / "lib" / f"{key}.so"
+    if target.exists():
+        return target
+    target.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(suffix=".so", dir=target.parent)
+    os.close(fd)
+    command = [cc, *FLAGS, "-I", str(model_dir), "-o", tmp, str(model_dir / "model.c"), "-lm"]
+    run = subprocess.run(command, capture_output=True, text=True, check=False)
+    if run.returncode != 0:
+        os.unlink(tmp)
+        raise CompilationError(
+            f"compiling {model_dir / 'model.c'} failed (exit {run.returncode}):\n$ {' '.join(command)}\n"
+            f"{run.stdout}{run.stderr}"
+        )
+    os.replace(tmp, target)  # atomic: a concurrent build never sees a half-written library
+    return target

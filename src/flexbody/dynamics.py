@@ -1,0 +1,68 @@
+"""Contact-constrained dynamics on top of a generated model (NumPy reference path).
+
+With held contacts S, the accelerations solve ``M u' = F + J_S^T lam + J^T push`` with
+``J_S u' + bias_S = 0``, so ``lam = -(J_S M^-1 J_S^T)^-1 (J_S M^-1 (F + J^T push) + bias_S)``.
+For point masses on flat grounds ``J M^-1 J^T`` is diagonal (``1/m_i``) whichever
+coordinates are used, so each contact's force is that of its own particle; the general
+formula is kept so both formulations run the same code.  The C template implements the
+same algorithm (``fb_rhs``); tests check the two agree.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from .model import Model
+
+
+def constrained_rhs(model: Model, y, p, held, push) -> tuple[np.ndarray, np.ndarray]:
+    """``(ydot (ny,), lam (nc,))`` for state ``y = [q, u, w]``; see :meth:`Model.rhs`."""
+    q, u = y[: model.nq], y[model.nq : model.nq + model.nu]
+    M = model.mass_matrix(q, p)
+    F = model.forcing(q, u, p)
+    held = np.asarray(held, dtype=bool)
+    push = np.asarray(push, dtype=float)
+    lam = np.zeros(model.n_contacts)
+    impact_power = 0.0
+    if held.any() or push.any():
+        J = model.gap_jacobian(q, p)
+        bias = model.gap_bias(q, u, p)
+        F = F + J.T @ push
+        impact_power = -float(push @ (J @ u))
+    acc = np.linalg.solve(M, F)
+    if held.any():
+        Js = J[held]
+        X = np.linalg.solve(M, Js.T)
+        lam_s = np.linalg.solve(Js @ X, -(Js @ acc + bias[held]))
+        acc = acc + X @ lam_s
+        lam[held] = lam_s
+    ydot = np.concatenate([u, acc, [model._call("damping_power", q, u, p), impact_power]])
+    return ydot, lam
+
+
+def state_jacobian(model: Model, y, p, held) -> np.ndarray:
+    """Jacobian of the right-hand side with respect to ``y``, shape (ny, ny).
+
+    Exact for free contacts; for held ones the unconstrained Jacobian is projected onto
+    the constraint (the variation of J and of the bias is neglected), which is what an
+    implicit method's Newton iteration needs.
+    """
+    nq, nu = model.nq, model.nu
+    q, u = y[:nq], y[nq : nq + nu]
+    ydot, _ = model.rhs(y, p, held, np.zeros(model.n_contacts))
+    acc = ydot[nq : nq + nu]
+    Jq, Ju = model.forcing_jacobians(q, u, p, acc)
+    M = model.mass_matrix(q, p)
+    A = np.linalg.solve(M, np.hstack([Jq, Ju]))
+    held = np.asarray(held, dtype=bool)
+    if held.any():
+        Js = model.gap_jacobian(q, p)[held]
+        X = np.linalg.solve(M, Js.T)
+        A = A - X @ np.linalg.solve(Js @ X, Js @ A)
+    out = np.zeros((model.ny, model.ny))
+    out[:nq, nq : nq + nu] = np.eye(nq, nu)
+    out[nq : nq + nu, : nq + nu] = A
+    return out

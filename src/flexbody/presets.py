@@ -1,0 +1,68 @@
+"""Body geometry presets: particle positions in frame T and the links between them.
+
+Every preset returns ``(points, links)`` with ``points`` of shape (n, 2) in frame T and
+``links`` a list of index pairs.  Index order is part of the contract (results are indexed
+by it):
+
+* ``ring`` / ``ellipse``: the centre particle (if any) is index 0, then the perimeter
+  counter-clockwise starting on T's x-axis, which lies at the body's ``angle`` in N.
+  Links: every perimeter neighbour pair, and a spoke from the centre to each perimeter
+  particle.
+* ``polygon``: the given vertices in order (centre first if ``center``); edges, plus
+  either spokes (with a centre) or second-neighbour braces (without one), so the shape
+  has stiffness against shear.
+* ``chain``: ``count`` particles on T's x-axis, ``spacing`` apart, centred on T's origin,
+  linked to their neighbours.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+Links = list[tuple[int, int]]
+
+
+def _perimeter_links(first: int, count: int) -> Links:
+    if count < 2:
+        return []
+    if count == 2:
+        return [(first, first + 1)]
+    return [(first + k, first + (k + 1) % count) for k in range(count)]
+
+
+def _with_centre(perimeter: np.ndarray, center: bool) -> tuple[np.ndarray, Links]:
+    count = len(perimeter)
+    if not center:
+        return perimeter, _perimeter_links(0, count)
+    points = np.vstack([np.zeros((1, 2)), perimeter])
+    spokes = [(0, k) for k in range(1, count + 1)]
+    return points, spokes + _perimeter_links(1, count)
+
+
+def ellipse(count: int, radii: tuple[float, float], center: bool) -> tuple[np.ndarray, Links]:
+    """``count`` particles on an ellipse with semi-axes ``radii`` (a circle when equal)."""
+    phi = 2.0 * np.pi * np.arange(count) / count
+    perimeter = np.column_stack([radii[0] * np.cos(phi), radii[1] * np.sin(phi)])
+    return _with_centre(perimeter, center)
+
+
+def polygon(vertices: list[tuple[float, float]], center: bool) -> tuple[np.ndarray, Links]:
+    """Particles at ``vertices``; braced by spokes (with a centre) or second neighbours."""
+    perimeter = np.asarray(vertices, dtype=float)
+    if center:
+        centroid = perimeter.mean(axis=0)
+        points, links = _with_centre(perimeter - centroid, True)
+        return points + centroid, links
+    count = len(perimeter)
+    links = _perimeter_links(0, count)
+    if count > 3:
+        braces = {tuple(sorted((k, (k + 2) % count))) for k in range(count)}
+        links += sorted(braces)
+    return perimeter, links
+
+
+def chain(count: int, spacing: float) -> tuple[np.ndarray, Links]:
+    """``count`` particles in a straight line along T's x-axis, centred on the origin."""
+    x = spacing * (np.arange(count) - (count - 1) / 2.0)
+    points = np.column_stack([x, np.zeros(count)])
+    return points, [(k, k + 1) for k in range(count - 1)]

@@ -1,0 +1,506 @@
+"""Scene files: the TOML schema of DESIGN.md §2, loaded into immutable, validated objects.
+
+A scene names bodies (particles, links, masses, spring and damper constants, initial
+pose and velocity), the grounds they fall on, gravity and the simulation settings.
+:func:`load_scene` reads a path, a bundled scene's name or a mapping, checks every field,
+and raises one :class:`SceneError` listing every problem (field, value, rule).
+
+Units are SI throughout: m, kg, s, N/m, N·s/m.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+import warnings
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from . import presets
+from ._fields import Problems, TableReader
+from .topology import BodyTopology, Topology, gauge_particles
+
+SHAPES = ("ring", "ellipse", "polygon", "chain")
+DAMPERS = ("relative", "axial")
+METHODS = ("RK45", "RK23", "DOP853", "Radau", "BDF", "LSODA")
+FORMULATIONS = ("particles", "floating")
+BACKENDS = ("c", "numpy")
+IMPACT_MODES = ("instant", "thesis")
+DEFAULT_GRAVITY = (0.0, -9.81)
+BODY_KEYS = (
+    "name", "shape", "count", "radius", "radii", "center", "vertices", "spacing", "particles", "links",
+    "mass", "masses", "stiffness", "damping", "damper", "rest_lengths", "position", "angle", "velocity",
+    "angular_velocity", "particle_velocities",
+)  # fmt: skip
+SIMULATION_KEYS = (
+    "t_end", "output_dt", "method", "rtol", "atol", "impact", "impact_dt", "formulation", "backend",
+)  # fmt: skip
+
+
+class SceneError(ValueError):
+    """A scene failed validation; ``problems`` lists every field that is wrong."""
+
+    def __init__(self, source: str, problems: list[str]) -> None:
+        self.source = source
+        self.problems = list(problems)
+        lines = "\n".join(f"  - {p}" for p in problems)
+        super().__init__(f"scene {source} has {len(problems)} problem(s):\n{lines}")
+
+
+class OverdampedLinkWarning(UserWarning):
+    """A link's damping is at or above critical (thesis eq. 3.12): 4 k mu - c^2 <= 0."""
+
+
+def _frozen(array: Any) -> np.ndarray:
+    out = np.array(array, dtype=float)
+    out.setflags(write=False)
+    return out
+
+
+@dataclass(frozen=True)
+class Ground:
+    """A frictionless half-plane: a particle's gap is ``(x - point) . normal`` (>= 0 outside)."""
+
+    point: tuple[float, ...]
+    normal: tuple[float, ...]  # unit length
+
+
+@dataclass(frozen=True, eq=False)
+class Body:
+    """One flexible body: particles in frame T, links, constants and initial motion.
+
+    Attributes
+    ----------
+    points : ndarray, shape (n, dim)
+        Particle positions in frame T.
+    links : tuple of (int, int)
+        Particle pairs joined by a spring and a damper, indices within the body.
+    masses : ndarray, shape (n,)
+    stiffness, damping, rest_lengths : ndarray, shape (n_links,)
+    damper : {"relative", "axial"}
+        ``relative``: f = c (V_j - V_i) (thesis eq. 3.8); ``axial``: only the component of
+        the relative velocity along the link (a central force, conserves angular momentum).
+    position : tuple, (dim,)
+        Origin of T in N (q1, q2).
+    angle : float
+        Rotation of T about N3 (q3), rad.
+    velocity, angular_velocity : rigid-body initial velocity of T's origin and spin.
+    particle_velocities : ndarray, shape (n, dim)
+        Added to the rigid-body velocity of each particle.
+    """
+
+    name: str
+    points: np.ndarray
+    links: tuple[tuple[int, int], ...]
+    masses: np.ndarray
+    stiffness: np.ndarray
+    damping: np.ndarray
+    rest_lengths: np.ndarray
+    damper: str
+    position: tuple[float, ...]
+    angle: float
+    velocity: tuple[float, ...]
+    angular_velocity: float
+    particle_velocities: np.ndarray
+
+    @property
+    def n_particles(self) -> int:
+        return len(self.points)
+
+    def rotation(self) -> np.ndarray:
+        """Rotation matrix from T to N, shape (2, 2)."""
+        c, s = math.cos(self.angle), math.sin(self.angle)
+        return np.array([[c, -s], [s, c]])
+
+    def initial_positions(self) -> np.ndarray:
+        """Particle positions in N, shape (n, 2)."""
+        return np.asarray(self.position) + self.points @ self.rotation().T
+
+    def initial_velocities(self) -> np.ndarray:
+        """Particle velocities in N, shape (n, 2): rigid motion plus the per-particle extra."""
+        r = self.points @ self.rotation().T
+        spin = self.angular_velocity * np.column_stack([-r[:, 1], r[:, 0]])
+        return np.asarray(self.velocity) + spin + self.particle_velocities
+
+
+@dataclass(frozen=True)
+class SimulationSettings:
+    """Numerical settings of a run; every field can be overridden from the CLI."""
+
+    t_end: float
+    output_dt: float
+    method: str = "RK45"
+    rtol: float = 1e-6
+    atol: float = 1e-9
+    impact: str = "instant"
+    impact_dt: float | None = None
+    formulation: str = "particles"
+    backend: str = "c"
+
+
+@dataclass(frozen=True, eq=False)
+class Scene:
+    """A validated scene. Global particle index: bodies in file order, then particle order."""
+
+    name: str
+    gravity: tuple[float, ...]
+    grounds: tuple[Ground, ...]
+    bodies: tuple[Body, ...]
+    simulation: SimulationSettings
+    source: str = "<mapping>"
+    warnings: tuple[str, ...] = field(default=())
+
+    @property
+    def dim(self) -> int:
+        return len(self.gravity)
+
+    @property
+    def n_particles(self) -> int:
+        return sum(b.n_particles for b in self.bodies)
+
+    @property
+    def masses(self) -> np.ndarray:
+        """All particle masses, shape (n,)."""
+        return np.concatenate([b.masses for b in self.bodies])
+
+    def initial_positions(self) -> np.ndarray:
+        """All particle positions in N, shape (n, dim)."""
+        return np.vstack([b.initial_positions() for b in self.bodies])
+
+    def initial_velocities(self) -> np.ndarray:
+        """All particle velocities in N, shape (n, dim)."""
+        return np.vstack([b.initial_velocities() for b in self.bodies])
+
+    def topology(self) -> Topology:
+        """What selects a generated model: dimension, particles, links, dampers, grounds."""
+        return Topology(
+            dim=self.dim,
+            n_grounds=len(self.grounds),
+            bodies=tuple(
+                BodyTopology(
+                    n_particles=b.n_particles,
+                    links=b.links,
+                    damper=b.damper,
+                    gauge=gauge_particles(b.points),
+                )
+                for b in self.bodies
+            ),
+        )
+
+    def parameters(self) -> dict[str, float]:
+        """Numerical values of every model parameter, by the names the derivation uses."""
+        values: dict[str, float] = {}
+        offset = link_offset = 0
+        for body in self.bodies:
+            for i, m in enumerate(body.masses):
+                values[f"m{offset + i}"] = float(m)
+            for l_ in range(len(body.links)):
+                values[f"k{link_offset + l_}"] = float(body.stiffness[l_])
+                values[f"c{link_offset + l_}"] = float(body.damping[l_])
+                values[f"L{link_offset + l_}"] = float(body.rest_lengths[l_])
+            offset += body.n_particles
+            link_offset += len(body.links)
+        for axis, g in zip("xyz", self.gravity):
+            values[f"g_{axis}"] = g
+        for j, ground in enumerate(self.grounds):
+            for axis, a, b in zip("xyz", ground.point, ground.normal):
+                values[f"P{j}_{axis}"] = a
+                values[f"n{j}_{axis}"] = b
+        return values
+
+
+# --------------------------------------------------------------------------- loading
+
+
+def bundled_scenes() -> list[str]:
+    """Names of the scenes shipped with flexbody (usable instead of a path)."""
+    folder = resources.files("flexbody") / "scenes"
+    return sorted(p.name.removesuffix(".toml") for p in folder.iterdir() if p.name.endswith(".toml"))
+
+
+def resolve_scene_path(name_or_path: str | Path) -> Path:
+    """Path of a scene file given a path or a bundled scene's name."""
+    path = Path(name_or_path)
+    if path.is_file():
+        return path
+    if path.suffix == "" and str(name_or_path) in bundled_scenes():
+        return Path(str(resources.files("flexbody") / "scenes" / f"{name_or_path}.toml"))
+    raise SceneError(
+        str(name_or_path),
+        [f"`SCENE` = {str(name_or_path)!r}: is neither a file nor a bundled scene {bundled_scenes()}"],
+    )
+
+
+def load_scene(source: str | Path | Mapping[str, Any]) -> Scene:
+    """Load and validate a scene.
+
+    Parameters
+    ----------
+    source : path, bundled scene name, or mapping
+        A TOML file, the name of a bundled scene (``"thesis_ball"``), or the parsed table.
+
+    Raises
+    ------
+    SceneError
+        Listing every problem found, each naming the field, its value and the rule.
+    """
+    if isinstance(source, Mapping):
+        return _build(dict(source), "<mapping>", default_name="scene")
+    path = resolve_scene_path(source)
+    try:
+        data = tomllib.loads(path.read_text())
+    except tomllib.TOMLDecodeError as exc:
+        raise SceneError(str(path), [f"not valid TOML: {exc}"]) from None
+    return _build(data, str(path), default_name=path.stem)
+
+
+def _build(data: dict[str, Any], source: str, default_name: str) -> Scene:
+    problems = Problems()
+    top = TableReader(data, "", problems, ("name", "gravity", "grounds", "bodies", "simulation"))
+    name = top.string("name", default_name)
+    # Planar only for now (as the thesis); the schema keeps `dim` general for 3D later.
+    gravity = top.vector("gravity", 2, DEFAULT_GRAVITY)
+    dim = 2
+    grounds = _grounds(top.raw("grounds", None), dim, problems)
+    raw_bodies = top.raw("bodies", None)
+    bodies: list[Body] = []
+    if not isinstance(raw_bodies, list) or not raw_bodies:
+        top.fail("bodies", raw_bodies, "is required: a non-empty array of [[bodies]] tables")
+    else:
+        for b, table in enumerate(raw_bodies):
+            body = _body(TableReader(table, f"bodies[{b}]", problems, BODY_KEYS), dim)
+            if body is not None:
+                bodies.append(body)
+    simulation = _simulation(TableReader(top.raw("simulation", None), "simulation", problems, SIMULATION_KEYS))
+    top.finish()
+    if not problems:
+        _check_above_ground(bodies, grounds, problems)
+        names = [b.name for b in bodies]
+        for dup in sorted({n for n in names if names.count(n) > 1}):
+            problems.add("bodies[].name", dup, "body names must be unique")
+    if problems or simulation is None:
+        raise SceneError(source, problems.items)
+    notes = _overdamped_links(bodies)
+    for note in notes:
+        warnings.warn(note, OverdampedLinkWarning, stacklevel=3)
+    return Scene(
+        name=name or default_name,
+        gravity=tuple(gravity or DEFAULT_GRAVITY),
+        grounds=tuple(grounds),
+        bodies=tuple(bodies),
+        simulation=simulation,
+        source=source,
+        warnings=tuple(notes),
+    )
+
+
+def _grounds(raw: Any, dim: int, problems: Problems) -> list[Ground]:
+    if raw is None:
+        return [Ground(point=(0.0,) * dim, normal=(0.0, 1.0))]
+    if not isinstance(raw, list):
+        problems.add("grounds", raw, "must be an array of [[grounds]] tables")
+        return []
+    grounds = []
+    for j, table in enumerate(raw):
+        reader = TableReader(table, f"grounds[{j}]", problems, ("point", "normal"))
+        point = reader.vector("point", dim)
+        normal = reader.vector("normal", dim)
+        reader.finish()
+        if normal is not None:
+            length = math.hypot(*normal)
+            if length == 0.0:
+                reader.fail("normal", list(normal), "must be a non-zero vector")
+            elif point is not None:
+                grounds.append(Ground(point=point, normal=tuple(v / length for v in normal)))
+    return grounds
+
+
+def _geometry(r: TableReader) -> tuple[np.ndarray, list[tuple[int, int]]] | None:
+    shape = r.string("shape", None, choices=SHAPES)
+    if r.has("shape") and shape is None:
+        return None
+    if shape is None:
+        points = r.vectors("particles", 2)
+        links = r.raw("links")
+        if points is None:
+            return None
+        if not isinstance(links, list) or not all(
+            isinstance(p, list) and len(p) == 2 and all(isinstance(i, int) and not isinstance(i, bool) for i in p)
+            for p in links
+        ):
+            r.fail("links", links, "must be a list of [i, j] particle index pairs (integers)")
+            return None
+        return np.array(points, dtype=float).reshape(-1, 2), [tuple(p) for p in links]
+    if shape in ("ring", "ellipse"):
+        count = r.integer("count", minimum=2)
+        center = r.boolean("center", False)
+        if shape == "ring":
+            radius = r.number("radius", check=lambda v: v > 0, rule="must be > 0 (m)")
+            radii = None if radius is None else (radius, radius)
+        else:
+            radii = r.vector("radii", 2)
+            if radii is not None and min(radii) <= 0:
+                r.fail("radii", list(radii), "both semi-axes must be > 0 (m)")
+                radii = None
+        if count is None or radii is None or center is None:
+            return None
+        return presets.ellipse(count, radii, center)
+    if shape == "polygon":
+        vertices = r.vectors("vertices", 2)
+        center = r.boolean("center", False)
+        if vertices is not None and len(vertices) < 3:
+            r.fail("vertices", vertices, "a polygon needs at least 3 vertices")
+            return None
+        if vertices is None or center is None:
+            return None
+        return presets.polygon(vertices, center)
+    count = r.integer("count", minimum=1)
+    spacing = r.number("spacing", check=lambda v: v > 0, rule="must be > 0 (m)")
+    if count is None or spacing is None:
+        return None
+    return presets.chain(count, spacing)
+
+
+def _body(r: TableReader, dim: int) -> Body | None:
+    name = r.string("name", r.path.replace("bodies", "body").replace("[", "").replace("]", ""))
+    geometry = _geometry(r)
+    points = None if geometry is None else geometry[0]
+    links: list[tuple[int, int]] = [] if geometry is None else geometry[1]
+    n = None if points is None else len(points)
+    nl = None if geometry is None else len(links)
+    links_ok = geometry is not None and _check_links(r, points, links)
+    if r.has("mass") == r.has("masses"):
+        r.fail("mass", r.raw("mass", None), "give exactly one of `mass` (each particle) or `masses` (a list)")
+        masses = None
+    elif r.has("mass"):
+        m = r.number("mass", check=lambda v: v > 0, rule="must be > 0 (kg)")
+        masses = None if m is None else [m] * (n or 1)
+    else:
+        masses = r.scalar_or_list("masses", n, minimum=0.0, strict=True, item="particle")
+    stiffness = r.scalar_or_list("stiffness", nl, minimum=0.0, strict=False, item="link")
+    damping = r.scalar_or_list("damping", nl, minimum=0.0, strict=False, item="link")
+    damper = r.string("damper", "relative", choices=DAMPERS)
+    rest = None
+    if r.has("rest_lengths"):
+        rest = r.scalar_or_list("rest_lengths", nl, minimum=0.0, strict=True, item="link")
+    position = r.vector("position", dim)
+    angle = r.number("angle", 0.0)
+    velocity = r.vector("velocity", dim, (0.0,) * dim)
+    spin = r.number("angular_velocity", 0.0)
+    extra = np.zeros((n or 0, dim))
+    if r.has("particle_velocities"):
+        given = r.vectors("particle_velocities", dim, count=n)
+        if given is not None:
+            extra = np.array(given, dtype=float).reshape(-1, dim)
+    r.finish()
+    if not links_ok or None in (masses, stiffness, damping, damper, position, angle, velocity, spin):
+        return None
+    if rest is None:
+        rest = [float(np.linalg.norm(points[i] - points[j])) for i, j in links]
+    return Body(
+        name=name or "body",
+        points=_frozen(points),
+        links=tuple((int(i), int(j)) for i, j in links),
+        masses=_frozen(masses),
+        stiffness=_frozen(stiffness),
+        damping=_frozen(damping),
+        rest_lengths=_frozen(rest),
+        damper=damper,
+        position=position,
+        angle=angle,
+        velocity=velocity,
+        angular_velocity=spin,
+        particle_velocities=_frozen(extra),
+    )
+
+
+def _check_links(r: TableReader, points: np.ndarray, links: list[tuple[int, int]]) -> bool:
+    n = len(points)
+    ok = True
+    seen: set[tuple[int, int]] = set()
+    for l_, (i, j) in enumerate(links):
+        if not (0 <= i < n and 0 <= j < n):
+            r.fail(f"links[{l_}]", [i, j], f"refers to a missing particle (the body has particles 0..{n - 1})")
+            ok = False
+            continue
+        if i == j:
+            r.fail(f"links[{l_}]", [i, j], "links a particle to itself")
+            ok = False
+            continue
+        key = (min(i, j), max(i, j))
+        if key in seen:
+            r.fail(f"links[{l_}]", [i, j], "duplicate link (the same pair appears twice)")
+            ok = False
+        seen.add(key)
+        if np.linalg.norm(points[i] - points[j]) == 0.0:
+            r.fail(f"links[{l_}]", [i, j], "zero-length link: the two particles start at the same point")
+            ok = False
+    for i in range(n):
+        for j in range(i + 1, n):
+            if (min(i, j), max(i, j)) not in seen and np.array_equal(points[i], points[j]):
+                r.fail("particles", [i, j], "two particles of one body start at the same point")
+                ok = False
+    return ok
+
+
+def _simulation(r: TableReader) -> SimulationSettings | None:
+    t_end = r.number("t_end", check=lambda v: v > 0, rule="must be > 0 (s)")
+    output_dt = r.number("output_dt", None, check=lambda v: v > 0, rule="must be > 0 (s)")
+    method = r.string("method", "RK45", choices=METHODS)
+    rtol = r.number("rtol", 1e-6, check=lambda v: 1e-14 <= v < 1, rule="must be in [1e-14, 1)")
+    atol = r.number("atol", 1e-9, check=lambda v: 0 < v < 1, rule="must be in (0, 1)")
+    impact = r.string("impact", "instant", choices=IMPACT_MODES)
+    impact_dt = r.number("impact_dt", None, check=lambda v: v > 0, rule="must be > 0 (s)")
+    if impact == "thesis" and impact_dt is None and not r.has("impact_dt"):
+        r.fail("impact_dt", None, 'is required when impact = "thesis" (the time step ΔT of eq. 4.6, s)')
+    formulation = r.string("formulation", "particles", choices=FORMULATIONS)
+    backend = r.string("backend", "c", choices=BACKENDS)
+    r.finish()
+    if None in (t_end, method, rtol, atol, impact, formulation, backend):
+        return None
+    return SimulationSettings(
+        t_end=t_end,
+        output_dt=output_dt if output_dt is not None else t_end / 1000.0,
+        method=method,
+        rtol=rtol,
+        atol=atol,
+        impact=impact,
+        impact_dt=impact_dt,
+        formulation=formulation,
+        backend=backend,
+    )
+
+
+def _check_above_ground(bodies: list[Body], grounds: list[Ground], problems: Problems) -> None:
+    for b, body in enumerate(bodies):
+        x = body.initial_positions()
+        for j, ground in enumerate(grounds):
+            gaps = (x - np.asarray(ground.point)) @ np.asarray(ground.normal)
+            below = np.flatnonzero(gaps < 0.0)
+            if below.size:
+                problems.add(
+                    f"bodies[{b}].position",
+                    list(body.position),
+                    f"particles {below.tolist()} start below grounds[{j}] (gap {gaps[below].min():.3g} m < 0)",
+                )
+
+
+def _overdamped_links(bodies: list[Body]) -> list[str]:
+    notes = []
+    for b, body in enumerate(bodies):
+        bad = []
+        for l_, (i, j) in enumerate(body.links):
+            mu = body.masses[i] * body.masses[j] / (body.masses[i] + body.masses[j])
+            if 4.0 * body.stiffness[l_] * mu - body.damping[l_] ** 2 <= 0.0:
+                bad.append(l_)
+        if bad:
+            notes.append(
+                f"bodies[{b}]: links {bad} are not underdamped (4 k mu - c^2 <= 0 with the reduced mass mu, "
+                "thesis eq. 3.12): the body will not vibrate but creep; lower `damping` or raise `stiffness`"
+            )
+    return notes

@@ -1,0 +1,91 @@
+"""Topology: the part of a scene that selects a generated model.
+
+Particle count, links, damper law, dimension and the number of grounds change the
+symbolic equations; masses, stiffness, damping, rest lengths, gravity and ground
+placement are parameters passed at run time.  The floating formulation also fixes its
+gauge from the body's geometry (which particle is pinned at T's origin, which one lies
+on T's x-axis), so that choice is part of the topology too.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+#: Bump when the derivation or templates change what is generated for the same topology.
+GENERATOR_VERSION = "1"
+
+
+@dataclass(frozen=True)
+class BodyTopology:
+    n_particles: int
+    links: tuple[tuple[int, int], ...]
+    damper: str
+    gauge: tuple[int, int]  # (anchor, reference), see gauge_particles
+
+
+@dataclass(frozen=True)
+class Topology:
+    dim: int
+    n_grounds: int
+    bodies: tuple[BodyTopology, ...]
+
+    @property
+    def n_particles(self) -> int:
+        return sum(b.n_particles for b in self.bodies)
+
+    @property
+    def n_links(self) -> int:
+        return sum(len(b.links) for b in self.bodies)
+
+    def to_json(self) -> str:
+        """Canonical JSON (sorted keys, no spaces): the input of :meth:`digest`."""
+        return json.dumps(asdict(self), sort_keys=True, separators=(",", ":"))
+
+    @classmethod
+    def from_json(cls, text: str) -> Topology:
+        data = json.loads(text)
+        bodies = tuple(
+            BodyTopology(
+                n_particles=b["n_particles"],
+                links=tuple(tuple(link) for link in b["links"]),
+                damper=b["damper"],
+                gauge=tuple(b["gauge"]),
+            )
+            for b in data["bodies"]
+        )
+        return cls(dim=data["dim"], n_grounds=data["n_grounds"], bodies=bodies)
+
+    def digest(self, formulation: str) -> str:
+        """Hash of topology, formulation and generator version (16 hex digits)."""
+        text = f"{self.to_json()}|{formulation}|{GENERATOR_VERSION}"
+        return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def gauge_particles(points: np.ndarray) -> tuple[int, int]:
+    """Gauge of the floating formulation for one body.
+
+    The anchor is the particle nearest the body's geometric centre (the centre particle of
+    a ``ring``); it is pinned at T's origin, which fixes translation.  The reference is the
+    lowest-indexed other particle; it lies on T's x-axis, which fixes rotation.  With these
+    three coordinates removed, the mass matrix is nonsingular.
+
+    Parameters
+    ----------
+    points : ndarray, shape (n, dim)
+
+    Returns
+    -------
+    (anchor, reference) : tuple of int; reference is -1 for a single particle.
+    """
+    points = np.asarray(points, dtype=float)
+    if len(points) == 1:
+        return (0, -1)
+    distance = np.linalg.norm(points - points.mean(axis=0), axis=1)
+    scale = max(float(np.ptp(points, axis=0).max()), 1e-300)
+    anchor = int(np.flatnonzero(distance <= distance.min() + 1e-9 * scale)[0])
+    reference = 0 if anchor != 0 else 1
+    return (anchor, reference)
