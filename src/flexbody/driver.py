@@ -1,0 +1,325 @@
+"""The simulation driver: integrate smooth segments, stop at events, apply the phase machine.
+
+``simulate`` integrates the generated model with one of SciPy's ``solve_ivp`` methods
+(their stepper classes, driven step by step so that co-timed events are all found), from
+event instant to event instant.  At each instant :func:`flexbody.contact.resolve`
+applies impacts, contact and lift-off, then a fresh segment starts.  The phase machine
+is kept apart from the integration of a smooth segment (:meth:`_Run.segment`), so a
+faster integrator can replace the latter.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+import scipy
+from scipy.integrate import BDF, DOP853, LSODA, RK23, RK45, Radau
+
+from . import __version__
+from .contact import FREE, HELD, PUSHED, Event, Phases, effective_masses, resolve
+from .events import EventFunctions, locate
+from .model import Model, load_model
+from .result import STATUSES, SimulationResult
+from .scene import IMPACT_MODES, METHODS, Scene, SimulationSettings, load_scene
+from .state import initial_coordinates
+
+SOLVERS = {"RK45": RK45, "RK23": RK23, "DOP853": DOP853, "Radau": Radau, "BDF": BDF, "LSODA": LSODA}
+IMPLICIT = ("Radau", "BDF", "LSODA")
+
+#: A particle with more impacts than this within CHATTER_WINDOW seconds is chattering.
+CHATTER_IMPACTS, CHATTER_WINDOW = 25, 1e-3
+#: Event instants closer than this (s) count as no progress; this many in a row is a failure.
+STALL_TIME, STALL_COUNT = 1e-12, 200
+
+Progress = Callable[[float, float, int], None]
+
+
+class SimulationFailed(Exception):
+    def __init__(self, status: str, message: str) -> None:
+        super().__init__(message)
+        self.status, self.message = status, message
+
+
+def _settings(scene: Scene, overrides: dict) -> SimulationSettings:
+    """The scene's settings with the given overrides, each validated (ValueError names it)."""
+    s = scene.simulation
+    values = {k: getattr(s, k) for k in s.__dataclass_fields__}
+    for key, value in overrides.items():
+        if value is not None:
+            values[key] = value
+    problems = []
+    if values["method"] not in METHODS:
+        problems.append(f"`method` = {values['method']!r}: must be one of {list(METHODS)}")
+    if not 1e-14 <= values["rtol"] < 1:
+        problems.append(f"`rtol` = {values['rtol']!r}: must be in [1e-14, 1)")
+    if not 0 < values["atol"] < 1:
+        problems.append(f"`atol` = {values['atol']!r}: must be in (0, 1)")
+    if not (np.isfinite(values["t_end"]) and values["t_end"] > 0):
+        problems.append(f"`t_end` = {values['t_end']!r}: must be a finite number > 0 (s)")
+    if not (np.isfinite(values["output_dt"]) and values["output_dt"] > 0):
+        problems.append(f"`output_dt` = {values['output_dt']!r}: must be a finite number > 0 (s)")
+    if values["impact"] not in IMPACT_MODES:
+        problems.append(f"`impact` = {values['impact']!r}: must be one of {list(IMPACT_MODES)}")
+    if values["impact"] == "thesis" and not (values["impact_dt"] and values["impact_dt"] > 0):
+        problems.append(f"`impact_dt` = {values['impact_dt']!r}: the thesis impact mode needs a ΔT > 0 (s)")
+    if problems:
+        raise ValueError("invalid simulation options:\n" + "\n".join(f"  - {p}" for p in problems))
+    return SimulationSettings(**values)
+
+
+@dataclass
+class _Stop:
+    t: float
+    y: np.ndarray
+    touching: np.ndarray
+    leaving: np.ndarray
+
+
+class _Run:
+    """State of one simulation: model, phases, samples, counters."""
+
+    def __init__(self, scene: Scene, model: Model, settings: SimulationSettings, progress: Progress | None,
+                 max_events: int) -> None:
+        self.scene, self.model, self.settings = scene, model, settings
+        self.progress, self.max_events = progress, max_events
+        self.p = model.parameters(scene)
+        q, u = initial_coordinates(scene, model)
+        self.y0 = np.concatenate([q, u, [0.0, 0.0]])
+        size = float(np.abs(scene.initial_positions()).max())
+        self.gap_tolerance = 1e-12 * max(size, 1.0)
+        weight = effective_masses(model, q, self.p) * max(float(np.hypot(*scene.gravity)), 1.0)
+        self.force_tolerance = 1e-10 * weight
+        self.grid = np.linspace(0.0, settings.t_end, int(round(settings.t_end / settings.output_dt)) + 1)
+        self.samples: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []  # (t, y, held, push)
+        self.next_sample = 0
+        self.events: list[Event] = []
+        self.losses: list[tuple[float, float]] = []
+        self.nfev = self.njev = self.steps = self.segments = 0
+        self.min_gap = np.inf
+        self.stalled = 0
+
+    # ------------------------------------------------------------------ one smooth segment
+    def segment(self, t0: float, y0: np.ndarray, t_bound: float, phases: Phases) -> _Stop:
+        """Integrate with a fixed contact set from ``t0`` until an event or ``t_bound``."""
+        model, s = self.model, self.settings
+        options = {"rtol": s.rtol, "atol": s.atol}
+        if s.method in IMPLICIT:
+            options["jac"] = model.jacobian_function(self.p, phases.held)
+        solver = SOLVERS[s.method](model.rhs_function(self.p, phases.held, phases.push), t0, y0, t_bound, **options)
+        events = EventFunctions(model, self.p, phases, self.force_tolerance)
+        g_old = events(y0)
+        self.segments += 1
+        try:
+            while True:
+                message = solver.step()
+                self.steps += 1
+                if solver.status == "failed":
+                    raise SimulationFailed(
+                        "step_size_collapse",
+                        f"{s.method} failed at t = {solver.t:.9g} s: {message} The model is too stiff for this "
+                        "method or tolerance: try an implicit method (--method Radau or BDF) or a looser --rtol.",
+                    )
+                if not np.all(np.isfinite(solver.y)):
+                    raise SimulationFailed("blow_up", f"the state became non-finite at t = {solver.t:.9g} s; "
+                                           "tighten --rtol/--atol or use an implicit method.")
+                dense = solver.dense_output()
+                g_new = events(solver.y)
+                hit = locate(events, dense, solver.t_old, solver.t, g_old, g_new)
+                t_stop = hit.t if hit else solver.t
+                y_stop = dense(t_stop) if hit else solver.y
+                self.record(dense, t_stop, y_stop, phases)
+                if hit:
+                    return _Stop(t_stop, y_stop, hit.contacts & events.free, hit.contacts & events.held_mask)
+                if solver.status == "finished":
+                    return _Stop(solver.t, solver.y.copy(), np.zeros_like(events.free), np.zeros_like(events.free))
+                if events.free.any():  # a free particle back above the ground is armed at the ground again
+                    above = events.free & (model.gaps(solver.y[: model.nq], self.p) >= 0.0)
+                    if (phases.floor[above] != -self.gap_tolerance).any():
+                        phases.floor[above] = -self.gap_tolerance
+                        g_new = events(solver.y)
+                g_old = g_new
+                if self.progress:
+                    self.progress(solver.t, s.t_end, len(self.events))
+        except FloatingPointError as exc:
+            raise SimulationFailed("blow_up", f"at t = {solver.t:.9g} s: {exc}") from None
+        finally:
+            self.nfev += solver.nfev
+            self.njev += getattr(solver, "njev", 0)
+
+    def record(self, dense, t_stop: float, y_stop: np.ndarray, phases: Phases) -> None:
+        """Keep the output-grid samples up to ``t_stop`` and track penetration."""
+        grid = self.grid
+        end = np.searchsorted(grid, t_stop, side="right")
+        held, push = phases.held.astype(bool), phases.push.copy()
+        for k in range(self.next_sample, end):
+            self.samples.append((grid[k], dense(grid[k]), held, push))
+        self.next_sample = max(self.next_sample, end)
+        self.min_gap = min(self.min_gap, float(self.model.gaps(y_stop[: self.model.nq], self.p).min()))
+
+    # ------------------------------------------------------------------ the phase machine
+    def run(self) -> tuple[str, str]:
+        s, model = self.settings, self.model
+        t, y = 0.0, self.y0.copy()
+        phases = Phases.all_free(model.n_contacts, self.gap_tolerance)
+        # Particles starting on a ground at rest are held if the ground has to push them.
+        q, u = y[: model.nq], y[model.nq : model.nq + model.nu]
+        resting = (model.gaps(q, self.p) <= self.gap_tolerance) & (model.gap_jacobian(q, self.p) @ u == 0.0)
+        phases.phase[resting] = HELD
+        res = resolve(model, 0.0, y, self.p, phases, np.zeros_like(resting), np.zeros_like(resting),
+                      gap_tolerance=self.gap_tolerance, force_tolerance=self.force_tolerance,
+                      impact=s.impact, impact_dt=s.impact_dt)
+        y, phases = res.y, res.phases
+        self.samples.append((0.0, y.copy(), phases.held.astype(bool), phases.push.copy()))
+        self.next_sample = 1
+        try:
+            while t < s.t_end:
+                t_bound = min(s.t_end, float(phases.push_until.min()))
+                stop = self.segment(t, y, t_bound, phases)
+                touching, leaving = stop.touching, stop.leaving
+                if not (touching.any() or leaving.any()):
+                    if stop.t >= s.t_end:
+                        break
+                    touching = (phases.phase == PUSHED) & (phases.push_until <= stop.t * (1 + 1e-15) + 1e-300)
+                self.stalled = self.stalled + 1 if stop.t - t < STALL_TIME else 0
+                t = stop.t
+                res = resolve(model, t, stop.y, self.p, phases, touching, leaving,
+                              gap_tolerance=self.gap_tolerance, force_tolerance=self.force_tolerance,
+                              impact=s.impact, impact_dt=s.impact_dt)
+                y, phases = res.y, res.phases
+                self.events += res.events
+                if res.impact_loss:
+                    self.losses.append((t, res.impact_loss))
+                self.check_guards(t, res.events)
+        except SimulationFailed as failure:
+            return failure.status, failure.message
+        return "success", STATUSES["success"]
+
+    def check_guards(self, t: float, new_events: list[Event]) -> None:
+        if len(self.events) >= self.max_events:
+            raise SimulationFailed("max_events", f"{len(self.events)} events by t = {t:.9g} s (max_events = "
+                                   f"{self.max_events}); raise max_events if the scene really has that many.")
+        if self.stalled >= STALL_COUNT:
+            raise SimulationFailed("no_progress", f"{self.stalled} event instants in a row within {STALL_TIME} s "
+                                   f"of each other at t = {t:.12g} s; tighten --rtol/--atol.")
+        for e in new_events:
+            if e.kind != "impact":
+                continue
+            recent = [x for x in self.events if x.kind == "impact" and x.contact == e.contact
+                      and x.t > t - CHATTER_WINDOW]
+            if len(recent) > CHATTER_IMPACTS:
+                particle = int(self.model.contacts[e.contact][0])
+                speed = max(abs(x.normal_velocity) for x in recent[-5:])
+                raise SimulationFailed(
+                    "chattering",
+                    f"particle {particle} impacted {len(recent)} times within {CHATTER_WINDOW * 1e3:g} ms up to "
+                    f"t = {t:.9g} s at normal speeds up to {speed:.3g} m/s (an accumulation of impacts); "
+                    "tighten --rtol/--atol, or add damping so the body settles.",
+                )
+
+    # ------------------------------------------------------------------ results
+    def result(self, status: str, message: str, wall: float) -> SimulationResult:
+        model, p, s = self.model, self.p, self.settings
+        nq, nu = model.nq, model.nu
+        T = np.array([x[0] for x in self.samples])
+        Y = np.array([x[1] for x in self.samples])
+        n = model.n_particles
+        X = np.empty((len(T), n, 2))
+        V = np.empty((len(T), n, 2))
+        E = np.empty((len(T), 4))
+        force = np.zeros((len(T), n))
+        for k, (_, y, held, push) in enumerate(self.samples):
+            q, u = y[:nq], y[nq : nq + nu]
+            X[k], V[k], E[k] = model.positions(q, p), model.velocities(q, u, p), model.energies(q, u, p)
+            lam = model.rhs(y, p, held.astype(np.intc), push)[1] if held.any() else np.zeros(model.n_contacts)
+            np.add.at(force[k], model.contacts[:, 0], lam + push)
+        self.min_gap = min(self.min_gap, float(np.min(model.gaps(Y[-1, :nq], p))) if len(Y) else np.inf)
+        loss_t = np.array([x[0] for x in self.losses])
+        loss_v = np.array([x[1] for x in self.losses])
+        instant = np.array([loss_v[loss_t < t].sum() for t in T]) if len(loss_t) else np.zeros(len(T))
+        ev = self.events
+        result = SimulationResult(
+            t=T, positions=X, velocities=V, contact_force=force,
+            kinetic=E[:, 0], spring=E[:, 1], gravity=E[:, 2],
+            damping_work=Y[:, nq + nu], impact_loss=instant + Y[:, nq + nu + 1],
+            events_time=np.array([e.t for e in ev], dtype=float),
+            events_particle=np.array([model.contacts[e.contact][0] for e in ev], dtype=int),
+            events_kind=np.array([e.kind for e in ev], dtype="<U7"),
+            events_held=np.array([e.held for e in ev], dtype=bool),
+            masses=self.scene.masses.copy(), status=status, message=message,
+        )
+        total = result.total_energy
+        drift = float(np.abs(total - total[0]).max()) if len(total) else 0.0
+        impacts = [e for e in ev if e.kind == "impact"]
+        result.stats = {
+            "scene": self.scene.name, "source": self.scene.source,
+            "method": s.method, "rtol": s.rtol, "atol": s.atol, "backend": model.backend,
+            "formulation": model.formulation, "impact": s.impact, "impact_dt": s.impact_dt,
+            "t_end": s.t_end, "t_reached": float(T[-1]) if len(T) else 0.0,
+            "wall_time_s": wall, "rhs_evaluations": self.nfev, "jacobian_evaluations": self.njev,
+            "steps": self.steps, "segments": self.segments,
+            "events": len(ev), "impacts": len(impacts), "not_held": sum(not e.held for e in impacts),
+            "liftoffs": len(ev) - len(impacts),
+            "max_penetration_m": max(0.0, -self.min_gap),
+            "energy_initial_J": float(total[0]) if len(total) else 0.0,
+            "energy_drift_J": drift,
+            "energy_drift_relative": drift / max(abs(float(total[0])), float(result.kinetic.max()), 1e-300),
+            "model_digest": model.digest,
+            "versions": {"flexbody": __version__, "numpy": np.__version__, "scipy": scipy.__version__},
+        }
+        return result
+
+
+def simulate(
+    scene: Scene | str,
+    *,
+    model: Model | None = None,
+    method: str | None = None,
+    rtol: float | None = None,
+    atol: float | None = None,
+    t_end: float | None = None,
+    output_dt: float | None = None,
+    backend: str | None = None,
+    formulation: str | None = None,
+    impact: str | None = None,
+    impact_dt: float | None = None,
+    max_events: int = 100_000,
+    progress: Progress | None = None,
+) -> SimulationResult:
+    """Simulate a scene: free flight, impacts, contact and lift-off of every particle.
+
+    Parameters
+    ----------
+    scene : Scene, path or bundled scene name
+    model : Model, optional
+        A loaded model (skips loading); otherwise ``load_model(scene, backend, formulation)``.
+    method, rtol, atol, t_end, output_dt, backend, formulation, impact, impact_dt
+        Override the scene's ``[simulation]`` settings.
+    max_events : int
+        Stop with status ``max_events`` after this many events.
+    progress : callable, optional
+        ``progress(t, t_end, n_events)``, called after every step.
+
+    Returns
+    -------
+    SimulationResult
+        ``status`` says whether it reached ``t_end``; if not, ``message`` says why and
+        what to change, and the arrays hold what was computed until then.
+    """
+    if not isinstance(scene, Scene):
+        scene = load_scene(scene)
+    settings = _settings(scene, dict(method=method, rtol=rtol, atol=atol, t_end=t_end, output_dt=output_dt,
+                                     backend=backend, formulation=formulation, impact=impact, impact_dt=impact_dt))
+    if model is None:
+        model = load_model(scene, backend=settings.backend, formulation=settings.formulation)
+    settings = _settings(scene, dict(vars(settings), backend=model.backend, formulation=model.formulation))
+    run = _Run(scene, model, settings, progress, max_events)
+    start = time.perf_counter()
+    status, message = run.run()
+    wall = time.perf_counter() - start
+    return run.result(status, message, wall)
+
+
+__all__ = ["simulate", "SimulationFailed", "FREE", "HELD"]

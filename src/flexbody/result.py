@@ -1,0 +1,123 @@
+"""Simulation results: the arrays of DESIGN.md §2, status, statistics, atomic saving."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+#: Array keys of result.npz, in the order of DESIGN.md §2 (plus events_held).
+ARRAY_KEYS = (
+    "t", "positions", "velocities", "contact_force", "kinetic", "spring", "gravity", "damping_work",
+    "impact_loss", "events_time", "events_particle", "events_kind", "events_held", "masses",
+)  # fmt: skip
+
+#: Status values and what each means.
+STATUSES = {
+    "success": "The simulation reached t_end.",
+    "chattering": "A particle kept impacting at vanishing speed (an accumulation of impacts).",
+    "no_progress": "Events kept firing without time advancing.",
+    "step_size_collapse": "The integrator's step size collapsed.",
+    "blow_up": "The state became non-finite or the mass matrix singular.",
+    "max_events": "The maximum number of events was reached.",
+}
+
+
+@dataclass
+class SimulationResult:
+    """Everything a run produced.
+
+    Attributes
+    ----------
+    t : ndarray, shape (nt,)
+    positions, velocities : ndarray, shape (nt, n, 2)
+        Particles in N.
+    contact_force : ndarray, shape (nt, n)
+        Normal constraint force on each particle (N, >= 0; summed over grounds).
+    kinetic, spring, gravity, damping_work, impact_loss : ndarray, shape (nt,)
+        The energy ledger (J): their sum stays at its initial value.
+    events_time, events_particle, events_kind, events_held : ndarray, shape (ne,)
+        Each impact or lift-off; ``events_held`` is False for an impacted particle that
+        leaves at once because holding it would need a pulling force.
+    masses : ndarray, shape (n,)
+    status : str
+        One of :data:`STATUSES`; ``message`` says what happened and what to change.
+    stats : dict
+        Method, tolerances, backend, formulation, wall time, RHS evaluations, steps,
+        events, max penetration, energy drift.
+    """
+
+    t: np.ndarray
+    positions: np.ndarray
+    velocities: np.ndarray
+    contact_force: np.ndarray
+    kinetic: np.ndarray
+    spring: np.ndarray
+    gravity: np.ndarray
+    damping_work: np.ndarray
+    impact_loss: np.ndarray
+    events_time: np.ndarray
+    events_particle: np.ndarray
+    events_kind: np.ndarray
+    events_held: np.ndarray
+    masses: np.ndarray
+    status: str = "success"
+    message: str = STATUSES["success"]
+    stats: dict = field(default_factory=dict)
+
+    @property
+    def success(self) -> bool:
+        return self.status == "success"
+
+    @property
+    def total_energy(self) -> np.ndarray:
+        """Kinetic + spring + gravity + damping work + impact loss, shape (nt,)."""
+        return self.kinetic + self.spring + self.gravity + self.damping_work + self.impact_loss
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        return {key: getattr(self, key) for key in ARRAY_KEYS}
+
+    def save(self, out_dir: str | Path, extra_files: dict[str, bytes] | None = None) -> Path:
+        """Write ``result.npz`` and ``summary.json`` (and ``extra_files``) into ``out_dir``.
+
+        All files are written to a temporary folder beside ``out_dir`` first and moved in
+        only when every one is complete, so a failure leaves no half-written result.
+        """
+        out_dir = Path(out_dir)
+        out_dir.parent.mkdir(parents=True, exist_ok=True)
+        staging = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}-", dir=out_dir.parent))
+        try:
+            np.savez_compressed(staging / "result.npz", **self.arrays())
+            summary = dict(self.stats, status=self.status, message=self.message)
+            (staging / "summary.json").write_text(json.dumps(summary, indent=1, default=_plain) + "\n")
+            for name, data in (extra_files or {}).items():
+                (staging / name).write_bytes(data)
+            out_dir.mkdir(exist_ok=True)
+            for item in staging.iterdir():
+                os.replace(item, out_dir / item.name)
+        finally:
+            shutil.rmtree(staging, ignore_errors=True)
+        return out_dir
+
+
+def _plain(value):
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    raise TypeError(f"cannot write {type(value).__name__} to JSON")
+
+
+def load_result(out_dir: str | Path) -> SimulationResult:
+    """Read a result written by :meth:`SimulationResult.save`."""
+    out_dir = Path(out_dir)
+    with np.load(out_dir / "result.npz") as data:
+        arrays = {key: data[key] for key in ARRAY_KEYS}
+    summary = json.loads((out_dir / "summary.json").read_text())
+    status, message = summary.pop("status"), summary.pop("message")
+    return SimulationResult(**arrays, status=status, message=message, stats=summary)
