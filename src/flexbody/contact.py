@@ -31,13 +31,15 @@ class Phases:
     """Per-contact state of the phase machine, arrays of shape (nc,)."""
 
     phase: np.ndarray  # FREE / HELD / PUSHED
-    floor: np.ndarray  # a FREE contact's event fires when its gap falls to this level (m)
+    floor: np.ndarray  # a FREE contact's event fires when its gap falls to this level (m): 0, or
+    # a hair below where the contact was released on the ground
     push: np.ndarray  # normal force of PUSHED contacts (N), 0 elsewhere
     push_until: np.ndarray  # end of each PUSHED window (s), inf elsewhere
 
     @classmethod
-    def all_free(cls, nc: int, gap_tolerance: float) -> Phases:
-        return cls(np.zeros(nc, int), np.full(nc, -gap_tolerance), np.zeros(nc), np.full(nc, np.inf))
+    def all_free(cls, nc: int) -> Phases:
+        """Every contact free and armed at the ground itself (floor 0)."""
+        return cls(np.zeros(nc, int), np.zeros(nc), np.zeros(nc), np.full(nc, np.inf))
 
     @property
     def held(self) -> np.ndarray:
@@ -64,6 +66,7 @@ class Resolution:
     y: np.ndarray
     phases: Phases
     events: list[Event] = field(default_factory=list)
+    not_held: np.ndarray | None = None  # bool (nc,): stopped at this instant, then released at once
     impact_loss: float = 0.0  # kinetic energy removed by instant impacts (J)
     iterations: int = 0
 
@@ -149,6 +152,8 @@ def resolve(
     events: list[Event] = []
     loss = 0.0
     impacted = np.zeros(model.n_contacts, bool)
+    settled = np.zeros(model.n_contacts, bool)
+    not_held = np.zeros(model.n_contacts, bool)
     was_held = phases.phase == HELD  # on the ground before this instant, so v_n = 0
     iterations = 0
     for iterations in range(1, 2 * model.n_contacts + 3):
@@ -161,9 +166,10 @@ def resolve(
         # at this instant has v_n = 0 up to round-off (1e-16 m/s) and is not hit again.
         hit = near & (vn < 0.0) & ~impacted & ~was_held
         ending = (phases.phase == PUSHED) & touching  # thesis windows that end now
-        touching &= ~ending
+        touching &= ~(ending | near)  # each touch is handled once
         events += [Event(t, int(c), "impact", float(vn[c])) for c in np.flatnonzero(hit)]
         impacted |= hit
+        settled |= ending | (hit & (impact == "instant"))  # stopped on the ground at this instant
         if impact == "thesis" and hit.any():
             # eq. 4.6: the impulse -m v_n spread as a force over dT; no velocity jump now.
             m_eff = effective_masses(model, q, p)
@@ -195,10 +201,8 @@ def resolve(
                 c = int(np.flatnonzero(pulling)[np.argmin(lam[pulling])])
                 phases.phase[c] = FREE
                 phases.floor[c] = min(0.0, gaps[c]) - gap_tolerance
-                if impacted[c]:
-                    for e in events:
-                        if e.contact == c and e.kind == "impact":
-                            e.held = False  # "not held": it leaves at once
+                if settled[c]:
+                    not_held[c] = True  # its (latest) impact did not hold it: it leaves at once
                 else:
                     events.append(Event(t, c, "liftoff"))
                 changed = True
@@ -206,11 +210,11 @@ def resolve(
             break
     else:
         raise RuntimeError(f"contact resolution at t = {t:.17g} s did not settle after {iterations} passes")
-    # Free contacts below their floor but leaving: lower the floor so the next event is a real approach.
-    q = y[:nq]
-    gaps = model.gaps(q, p)
-    free = phases.phase == FREE
-    phases.floor[free] = np.minimum(phases.floor[free], np.minimum(0.0, gaps[free]) - gap_tolerance)
+    # A free contact too close to its floor to be armed (released on the ground, or left at
+    # -1e-16 by round-off) gets a floor a hair below: its next event is a real approach.
+    gaps = model.gaps(y[:nq], p)
+    unarmed = (phases.phase == FREE) & (gaps - phases.floor <= gap_tolerance)
+    phases.floor[unarmed] = np.minimum(0.0, gaps[unarmed]) - gap_tolerance
     phases.push[phases.phase != PUSHED] = 0.0
     phases.push_until[phases.phase != PUSHED] = np.inf
-    return Resolution(y=y, phases=phases, events=events, impact_loss=loss, iterations=iterations)
+    return Resolution(y=y, phases=phases, events=events, not_held=not_held, impact_loss=loss, iterations=iterations)

@@ -135,10 +135,11 @@ class _Run:
                     return _Stop(t_stop, y_stop, hit.contacts & events.free, hit.contacts & events.held_mask)
                 if solver.status == "finished":
                     return _Stop(solver.t, solver.y.copy(), np.zeros_like(events.free), np.zeros_like(events.free))
-                if events.free.any():  # a free particle back above the ground is armed at the ground again
-                    above = events.free & (model.gaps(solver.y[: model.nq], self.p) >= 0.0)
-                    if (phases.floor[above] != -self.gap_tolerance).any():
-                        phases.floor[above] = -self.gap_tolerance
+                lowered = events.free & (phases.floor < 0.0)
+                if lowered.any():  # a particle clearly back above the ground is armed at the ground again
+                    above = lowered & (model.gaps(solver.y[: model.nq], self.p) >= 2 * self.gap_tolerance)
+                    if above.any():
+                        phases.floor[above] = 0.0
                         g_new = events(solver.y)
                 g_old = g_new
                 if self.progress:
@@ -163,7 +164,7 @@ class _Run:
     def run(self) -> tuple[str, str]:
         s, model = self.settings, self.model
         t, y = 0.0, self.y0.copy()
-        phases = Phases.all_free(model.n_contacts, self.gap_tolerance)
+        phases = Phases.all_free(model.n_contacts)
         # Particles starting on a ground at rest are held if the ground has to push them.
         q, u = y[: model.nq], y[model.nq : model.nq + model.nu]
         resting = (model.gaps(q, self.p) <= self.gap_tolerance) & (model.gap_jacobian(q, self.p) @ u == 0.0)
@@ -190,6 +191,9 @@ class _Run:
                               impact=s.impact, impact_dt=s.impact_dt)
                 y, phases = res.y, res.phases
                 self.events += res.events
+                for c in np.flatnonzero(res.not_held):
+                    latest = next(e for e in reversed(self.events) if e.contact == c and e.kind == "impact")
+                    latest.held = False
                 if res.impact_loss:
                     self.losses.append((t, res.impact_loss))
                 self.check_guards(t, res.events)
@@ -248,7 +252,7 @@ class _Run:
             events_particle=np.array([model.contacts[e.contact][0] for e in ev], dtype=int),
             events_kind=np.array([e.kind for e in ev], dtype="<U7"),
             events_held=np.array([e.held for e in ev], dtype=bool),
-            masses=self.scene.masses.copy(), status=status, message=message,
+            masses=self.scene.masses.copy(), links=self.scene.links(), status=status, message=message,
         )
         total = result.total_energy
         drift = float(np.abs(total - total[0]).max()) if len(total) else 0.0

@@ -11,10 +11,10 @@ from pathlib import Path
 
 import numpy as np
 
-#: Array keys of result.npz, in the order of DESIGN.md §2 (plus events_held).
+#: Array keys of result.npz, in the order of DESIGN.md §2 (plus events_held and links).
 ARRAY_KEYS = (
     "t", "positions", "velocities", "contact_force", "kinetic", "spring", "gravity", "damping_work",
-    "impact_loss", "events_time", "events_particle", "events_kind", "events_held", "masses",
+    "impact_loss", "events_time", "events_particle", "events_kind", "events_held", "masses", "links",
 )  # fmt: skip
 
 #: Status values and what each means.
@@ -45,6 +45,8 @@ class SimulationResult:
         Each impact or lift-off; ``events_held`` is False for an impacted particle that
         leaves at once because holding it would need a pulling force.
     masses : ndarray, shape (n,)
+    links : ndarray of int, shape (n_links, 2)
+        Particle pairs joined by a spring and damper (for drawing the body).
     status : str
         One of :data:`STATUSES`; ``message`` says what happened and what to change.
     stats : dict
@@ -66,6 +68,7 @@ class SimulationResult:
     events_kind: np.ndarray
     events_held: np.ndarray
     masses: np.ndarray
+    links: np.ndarray
     status: str = "success"
     message: str = STATUSES["success"]
     stats: dict = field(default_factory=dict)

@@ -168,6 +168,12 @@ class Scene:
         """All particle masses, shape (n,)."""
         return np.concatenate([b.masses for b in self.bodies])
 
+    def links(self) -> np.ndarray:
+        """All links with global particle indices, shape (n_links, 2)."""
+        offsets = np.cumsum([0] + [b.n_particles for b in self.bodies])
+        pairs = [np.asarray(b.links, dtype=int).reshape(-1, 2) + o for b, o in zip(self.bodies, offsets)]
+        return np.vstack(pairs) if pairs else np.zeros((0, 2), int)
+
     def initial_positions(self) -> np.ndarray:
         """All particle positions in N, shape (n, dim)."""
         return np.vstack([b.initial_positions() for b in self.bodies])

@@ -1,0 +1,76 @@
+"""``flexbody run``: outputs, exit codes, and nothing written on a mistake or a failure."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from flexbody.cli import main
+
+
+def run_cli(*args):
+    return subprocess.run([sys.executable, "-m", "flexbody.cli", *args], capture_output=True, text=True)
+
+
+@pytest.mark.slow
+def test_main_job_writes_result_summary_figures_and_animation(tmp_path):
+    out = tmp_path / "ball"
+    run = run_cli("run", "thesis_ball", "--out", str(out))
+    assert run.returncode == 0, run.stderr
+    names = {p.name for p in out.iterdir()}
+    assert names == {"result.npz", "summary.json", "fig5_1_free_fall.png", "fig5_2_impact.png",
+                     "fig5_3_colliding_points.png", "fig5_4_energy.png", "drop.gif"}
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["status"] == "success" and summary["impacts"] == 29 and summary["liftoffs"] == 18
+    with np.load(out / "result.npz") as data:
+        assert data["positions"].shape == (2001, 23, 2)
+    assert (out / "drop.gif").read_bytes()[:6] == b"GIF89a"
+    assert "29 impacts" in run.stdout and "%" in run.stderr  # the summary, and progress
+
+
+def test_no_figures_and_overrides(tmp_path):
+    out = tmp_path / "quick"
+    assert main(["run", "thesis_ball", "--out", str(out), "--no-figures", "--t-end", "0.3", "--method", "DOP853",
+                 "--rtol", "1e-8", "--atol", "1e-11", "--formulation", "floating", "--backend", "numpy", "--quiet"]) == 0
+    assert {p.name for p in out.iterdir()} == {"result.npz", "summary.json"}
+    summary = json.loads((out / "summary.json").read_text())
+    assert (summary["method"], summary["rtol"], summary["formulation"], summary["backend"], summary["t_end"]) == \
+        ("DOP853", 1e-8, "floating", "numpy", 0.3)
+
+
+@pytest.mark.parametrize("args, says", [
+    (["no_such_scene"], "bundled scene"),
+    (["thesis_ball", "--rtol", "5"], "`rtol` = 5.0"),
+    (["thesis_ball", "--t-end", "-1"], "`t_end` = -1.0"),
+    (["thesis_ball", "--impact", "thesis"], "`impact_dt`"),
+])
+def test_bad_input_is_one_clear_error_and_writes_nothing(tmp_path, args, says):
+    out = tmp_path / "never"
+    run = run_cli("run", *args, "--out", str(out))
+    assert run.returncode == 2
+    assert run.stderr.startswith("error:") and says in run.stderr and "Traceback" not in run.stderr
+    assert not out.exists()
+
+
+def test_bad_scene_file_lists_every_problem(tmp_path):
+    scene = tmp_path / "bad.toml"
+    scene.write_text('[[bodies]]\nshape = "ring"\ncount = 0\nmass = -1\n[simulation]\nt_end = 1\n')
+    run = run_cli("run", str(scene), "--out", str(tmp_path / "never"))
+    assert run.returncode == 2 and "Traceback" not in run.stderr
+    for field in ("bodies[0].count", "bodies[0].mass", "bodies[0].radius", "bodies[0].stiffness", "bodies[0].position"):
+        assert field in run.stderr
+    assert not (tmp_path / "never").exists()
+
+
+def test_failed_simulation_exits_nonzero_says_why_and_writes_nothing(tmp_path, monkeypatch):
+    import flexbody.runner as runner
+
+    real = runner.simulate
+    monkeypatch.setattr(runner, "simulate", lambda *a, **k: real(*a, **k, max_events=3))
+    out = tmp_path / "failed"
+    assert main(["run", "thesis_ball", "--out", str(out), "--quiet", "--no-figures"]) == 1
+    assert not out.exists()

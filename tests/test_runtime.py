@@ -1,0 +1,212 @@
+"""The event-driven runtime against closed forms, invariants and an independent reference."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import flexbody
+from flexbody.contact import Event
+from flexbody.driver import SimulationFailed, _Run, _settings
+from flexbody.model import load_model
+
+from .conftest import BACKENDS, body, make_scene
+
+TIGHT = dict(method="DOP853", rtol=1e-11, atol=1e-13)
+
+
+def single_particle(h=1.0, mass=0.3, t_end=1.0):
+    return make_scene(body(particles=[[0.0, 0.0]], links=[], stiffness=[], damping=[], mass=mass, position=[0.0, h]),
+                      simulation={"t_end": t_end, "output_dt": 1e-3})
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_free_fall_impact_time_and_resting_contact_force(backend):
+    h, m, g = 1.0, 0.3, 9.81
+    r = flexbody.simulate(single_particle(h, m), backend=backend, **TIGHT)
+    assert r.success, r.message
+    assert list(r.events_kind) == ["impact"] and r.events_held.all()
+    assert r.events_time[0] == pytest.approx(np.sqrt(2 * h / g), abs=1e-12)
+    after = r.t > r.events_time[0]
+    np.testing.assert_allclose(r.positions[after, 0, 1], 0.0, atol=1e-12)
+    np.testing.assert_allclose(r.contact_force[after, 0], m * g, rtol=1e-12)
+    assert r.impact_loss[-1] == pytest.approx(m * g * h, rel=1e-10)  # all kinetic energy lost: plastic impact
+
+
+def test_vertical_dumbbell_lifts_off_at_the_closed_form_time():
+    """contact.md §4.3: m1 = 1 below m2 = 2, k = 400, L0 = 0.5, released at H = 1."""
+    scene = make_scene(body(particles=[[0.0, 0.0], [0.0, 0.5]], masses=[1.0, 2.0], mass=None, stiffness=400.0,
+                            damping=0.0, position=[0.0, 1.0]), simulation={"t_end": 0.75})
+    r = flexbody.simulate(scene, **TIGHT)
+    assert r.success, r.message
+    assert list(zip(r.events_particle, r.events_kind)) == [(0, "impact"), (0, "liftoff")]
+    assert r.events_time[0] == pytest.approx(0.451523640986, abs=1e-11)
+    assert r.events_time[1] == pytest.approx(0.701213600681, abs=1e-9)
+    model = load_model(scene, backend="numpy")
+    run = _Run(scene, model, _settings(scene, dict(TIGHT, t_end=0.701213600681)), None, 100)
+    run.run()
+    v2 = run.samples[-1][1][model.nq + 3]
+    assert v2 == pytest.approx(4.361023317411, abs=1e-7)
+
+
+@pytest.mark.parametrize("n, restitution, contact_time", [(2, 0.5, np.pi), (3, 0.649210, 5.268542),
+                                                          (4, 0.728018, 7.288611)])
+def test_falling_chain_restitution_matches_reference(n, restitution, contact_time):
+    """contact.md §4.5: a vertical chain of N equal particles, g = 0, lands at v0 plastically.
+
+    Spacing 1 m: the compression (~v0 / omega = 0.1 m) never folds the chain."""
+    k, m, v0 = 100.0, 1.0, 1.0
+    scene = make_scene(
+        body(particles=[[0.0, 1.0 * i] for i in range(n)], links=[[i, i + 1] for i in range(n - 1)], mass=m,
+             stiffness=k, damping=0.0, position=[0.0, 0.001], velocity=[0.0, -v0]),
+        gravity=[0.0, 0.0], simulation={"t_end": 1.5, "output_dt": 1e-4},
+    )
+    r = flexbody.simulate(scene, **TIGHT)
+    assert r.success, r.message
+    t_impact, t_liftoff = r.events_time[0], r.events_time[r.events_kind == "liftoff"][-1]
+    v_cm = r.velocities[-1, :, 1].mean()
+    assert v_cm / v0 == pytest.approx(restitution, abs=2e-6)
+    assert (t_liftoff - t_impact) * np.sqrt(k / m) == pytest.approx(contact_time, abs=2e-6)
+
+
+def test_two_particle_link_oscillates_at_the_damped_frequency():
+    """Thesis eq. 3.10 with the reduced mass mu: mu x'' + c x' + k x = 0 along the link."""
+    m1, m2, k, c, L = 0.05, 0.08, 2000.0, 0.5, 0.2
+    mu = m1 * m2 / (m1 + m2)
+    x0 = 0.01
+    scene = make_scene(body(particles=[[0.0, 0.0], [L + x0, 0.0]], masses=[m1, m2], mass=None, stiffness=k, damping=c,
+                            rest_lengths=L, position=[0.0, 1.0]), gravity=[0.0, 0.0],
+                       simulation={"t_end": 0.2, "output_dt": 1e-4})
+    r = flexbody.simulate(scene, **TIGHT)
+    x = np.linalg.norm(r.positions[:, 1] - r.positions[:, 0], axis=1) - L
+    w0, zeta = np.sqrt(k / mu), c / (2 * np.sqrt(k * mu))
+    wd = np.sqrt(4 * k * mu - c**2) / (2 * mu)
+    expected = x0 * np.exp(-zeta * w0 * r.t) * (np.cos(wd * r.t) + zeta * w0 / wd * np.sin(wd * r.t))
+    np.testing.assert_allclose(x, expected, atol=1e-9)
+
+
+def level_ring(angle_offset=0.0, order=None):
+    """The thesis ball turned so a face (two mirror particles) lands flat."""
+    angle = -np.pi / 2 + np.pi / 22 + angle_offset
+    table = body(particles=None, links=None, shape="ring", count=22, radius=0.1, center=True, angle=angle,
+                 position=[0.0, 0.3])
+    if order is not None:  # the same body with its particles listed in another order
+        s = make_scene(table)
+        pts = s.bodies[0].points
+        inverse = np.argsort(order)
+        table = body(particles=pts[order].tolist(), links=[[int(inverse[i]), int(inverse[j])] for i, j in s.bodies[0].links],
+                     angle=angle, position=[0.0, 0.3])
+    return make_scene(table, simulation={"t_end": 0.45, "output_dt": 1e-3})
+
+
+def test_flat_landing_hits_several_particles_at_once_symmetrically():
+    r = flexbody.simulate(level_ring(), **TIGHT)
+    assert r.success, r.message
+    first = r.events_time == r.events_time[0]
+    assert sorted(r.events_particle[first]) == [1, 22] and (r.events_kind[first] == "impact").all()
+    # mirror symmetry about the vertical through the centre: particle k <-> 23 - k
+    mirror = np.r_[0, 23 - np.arange(1, 23)]
+    x = r.positions
+    np.testing.assert_allclose(x[:, mirror, 0], -x[:, :, 0], atol=1e-10)
+    np.testing.assert_allclose(x[:, mirror, 1], x[:, :, 1], atol=1e-10)
+    assert r.stats["max_penetration_m"] < 1e-11
+    assert r.positions[:, :, 1].min() > -1e-11
+    assert r.stats["energy_drift_J"] < 1e-8 * r.stats["energy_initial_J"]
+
+
+def test_result_does_not_depend_on_particle_order():
+    order = np.r_[0, np.arange(22, 0, -1)]  # perimeter listed clockwise instead
+    a = flexbody.simulate(level_ring(), **TIGHT)
+    b = flexbody.simulate(level_ring(order=order), **TIGHT)
+    np.testing.assert_allclose(b.positions, a.positions[:, order], atol=1e-10)
+    np.testing.assert_allclose(b.events_time, a.events_time, atol=1e-12)
+
+
+def test_near_simultaneous_impacts_are_continuous_with_simultaneous():
+    exact = flexbody.simulate(level_ring(), **TIGHT)
+    for offset in (1e-13, 1e-10, 1e-8):
+        near = flexbody.simulate(level_ring(angle_offset=offset), **TIGHT)
+        assert near.success
+        assert np.abs(near.positions - exact.positions).max() < 1e3 * offset + 1e-10
+        assert near.stats["max_penetration_m"] < 1e-11
+
+
+def test_thesis_impact_mode_converges_to_instant():
+    scene = flexbody.load_scene("thesis_ball")
+    reference = flexbody.simulate(scene, t_end=0.4, **TIGHT)
+    errors = []
+    for dt in (1e-3, 1e-4, 1e-5):
+        r = flexbody.simulate(scene, t_end=0.4, impact="thesis", impact_dt=dt, **TIGHT)
+        assert r.success, r.message
+        errors.append(np.abs(r.positions - reference.positions).max())
+        total = r.total_energy
+        assert np.abs(total - total[0]).max() < 1e-8 * total[0]  # the window's work is in the ledger
+    assert errors[0] > errors[1] > errors[2]
+    assert errors[2] < 0.05 * errors[0]  # first order in dT
+    assert errors[2] < 1e-4
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_particles_and_floating_formulations_agree(ball, backend):
+    a = flexbody.simulate(ball, t_end=0.8, formulation="particles", backend=backend, **TIGHT)
+    b = flexbody.simulate(ball, t_end=0.8, formulation="floating", backend=backend, **TIGHT)
+    assert list(zip(a.events_particle, a.events_kind)) == list(zip(b.events_particle, b.events_kind))
+    np.testing.assert_allclose(a.events_time, b.events_time, atol=1e-9)
+    np.testing.assert_allclose(a.positions, b.positions, atol=1e-8)
+    np.testing.assert_allclose(a.contact_force, b.contact_force, atol=1e-5 * a.contact_force.max())
+
+
+@pytest.mark.parametrize("rtol", [1e-6, 1e-9])
+def test_energy_balance_on_the_thesis_ball(ball, rtol):
+    r = flexbody.simulate(ball, method="DOP853", rtol=rtol, atol=rtol * 1e-3)
+    assert r.success
+    total = r.total_energy
+    assert np.abs(total - total[0]).max() <= 10 * rtol * total[0]
+    assert (np.diff(r.damping_work) >= -1e-12).all() and (np.diff(r.impact_loss) >= 0).all()
+    # the same event sequence as the independent implementation (contact.md: 29 / 8 / 18)
+    assert (r.stats["impacts"], r.stats["not_held"], r.stats["liftoffs"]) == (29, 8, 18)
+    assert r.stats["max_penetration_m"] < 1e-10
+    assert (r.contact_force >= 0).all()
+
+
+def test_every_scipy_method_gives_the_same_events(ball):
+    reference = flexbody.simulate(ball, t_end=0.7, **TIGHT)
+    for method in ("RK45", "RK23", "Radau", "BDF", "LSODA"):
+        r = flexbody.simulate(ball, t_end=0.7, method=method, rtol=1e-7, atol=1e-10)
+        assert r.success, (method, r.message)
+        assert list(r.events_kind) == list(reference.events_kind), method
+        assert np.abs(r.positions - reference.positions).max() < 1e-5, method
+
+
+def test_max_events_stops_with_status_and_message(ball):
+    r = flexbody.simulate(ball, max_events=5)
+    assert r.status == "max_events" and not r.success
+    assert "max_events" in r.message and len(r.events_time) >= 5
+
+
+def test_chattering_is_reported_not_spun_on(ball):
+    model = load_model(ball, backend="numpy")
+    run = _Run(ball, model, _settings(ball, {}), None, 10**6)
+    run.events = [Event(0.5 + 1e-5 * k, 3, "impact", -1e-7) for k in range(30)]
+    with pytest.raises(SimulationFailed) as info:
+        run.check_guards(0.5 + 3e-4, run.events[-1:])
+    assert info.value.status == "chattering"
+    assert "particle 3 impacted 30 times" in info.value.message and "rtol" in info.value.message
+
+
+def test_result_contract(ball, tmp_path):
+    r = flexbody.simulate(ball, t_end=0.5)
+    out = r.save(tmp_path / "run")
+    back = flexbody.load_result(out)
+    nt, n = len(back.t), 23
+    assert back.positions.shape == back.velocities.shape == (nt, n, 2)
+    assert back.contact_force.shape == (nt, n)
+    for key in ("kinetic", "spring", "gravity", "damping_work", "impact_loss"):
+        assert getattr(back, key).shape == (nt,)
+    assert set(back.events_kind) == {"impact", "liftoff"}
+    assert back.events_time.shape == back.events_particle.shape == back.events_kind.shape
+    np.testing.assert_array_equal(back.masses, np.full(n, 0.05))
+    for key in ("scene", "method", "rtol", "atol", "backend", "formulation", "wall_time_s", "rhs_evaluations",
+                "steps", "events", "max_penetration_m", "energy_drift_J", "versions"):
+        assert key in back.stats
+    assert back.t[0] == 0.0 and back.t[-1] == pytest.approx(0.5)
