@@ -13,6 +13,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import jinja2
+import numpy as np
 import sympy as sp
 
 from flexbody.topology import GENERATOR_VERSION
@@ -27,6 +28,7 @@ FILES = {
     "model.c.jinja": "model.c",
     "model.h.jinja": "model.h",
     "eom.md.jinja": "eom.md",
+    "integrator.c.jinja": "integrator.c",
 }
 #: Generated functions in the order they appear, with one-line descriptions.
 FUNCTIONS = {
@@ -85,6 +87,17 @@ def build_blocks(model: SymbolicModel) -> list[Block]:
     """CSE all outputs once, then give each function the temporaries it depends on."""
     _check_coverage(model)
     temporaries, reduced = _cse(model)
+    reduced = dict(reduced)
+    extra_docs = {}
+    if model.mass_matrix_is_diagonal:
+        n = model.outputs["mass_matrix"].rows
+        reduced["mass_diagonal"] = [reduced["mass_matrix"][i * n + i] for i in range(n)]
+        model.outputs["mass_diagonal"] = sp.Matrix([model.outputs["mass_matrix"][i, i] for i in range(n)])
+        extra_docs["mass_diagonal"] = "Diagonal of the (diagonal) mass matrix."
+    pattern = gap_jacobian_pattern(model)
+    reduced["gap_jacobian_values"] = [reduced["gap_jacobian"][k] for k in pattern.flat]
+    model.outputs["gap_jacobian_values"] = sp.Matrix([list(model.outputs["gap_jacobian"])[k] for k in pattern.flat])
+    extra_docs["gap_jacobian_values"] = "Nonzeros of gap_jacobian, row by row (pattern GJ_START, GJ_COL)."
     groups = {"q": model.q, "u": model.u, "p": model.p, "a": model.a}
     where = {s: (g, i) for g, syms in groups.items() for i, s in enumerate(syms)}
     c_printer = CPrinter({s.name: f"{g}[{i}]" for s, (g, i) in where.items()})
@@ -92,10 +105,11 @@ def build_blocks(model: SymbolicModel) -> list[Block]:
     defined = dict(temporaries)
     order = {t: k for k, (t, _) in enumerate(temporaries)}
     blocks = []
-    for name, doc in FUNCTIONS.items():
+    for name, doc in (FUNCTIONS | extra_docs).items():
         exprs = reduced[name]
         shape = model.outputs[name].shape
         shape = (shape[0],) if shape[1] == 1 and name not in ("positions", "velocities") else shape
+        shape = (max(shape[0], 1),) + tuple(shape[1:])  # C has no zero-length arrays
         needed: set[sp.Symbol] = set()
         stack = [s for e in exprs for s in e.free_symbols if s in defined]
         while stack:
@@ -130,6 +144,59 @@ def build_blocks(model: SymbolicModel) -> list[Block]:
     return blocks
 
 
+class SparsePattern:
+    """Nonzeros of the gap Jacobian in row order: ``start`` (nc + 1,), ``col`` (nnz,), ``flat``
+    (nnz,) = row-major index of each nonzero."""
+
+    def __init__(self, matrix: sp.Matrix) -> None:
+        self.start, self.col, self.flat = [0], [], []
+        for i in range(matrix.rows):
+            for j in range(matrix.cols):
+                if matrix[i, j] != 0:
+                    self.col.append(j)
+                    self.flat.append(i * matrix.cols + j)
+            self.start.append(len(self.col))
+
+
+def gap_jacobian_pattern(model: SymbolicModel) -> SparsePattern:
+    return SparsePattern(model.outputs["gap_jacobian"])
+
+
+def cholesky_code(M: sp.Matrix) -> dict[str, list[str]]:
+    """Straight-line C for the Cholesky factor and solve of M's sparsity pattern.
+
+    Unknowns with the fewest couplings go first and the dense rigid-body rows of the
+    floating formulation last, so the arrowhead pattern factors without fill-in: O(n)
+    work instead of O(n^3).  The factor overwrites M's lower triangle (in that order).
+    """
+    n = M.rows
+    pattern = np.array([[M[i, j] != 0 for j in range(n)] for i in range(n)])
+    order = sorted(range(n), key=lambda i: (int(pattern[i].sum()), i))
+    L = np.tril(pattern[np.ix_(order, order)])
+    for j in range(n):  # symbolic elimination: the fill-in pattern
+        rows = np.flatnonzero(L[j + 1 :, j]) + j + 1
+        L[np.ix_(rows, rows)] |= np.tril(np.ones((len(rows), len(rows)), bool))
+
+    def m(i: int, j: int) -> str:
+        return f"m[{order[i] * n + order[j]}]"
+
+    factor, solve = [], []
+    for j in range(n):
+        terms = "".join(f" - {m(j, k)} * {m(j, k)}" for k in range(j) if L[j, k])
+        factor.append(f"d = {m(j, j)}{terms}; if (!(d > 0.0)) return -1; {m(j, j)} = sqrt(d);")
+        for i in range(j + 1, n):
+            if L[i, j]:
+                terms = "".join(f" - {m(i, k)} * {m(j, k)}" for k in range(j) if L[i, k] and L[j, k])
+                factor.append(f"{m(i, j)} = ({m(i, j)}{terms}) / {m(j, j)};")
+    for i in range(n):
+        terms = "".join(f" - {m(i, k)} * x[{order[k]}]" for k in range(i) if L[i, k])
+        solve.append(f"x[{order[i]}] = (x[{order[i]}]{terms}) / {m(i, i)};")
+    for i in reversed(range(n)):
+        terms = "".join(f" - {m(k, i)} * x[{order[k]}]" for k in range(i + 1, n) if L[k, i])
+        solve.append(f"x[{order[i]}] = (x[{order[i]}]{terms}) / {m(i, i)};")
+    return {"factor": factor, "solve": solve}
+
+
 def _environment() -> jinja2.Environment:
     return jinja2.Environment(
         loader=jinja2.FileSystemLoader(str(TEMPLATES)),
@@ -139,6 +206,30 @@ def _environment() -> jinja2.Environment:
         keep_trailing_newline=True,
         autoescape=False,
     )
+
+
+def _c_array(values) -> str:
+    """A C initializer with every double printed so it reads back exactly."""
+    values = np.asarray(values, dtype=float)
+    if values.ndim == 1:
+        return "{" + ", ".join(repr(float(v)) for v in values) + "}"
+    return "{\n    " + ",\n    ".join(_c_array(row) for row in values) + "}"
+
+
+def _runge_kutta_tables() -> list[dict[str, str]]:
+    """Butcher tableaux, error weights and dense-output coefficients (Dormand & Prince;
+    Hairer, Norsett & Wanner), read as data from SciPy so both integration paths agree."""
+    from scipy.integrate import RK45
+    from scipy.integrate._ivp import dop853_coefficients as d8
+
+    tables = {
+        "D5_C": RK45.C, "D5_A": RK45.A, "D5_B": RK45.B, "D5_E": RK45.E, "D5_P": RK45.P,
+        "D8_C": d8.C, "D8_A": d8.A, "D8_B": d8.B, "D8_E3": d8.E3, "D8_E5": d8.E5, "D8_D": d8.D,
+    }  # fmt: skip
+    return [
+        {"name": name, "shape": "".join(f"[{n}]" for n in np.shape(values)), "init": _c_array(values)}
+        for name, values in tables.items()
+    ]
 
 
 def _equations(model: SymbolicModel) -> list[dict[str, str]]:
@@ -199,6 +290,10 @@ def render(model: SymbolicModel, *, source: str, command: str) -> dict[str, str]
         "diagonal": model.mass_matrix_is_diagonal,
         "blocks": blocks,
         "equations": _equations(model),
+        "tables": _runge_kutta_tables(),
+        "gj": gap_jacobian_pattern(model),
+        "cholesky": cholesky_code(model.outputs["mass_matrix"]),
+        "group_time": "1e-12",
     }
     env = _environment()
     files = {}

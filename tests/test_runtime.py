@@ -210,3 +210,26 @@ def test_result_contract(ball, tmp_path):
                 "steps", "events", "max_penetration_m", "energy_drift_J", "versions"):
         assert key in back.stats
     assert back.t[0] == 0.0 and back.t[-1] == pytest.approx(0.5)
+
+
+@pytest.mark.skipif("c" not in BACKENDS, reason="no C compiler")
+@pytest.mark.parametrize("compiled, scipy_method", [("dopri5", "RK45"), ("dop853", "DOP853")])
+@pytest.mark.parametrize("formulation", ["particles", "floating"])
+def test_compiled_integrator_reproduces_the_scipy_path(ball, compiled, scipy_method, formulation):
+    """Same tableau and step-size controller: the same steps, events and trajectory."""
+    options = dict(rtol=1e-7, atol=1e-10, t_end=0.8, formulation=formulation)
+    a = flexbody.simulate(ball, method=compiled, **options)
+    b = flexbody.simulate(ball, method=scipy_method, **options)
+    assert a.success and b.success
+    assert list(zip(a.events_particle, a.events_kind)) == list(zip(b.events_particle, b.events_kind))
+    np.testing.assert_allclose(a.events_time, b.events_time, atol=1e-10)
+    np.testing.assert_allclose(a.positions, b.positions, atol=1e-9)
+    if compiled == "dopri5":  # DOP853's dense output stages are counted differently
+        assert a.stats["steps"] == b.stats["steps"]
+        assert abs(a.stats["rhs_evaluations"] - b.stats["rhs_evaluations"]) <= 2 * a.stats["segments"]
+
+
+def test_compiled_methods_need_the_c_backend(ball):
+    with pytest.raises(ValueError, match="`method` = 'dopri5': is compiled C and needs backend 'c'"):
+        flexbody.simulate(ball, method="dopri5", backend="numpy")
+    assert flexbody.simulate(ball, backend="numpy", t_end=0.05).stats["method"] == "RK45"

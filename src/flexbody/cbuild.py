@@ -39,10 +39,11 @@ def _compiler_identity(cc: str) -> str:
 
 
 def library_path(model_dir: Path) -> Path:
-    """Compile ``model_dir/model.c`` if needed and return the cached library's path."""
+    """Compile ``model_dir/*.c`` (model and integrator) if needed; return the cached library."""
     model_dir = Path(model_dir)
     cc = compiler()
-    source = (model_dir / "model.c").read_bytes() + (model_dir / "model.h").read_bytes()
+    sources = sorted(model_dir.glob("*.c"))
+    source = b"".join(path.read_bytes() for path in sources + [model_dir / "model.h"])
     key = hashlib.sha256(source + _compiler_identity(cc).encode() + " ".join(FLAGS).encode()).hexdigest()[:24]
     target = cache_root() / "lib" / f"{key}.so"
     if target.exists():
@@ -50,12 +51,12 @@ def library_path(model_dir: Path) -> Path:
     target.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(suffix=".so", dir=target.parent)
     os.close(fd)
-    command = [cc, *FLAGS, "-I", str(model_dir), "-o", tmp, str(model_dir / "model.c"), "-lm"]
+    command = [cc, *FLAGS, "-I", str(model_dir), "-o", tmp, *map(str, sources), "-lm"]
     run = subprocess.run(command, capture_output=True, text=True, check=False)
     if run.returncode != 0:
         os.unlink(tmp)
         raise CompilationError(
-            f"compiling {model_dir / 'model.c'} failed (exit {run.returncode}):\n$ {' '.join(command)}\n"
+            f"compiling {model_dir}/*.c failed (exit {run.returncode}):\n$ {' '.join(command)}\n"
             f"{run.stdout}{run.stderr}"
         )
     os.replace(tmp, target)  # atomic: a concurrent build never sees a half-written library

@@ -35,7 +35,7 @@ def _parser() -> argparse.ArgumentParser:
     _add_scene(run)
     run.add_argument("--out", type=Path, required=True, metavar="DIR", help="output folder")
     run.add_argument("--no-figures", action="store_true", help="skip the figures and the animation")
-    run.add_argument("--method", choices=METHODS, help="integration method (default: the scene's, else RK45)")
+    run.add_argument("--method", choices=METHODS, help="integration method: dopri5 or dop853 (compiled C; default dopri5) or a SciPy solve_ivp method")
     run.add_argument("--rtol", type=float, help="relative tolerance")
     run.add_argument("--atol", type=float, help="absolute tolerance")
     run.add_argument("--backend", choices=BACKENDS, help="c (compiled, default) or numpy")

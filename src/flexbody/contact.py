@@ -71,42 +71,6 @@ class Resolution:
     iterations: int = 0
 
 
-def kinetic_energy(model: Model, y: np.ndarray, p: np.ndarray) -> float:
-    q, u = y[: model.nq], y[model.nq : model.nq + model.nu]
-    return 0.5 * float(u @ model.mass_matrix(q, p) @ u)
-
-
-def apply_impacts(model: Model, y: np.ndarray, p: np.ndarray, hit: np.ndarray, keep: np.ndarray) -> np.ndarray:
-    """Plastic impacts: zero the normal velocity of contacts ``hit`` (eq. 4.4-4.5).
-
-    The impulses act along the gap Jacobian rows and also keep the already held contacts
-    ``keep`` at zero normal velocity: ``u+ = u + M^-1 J_S^T L`` with ``J_S u+ = 0``.
-    Tangential velocity is kept (no friction).
-
-    Returns
-    -------
-    ndarray, shape (ny,)
-        The state after the impulses.
-    """
-    nq, nu = model.nq, model.nu
-    q, u = y[:nq], y[nq : nq + nu]
-    S = np.flatnonzero(hit | keep)
-    J = model.gap_jacobian(q, p)[S]
-    M = model.mass_matrix(q, p)
-    X = np.linalg.solve(M, J.T)
-    impulses = np.linalg.solve(J @ X, -(J @ u))
-    out = y.copy()
-    out[nq : nq + nu] = u + X @ impulses
-    return out
-
-
-def effective_masses(model: Model, q: np.ndarray, p: np.ndarray) -> np.ndarray:
-    """``1 / (J M^-1 J^T)_cc`` for every contact, shape (nc,): the particle's mass."""
-    J = model.gap_jacobian(q, p)
-    X = np.linalg.solve(model.mass_matrix(q, p), J.T)
-    return 1.0 / np.einsum("ij,ji->i", J, X)
-
-
 def resolve(
     model: Model,
     t: float,
@@ -118,6 +82,7 @@ def resolve(
     *,
     gap_tolerance: float,
     force_tolerance: np.ndarray,
+    masses: np.ndarray,
     impact: str = "instant",
     impact_dt: float | None = None,
 ) -> Resolution:
@@ -137,6 +102,8 @@ def resolve(
         A free contact at or below ``floor + gap_tolerance`` counts as touching (m).
     force_tolerance : ndarray, shape (nc,)
         A held contact in ``leaving`` is released when its force is below this (N).
+    masses : ndarray, shape (nc,)
+        Mass of each contact's particle (the impact force of eq. 4.6 is ``-m v_n / dT``).
     impact : {"instant", "thesis"}
     impact_dt : float, optional
         The thesis mode's ΔT (s).
@@ -146,21 +113,14 @@ def resolve(
     Resolution
     """
     phases = phases.copy()
-    y = y.copy()
     touching = touching.copy()
-    nq, nu = model.nq, model.nu
+    nc = model.n_contacts
     events: list[Event] = []
     loss = 0.0
-    impacted = np.zeros(model.n_contacts, bool)
-    settled = np.zeros(model.n_contacts, bool)
-    not_held = np.zeros(model.n_contacts, bool)
+    impacted, settled, not_held = np.zeros(nc, bool), np.zeros(nc, bool), np.zeros(nc, bool)
     was_held = phases.phase == HELD  # on the ground before this instant, so v_n = 0
-    iterations = 0
-    for iterations in range(1, 2 * model.n_contacts + 3):
-        changed = False
-        q, u = y[:nq], y[nq : nq + nu]
-        gaps = model.gaps(q, p)
-        vn = model.gap_jacobian(q, p) @ u
+    for iterations in range(1, 2 * nc + 3):
+        gaps, vn, lam = model.contact_state(y, p, phases.held, phases.push)
         near = (phases.phase == FREE) & (touching | (gaps <= phases.floor + gap_tolerance))
         # Strictly approaching (<= 0 would flip-flop forever); a contact stopped or released
         # at this instant has v_n = 0 up to round-off (1e-16 m/s) and is not hit again.
@@ -170,49 +130,40 @@ def resolve(
         events += [Event(t, int(c), "impact", float(vn[c])) for c in np.flatnonzero(hit)]
         impacted |= hit
         settled |= ending | (hit & (impact == "instant"))  # stopped on the ground at this instant
-        if impact == "thesis" and hit.any():
+        started = hit if impact == "thesis" else np.zeros_like(hit)
+        if started.any():
             # eq. 4.6: the impulse -m v_n spread as a force over dT; no velocity jump now.
-            m_eff = effective_masses(model, q, p)
-            phases.phase[hit] = PUSHED
-            phases.push[hit] = -m_eff[hit] * vn[hit] / impact_dt
-            phases.push_until[hit] = t + impact_dt
+            phases.phase[started] = PUSHED
+            phases.push[started] = -masses[started] * vn[started] / impact_dt
+            phases.push_until[started] = t + impact_dt
             hit = np.zeros_like(hit)
-            changed = True
         # After a window, what velocity is left towards the ground is stopped instantly.
         instant = hit | (ending & (vn < 0.0))
         if instant.any():
-            before = kinetic_energy(model, y, p)
-            y = apply_impacts(model, y, p, instant, phases.phase == HELD)
-            loss += before - kinetic_energy(model, y, p)
+            y, lost = model.impact(y, p, instant | (phases.phase == HELD))
+            loss += lost
             phases.phase[instant] = HELD
-            changed = True
         away = ending & (vn >= 0.0)
-        if away.any():
-            phases.phase[away] = FREE
-            phases.floor[away] = np.minimum(0.0, gaps[away]) - gap_tolerance
-            changed = True
-        held = phases.held
-        if held.any():
-            # The dampers saw the velocity jump: recompute the forces before holding anyone.
-            _, lam = model.rhs(y, p, held, phases.push)
-            pulling = (phases.phase == HELD) & ((lam < 0.0) | (leaving & (lam <= force_tolerance)))
-            if pulling.any():
-                # Release the most pulling contact, then recompute: exact also for coupled contacts.
-                c = int(np.flatnonzero(pulling)[np.argmin(lam[pulling])])
-                phases.phase[c] = FREE
-                phases.floor[c] = min(0.0, gaps[c]) - gap_tolerance
-                if settled[c]:
-                    not_held[c] = True  # its (latest) impact did not hold it: it leaves at once
-                else:
-                    events.append(Event(t, c, "liftoff"))
-                changed = True
-        if not changed:
+        phases.phase[away] = FREE
+        phases.floor[away] = np.minimum(0.0, gaps[away]) - gap_tolerance
+        if (started | instant | away).any():
+            continue  # the dampers saw the velocity jump: recompute the forces before holding anyone
+        pulling = (phases.phase == HELD) & ((lam < 0.0) | (leaving & (lam <= force_tolerance)))
+        if not pulling.any():
             break
+        # Release the most pulling contact, then recompute: exact also for coupled contacts.
+        c = int(np.flatnonzero(pulling)[np.argmin(lam[pulling])])
+        phases.phase[c] = FREE
+        phases.floor[c] = min(0.0, gaps[c]) - gap_tolerance
+        if settled[c]:
+            not_held[c] = True  # its (latest) impact did not hold it: it leaves at once
+        else:
+            events.append(Event(t, c, "liftoff"))
     else:
         raise RuntimeError(f"contact resolution at t = {t:.17g} s did not settle after {iterations} passes")
     # A free contact too close to its floor to be armed (released on the ground, or left at
     # -1e-16 by round-off) gets a floor a hair below: its next event is a real approach.
-    gaps = model.gaps(y[:nq], p)
+    gaps = model.gaps(y[: model.nq], p)
     unarmed = (phases.phase == FREE) & (gaps - phases.floor <= gap_tolerance)
     phases.floor[unarmed] = np.minimum(0.0, gaps[unarmed]) - gap_tolerance
     phases.push[phases.phase != PUSHED] = 0.0

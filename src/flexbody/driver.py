@@ -19,11 +19,11 @@ import scipy
 from scipy.integrate import BDF, DOP853, LSODA, RK23, RK45, Radau
 
 from . import __version__
-from .contact import FREE, HELD, PUSHED, Event, Phases, effective_masses, resolve
+from .contact import FREE, HELD, PUSHED, Event, Phases, resolve
 from .events import EventFunctions, locate
 from .model import Model, load_model
 from .result import STATUSES, SimulationResult
-from .scene import IMPACT_MODES, METHODS, Scene, SimulationSettings, load_scene
+from .scene import COMPILED_METHODS, IMPACT_MODES, METHODS, Scene, SimulationSettings, load_scene
 from .state import initial_coordinates
 
 SOLVERS = {"RK45": RK45, "RK23": RK23, "DOP853": DOP853, "Radau": Radau, "BDF": BDF, "LSODA": LSODA}
@@ -51,6 +51,11 @@ def _settings(scene: Scene, overrides: dict) -> SimulationSettings:
         if value is not None:
             values[key] = value
     problems = []
+    if values["method"] is None:
+        values["method"] = "dopri5" if values["backend"] == "c" else "RK45"
+    if values["method"] in COMPILED_METHODS and values["backend"] != "c":
+        problems.append(f"`method` = {values['method']!r}: is compiled C and needs backend 'c'; with backend "
+                        f"{values['backend']!r} use a SciPy method ({', '.join(METHODS[len(COMPILED_METHODS):])})")
     if values["method"] not in METHODS:
         problems.append(f"`method` = {values['method']!r}: must be one of {list(METHODS)}")
     if not 1e-14 <= values["rtol"] < 1:
@@ -90,20 +95,56 @@ class _Run:
         self.y0 = np.concatenate([q, u, [0.0, 0.0]])
         size = float(np.abs(scene.initial_positions()).max())
         self.gap_tolerance = 1e-12 * max(size, 1.0)
-        weight = effective_masses(model, q, self.p) * max(float(np.hypot(*scene.gravity)), 1.0)
-        self.force_tolerance = 1e-10 * weight
+        # For point masses on flat grounds a contact's effective mass 1 / (J M^-1 J^T) is its particle's.
+        self.contact_masses = scene.masses[model.contacts[:, 0]]
+        self.force_tolerance = 1e-10 * self.contact_masses * max(float(np.hypot(*scene.gravity)), 1.0)
         self.grid = np.linspace(0.0, settings.t_end, int(round(settings.t_end / settings.output_dt)) + 1)
         self.samples: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []  # (t, y, held, push)
         self.next_sample = 0
         self.events: list[Event] = []
         self.losses: list[tuple[float, float]] = []
         self.nfev = self.njev = self.steps = self.segments = 0
+        self.counters = np.zeros(4, np.int64)  # compiled path: nfev, steps, rejected, event evaluations
         self.min_gap = np.inf
         self.stalled = 0
 
     # ------------------------------------------------------------------ one smooth segment
     def segment(self, t0: float, y0: np.ndarray, t_bound: float, phases: Phases) -> _Stop:
         """Integrate with a fixed contact set from ``t0`` until an event or ``t_bound``."""
+        if self.settings.method in COMPILED_METHODS:
+            return self.segment_compiled(t0, y0, t_bound, phases)
+        return self.segment_scipy(t0, y0, t_bound, phases)
+
+    def segment_compiled(self, t0: float, y0: np.ndarray, t_bound: float, phases: Phases) -> _Stop:
+        """The same as :meth:`segment_scipy`, in one call of the generated C integrator."""
+        model, s = self.model, self.settings
+        grid = self.grid[self.next_sample :]
+        grid = grid[: np.searchsorted(grid, t_bound, side="right")]
+        status, t_stop, y_stop, fired, samples, self.min_gap = model.integrate(
+            COMPILED_METHODS.index(s.method), t0, y0, t_bound, self.p, phases.phase, phases.push, phases.floor,
+            self.force_tolerance, self.gap_tolerance, s.rtol, s.atol, grid, self.counters, self.min_gap,
+        )
+        self.segments += 1
+        held, push = phases.held.astype(bool), phases.push.copy()
+        self.samples += [(t, y, held, push) for t, y in zip(grid, samples)]
+        self.next_sample += len(samples)
+        if self.progress:
+            self.progress(t_stop, s.t_end, len(self.events))
+        if status < 0:
+            raise SimulationFailed(*self.COMPILED_FAILURES[status](s.method, t_stop))
+        free, held_mask = phases.phase == FREE, phases.phase == HELD
+        return _Stop(t_stop, y_stop, fired & free, fired & held_mask)
+
+    COMPILED_FAILURES = {
+        -1: lambda m, t: ("step_size_collapse", f"{m} failed at t = {t:.9g} s: the step size collapsed. The model "
+                          "is too stiff for this method or tolerance: try --method Radau or BDF, or a looser --rtol."),
+        -2: lambda m, t: ("blow_up", f"the state became non-finite at t = {t:.9g} s; tighten --rtol/--atol "
+                          "or use an implicit method."),
+        -3: lambda m, t: ("blow_up", f"at t = {t:.9g} s: mass or contact matrix not positive definite."),
+    }
+
+    def segment_scipy(self, t0: float, y0: np.ndarray, t_bound: float, phases: Phases) -> _Stop:
+        """Integrate with one of SciPy's steppers, locating events on its dense output."""
         model, s = self.model, self.settings
         options = {"rtol": s.rtol, "atol": s.atol}
         if s.method in IMPLICIT:
@@ -171,7 +212,7 @@ class _Run:
         phases.phase[resting] = HELD
         res = resolve(model, 0.0, y, self.p, phases, np.zeros_like(resting), np.zeros_like(resting),
                       gap_tolerance=self.gap_tolerance, force_tolerance=self.force_tolerance,
-                      impact=s.impact, impact_dt=s.impact_dt)
+                      masses=self.contact_masses, impact=s.impact, impact_dt=s.impact_dt)
         y, phases = res.y, res.phases
         self.samples.append((0.0, y.copy(), phases.held.astype(bool), phases.push.copy()))
         self.next_sample = 1
@@ -188,7 +229,7 @@ class _Run:
                 t = stop.t
                 res = resolve(model, t, stop.y, self.p, phases, touching, leaving,
                               gap_tolerance=self.gap_tolerance, force_tolerance=self.force_tolerance,
-                              impact=s.impact, impact_dt=s.impact_dt)
+                              masses=self.contact_masses, impact=s.impact, impact_dt=s.impact_dt)
                 y, phases = res.y, res.phases
                 self.events += res.events
                 for c in np.flatnonzero(res.not_held):
@@ -262,8 +303,10 @@ class _Run:
             "method": s.method, "rtol": s.rtol, "atol": s.atol, "backend": model.backend,
             "formulation": model.formulation, "impact": s.impact, "impact_dt": s.impact_dt,
             "t_end": s.t_end, "t_reached": float(T[-1]) if len(T) else 0.0,
-            "wall_time_s": wall, "rhs_evaluations": self.nfev, "jacobian_evaluations": self.njev,
-            "steps": self.steps, "segments": self.segments,
+            "wall_time_s": wall, "rhs_evaluations": self.nfev + int(self.counters[0]),
+            "jacobian_evaluations": self.njev, "steps": self.steps + int(self.counters[1]),
+            "rejected_steps": int(self.counters[2]), "event_rhs_evaluations": int(self.counters[3]),
+            "segments": self.segments,
             "events": len(ev), "impacts": len(impacts), "not_held": sum(not e.held for e in impacts),
             "liftoffs": len(ev) - len(impacts),
             "max_penetration_m": max(0.0, -self.min_gap),

@@ -43,6 +43,30 @@ def constrained_rhs(model: Model, y, p, held, push) -> tuple[np.ndarray, np.ndar
     return ydot, lam
 
 
+def contact_state(model: Model, y, p, held, push) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Gaps, normal velocities and held-contact forces, each shape (nc,)."""
+    q, u = y[: model.nq], y[model.nq : model.nq + model.nu]
+    _, lam = constrained_rhs(model, y, p, held, push)
+    return model.gaps(q, p), model.gap_jacobian(q, p) @ u, lam
+
+
+def impact(model: Model, y, p, stop) -> tuple[np.ndarray, float]:
+    """Plastic impulses ``u+ = u + M^-1 J_S^T L`` with ``J_S u+ = 0`` for the contacts S in ``stop``.
+
+    Returns the new state, shape (ny,), and the kinetic energy removed (J).
+    """
+    nq, nu = model.nq, model.nu
+    q, u = y[:nq], y[nq : nq + nu]
+    stop = np.asarray(stop, dtype=bool)
+    J = model.gap_jacobian(q, p)[stop]
+    M = model.mass_matrix(q, p)
+    X = np.linalg.solve(M, J.T)
+    out = y.copy()
+    out[nq : nq + nu] = u + X @ np.linalg.solve(J @ X, -(J @ u))
+    loss = model.energies(q, u, p)[0] - model.energies(q, out[nq : nq + nu], p)[0]
+    return out, float(loss)
+
+
 def state_jacobian(model: Model, y, p, held) -> np.ndarray:
     """Jacobian of the right-hand side with respect to ``y``, shape (ny, ny).
 

@@ -127,6 +127,17 @@ class Model:
         """
         raise NotImplementedError  # pragma: no cover
 
+    def contact_state(self, y, p, held, push) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Gaps, normal velocities ``J u`` and held-contact forces at ``y``, each shape (nc,)."""
+        return dynamics.contact_state(self, y, p, held, push)
+
+    def impact(self, y, p, stop) -> tuple[FloatArray, float]:
+        """Impulses that zero the normal velocity of every contact in ``stop`` (bool (nc,)).
+
+        Returns the state after them, shape (ny,), and the kinetic energy they removed (J).
+        """
+        return dynamics.impact(self, y, p, stop)
+
     def rhs_function(self, p, held, push):
         """``f(t, y) -> ydot`` for SciPy, with the contact set frozen."""
         def f(t, y):
@@ -182,6 +193,15 @@ class CModel(Model):
         self._rhs = lib.fb_rhs
         self._rhs.argtypes = [ctypes.c_double] + [ptr] * 6
         self._rhs.restype = ctypes.c_int
+        self._contact_state = lib.fb_contact_state
+        self._contact_state.argtypes = [ptr] * 7
+        self._impact = lib.fb_impact
+        self._impact.argtypes = [ptr] * 5
+        self._integrate = lib.fb_integrate
+        d = ctypes.c_double
+        self._integrate.argtypes = [ctypes.c_int, d, ptr, d, ptr, ptr, ptr, ptr, ptr, d, d, d, ptr, ctypes.c_int,
+                                    ptr, ptr, ptr, ptr, ptr, ptr, ptr, ptr]
+        self._integrate.restype = ctypes.c_int
         self._zeros = np.zeros(max(self.nu, self.nq, 1))
 
     def _call(self, name, q, u, p, a=None):
@@ -205,6 +225,23 @@ class CModel(Model):
             raise FloatingPointError("mass or contact matrix not positive definite at this state")
         return ydot, lam
 
+    def contact_state(self, y, p, held, push):
+        y = np.ascontiguousarray(y, dtype=float)
+        held = np.ascontiguousarray(held, dtype=np.intc)
+        gaps, vn, lam = np.empty(self.n_contacts), np.empty(self.n_contacts), np.empty(self.n_contacts)
+        if self._contact_state(y.ctypes.data, p.ctypes.data, held.ctypes.data, push.ctypes.data, gaps.ctypes.data,
+                               vn.ctypes.data, lam.ctypes.data):
+            raise FloatingPointError("mass or contact matrix not positive definite at this state")
+        return gaps, vn, lam
+
+    def impact(self, y, p, stop):
+        y = np.ascontiguousarray(y, dtype=float)
+        stop = np.ascontiguousarray(stop, dtype=np.intc)
+        out, loss = np.empty(self.ny), ctypes.c_double(0.0)
+        if self._impact(y.ctypes.data, p.ctypes.data, stop.ctypes.data, out.ctypes.data, ctypes.addressof(loss)):
+            raise FloatingPointError("mass or contact matrix not positive definite at this state")
+        return out, loss.value
+
     def rhs_function(self, p, held, push):
         # Pointers of the frozen inputs are taken once: the call is ~1 µs, not ~5.
         keep = [np.ascontiguousarray(p, dtype=float), np.ascontiguousarray(held, dtype=np.intc),
@@ -221,6 +258,51 @@ class CModel(Model):
 
         f.keep = keep  # keep the buffers alive as long as f
         return f
+
+
+    def integrate(self, method: int, t0: float, y0, t_bound: float, p, phase, push, floor, force_tol,
+                  gap_tol: float, rtol: float, atol: float, grid, counters, min_gap: float):
+        """Integrate one smooth segment in C (``fb_integrate`` in ``integrator.c``).
+
+        Parameters
+        ----------
+        method : int
+            0 for dopri5, 1 for dop853.
+        y0 : ndarray, shape (ny,)
+        phase : ndarray of int, shape (nc,)
+            0 free, 1 held, 2 pushed.
+        floor : ndarray, shape (nc,)
+            Updated in place (contacts re-armed at the ground).
+        grid : ndarray, shape (k,)
+            Output times in (t0, t_bound].
+        counters : ndarray of int64, shape (4,)
+            nfev, steps, rejected steps, event evaluations; incremented in place.
+
+        Returns
+        -------
+        status : int
+            0 reached t_bound, 1 event, -1 step-size collapse, -2 non-finite, -3 singular.
+        t_stop : float
+        y_stop : ndarray, shape (ny,)
+        fired : ndarray of bool, shape (nc,)
+        samples : ndarray, shape (m, ny)
+            States at the first m grid times.
+        min_gap : float
+        """
+        y0 = np.ascontiguousarray(y0, dtype=float)
+        phase = np.ascontiguousarray(phase, dtype=np.intc)
+        grid = np.ascontiguousarray(grid, dtype=float)
+        samples = np.empty((len(grid), self.ny))
+        n_sampled, fired = ctypes.c_int(0), np.zeros(self.n_contacts, np.intc)
+        t_stop, gap, h_next = ctypes.c_double(0.0), ctypes.c_double(min_gap), ctypes.c_double(0.0)
+        y_stop = np.empty(self.ny)
+        status = self._integrate(
+            method, t0, y0.ctypes.data, t_bound, p.ctypes.data, phase.ctypes.data, push.ctypes.data,
+            floor.ctypes.data, force_tol.ctypes.data, gap_tol, rtol, atol, grid.ctypes.data, len(grid),
+            samples.ctypes.data, ctypes.addressof(n_sampled), ctypes.addressof(t_stop), y_stop.ctypes.data,
+            fired.ctypes.data, counters.ctypes.data, ctypes.addressof(gap), ctypes.addressof(h_next),
+        )
+        return status, t_stop.value, y_stop, fired.astype(bool), samples[: n_sampled.value], gap.value
 
 
 BACKENDS = {"c": CModel, "numpy": NumpyModel}

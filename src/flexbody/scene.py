@@ -27,7 +27,9 @@ from .topology import BodyTopology, Topology, gauge_particles
 
 SHAPES = ("ring", "ellipse", "polygon", "chain")
 DAMPERS = ("relative", "axial")
-METHODS = ("RK45", "RK23", "DOP853", "Radau", "BDF", "LSODA")
+#: Compiled in C (generated integrator.c, needs backend "c"), then SciPy's solve_ivp methods.
+COMPILED_METHODS = ("dopri5", "dop853")
+METHODS = COMPILED_METHODS + ("RK45", "RK23", "DOP853", "Radau", "BDF", "LSODA")
 FORMULATIONS = ("particles", "floating")
 BACKENDS = ("c", "numpy")
 IMPACT_MODES = ("instant", "thesis")
@@ -134,7 +136,7 @@ class SimulationSettings:
 
     t_end: float
     output_dt: float
-    method: str = "RK45"
+    method: str | None = None  # None: dopri5 with the C backend, RK45 with NumPy
     rtol: float = 1e-6
     atol: float = 1e-9
     impact: str = "instant"
@@ -457,7 +459,7 @@ def _check_links(r: TableReader, points: np.ndarray, links: list[tuple[int, int]
 def _simulation(r: TableReader) -> SimulationSettings | None:
     t_end = r.number("t_end", check=lambda v: v > 0, rule="must be > 0 (s)")
     output_dt = r.number("output_dt", None, check=lambda v: v > 0, rule="must be > 0 (s)")
-    method = r.string("method", "RK45", choices=METHODS)
+    method = r.string("method", None, choices=METHODS)
     rtol = r.number("rtol", 1e-6, check=lambda v: 1e-14 <= v < 1, rule="must be in [1e-14, 1)")
     atol = r.number("atol", 1e-9, check=lambda v: 0 < v < 1, rule="must be in (0, 1)")
     impact = r.string("impact", "instant", choices=IMPACT_MODES)
@@ -467,7 +469,7 @@ def _simulation(r: TableReader) -> SimulationSettings | None:
     formulation = r.string("formulation", "particles", choices=FORMULATIONS)
     backend = r.string("backend", "c", choices=BACKENDS)
     r.finish()
-    if None in (t_end, method, rtol, atol, impact, formulation, backend):
+    if None in (t_end, rtol, atol, impact, formulation, backend) or (r.has("method") and method is None):
         return None
     return SimulationSettings(
         t_end=t_end,

@@ -16,7 +16,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 #: Bump when the derivation or templates change what is generated for the same topology.
-GENERATOR_VERSION = "1"
+GENERATOR_VERSION = "2"
 
 
 @dataclass(frozen=True)
