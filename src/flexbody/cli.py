@@ -61,10 +61,13 @@ def _parser() -> argparse.ArgumentParser:
     show.add_argument("--formulation", choices=FORMULATIONS, default=None, help="default: the scene's")
 
     bench = sub.add_parser("bench", help="speed and accuracy benchmarks (prints and saves numbers)",
-                           description="Work-precision diagram of methods, backends and formulations.")
+                           description="Benchmarks, not tests: work-precision diagram (wp), stability map "
+                                       "(stability) and resolution study (resolution); JSON and PNG in --out.")
+    bench.add_argument("--study", choices=("wp", "stability", "resolution"), action="append",
+                       help="which study (repeatable; default: all)")
     bench.add_argument("--out", type=Path, default=Path("bench"), metavar="DIR", help="output folder")
     bench.add_argument("--repeats", type=int, default=5, help="timing repeats (median is reported)")
-    bench.add_argument("--quick", action="store_true", help="fewer tolerances and repeats")
+    bench.add_argument("--quick", action="store_true", help="fewer cases and repeats (about a minute)")
     return parser
 
 

@@ -87,9 +87,10 @@ class _Run:
     """State of one simulation: model, phases, samples, counters."""
 
     def __init__(self, scene: Scene, model: Model, settings: SimulationSettings, progress: Progress | None,
-                 max_events: int) -> None:
+                 max_events: int, max_wall_time: float = np.inf) -> None:
         self.scene, self.model, self.settings = scene, model, settings
         self.progress, self.max_events = progress, max_events
+        self.deadline = time.perf_counter() + max_wall_time
         self.p = model.parameters(scene)
         q, u = initial_coordinates(scene, model)
         self.y0 = np.concatenate([q, u, [0.0, 0.0]])
@@ -185,6 +186,7 @@ class _Run:
                 g_old = g_new
                 if self.progress:
                     self.progress(solver.t, s.t_end, len(self.events))
+                self.check_deadline(solver.t)
         except FloatingPointError as exc:
             raise SimulationFailed("blow_up", f"at t = {solver.t:.9g} s: {exc}") from None
         finally:
@@ -242,7 +244,12 @@ class _Run:
             return failure.status, failure.message
         return "success", STATUSES["success"]
 
+    def check_deadline(self, t: float) -> None:
+        if time.perf_counter() > self.deadline:
+            raise SimulationFailed("too_slow", f"stopped at t = {t:.6g} s: the run exceeded its max_wall_time.")
+
     def check_guards(self, t: float, new_events: list[Event]) -> None:
+        self.check_deadline(t)
         if len(self.events) >= self.max_events:
             raise SimulationFailed("max_events", f"{len(self.events)} events by t = {t:.9g} s (max_events = "
                                    f"{self.max_events}); raise max_events if the scene really has that many.")
@@ -271,15 +278,11 @@ class _Run:
         T = np.array([x[0] for x in self.samples])
         Y = np.array([x[1] for x in self.samples])
         n = model.n_particles
-        X = np.empty((len(T), n, 2))
-        V = np.empty((len(T), n, 2))
-        E = np.empty((len(T), 4))
+        held = np.array([x[2] for x in self.samples], dtype=np.intc).reshape(len(T), model.n_contacts)
+        push = np.array([x[3] for x in self.samples], dtype=float).reshape(len(T), model.n_contacts)
+        X, V, E, lam = model.trajectory(Y, p, held, push)
         force = np.zeros((len(T), n))
-        for k, (_, y, held, push) in enumerate(self.samples):
-            q, u = y[:nq], y[nq : nq + nu]
-            X[k], V[k], E[k] = model.positions(q, p), model.velocities(q, u, p), model.energies(q, u, p)
-            lam = model.rhs(y, p, held.astype(np.intc), push)[1] if held.any() else np.zeros(model.n_contacts)
-            np.add.at(force[k], model.contacts[:, 0], lam + push)
+        np.add.at(force, (slice(None), model.contacts[:, 0]), lam + push)
         self.min_gap = min(self.min_gap, float(np.min(model.gaps(Y[-1, :nq], p))) if len(Y) else np.inf)
         loss_t = np.array([x[0] for x in self.losses])
         loss_v = np.array([x[1] for x in self.losses])
@@ -333,6 +336,7 @@ def simulate(
     impact: str | None = None,
     impact_dt: float | None = None,
     max_events: int = 100_000,
+    max_wall_time: float = np.inf,
     progress: Progress | None = None,
 ) -> SimulationResult:
     """Simulate a scene: free flight, impacts, contact and lift-off of every particle.
@@ -346,6 +350,8 @@ def simulate(
         Override the scene's ``[simulation]`` settings.
     max_events : int
         Stop with status ``max_events`` after this many events.
+    max_wall_time : float
+        Stop with status ``too_slow`` after this many seconds (checked between steps).
     progress : callable, optional
         ``progress(t, t_end, n_events)``, called after every step.
 
@@ -362,7 +368,7 @@ def simulate(
     if model is None:
         model = load_model(scene, backend=settings.backend, formulation=settings.formulation)
     settings = _settings(scene, dict(vars(settings), backend=model.backend, formulation=model.formulation))
-    run = _Run(scene, model, settings, progress, max_events)
+    run = _Run(scene, model, settings, progress, max_events, max_wall_time)
     start = time.perf_counter()
     status, message = run.run()
     wall = time.perf_counter() - start

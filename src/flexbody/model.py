@@ -131,6 +131,21 @@ class Model:
         """Gaps, normal velocities ``J u`` and held-contact forces at ``y``, each shape (nc,)."""
         return dynamics.contact_state(self, y, p, held, push)
 
+    def trajectory(self, Y, p, held, push) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+        """Outputs along states ``Y (nt, ny)`` with contact sets ``held``, ``push`` (nt, nc).
+
+        Returns positions and velocities (nt, n, 2), energies (nt, 4), contact forces (nt, nc).
+        """
+        Y = np.asarray(Y, dtype=float)
+        Q, U = Y[:, : self.nq].T, Y[:, self.nq : self.nq + self.nu].T
+        X = np.moveaxis(self._call("positions", Q, U, p), -1, 0)
+        V = np.moveaxis(self._call("velocities", Q, U, p), -1, 0)
+        E = np.moveaxis(self._call("energies", Q, U, p), -1, 0)
+        lam = np.zeros((len(Y), self.n_contacts))
+        for k in np.flatnonzero(np.any(held, axis=1) | np.any(push != 0, axis=1)):
+            lam[k] = self.rhs(Y[k], p, held[k], push[k])[1]
+        return X, V, E, lam
+
     def impact(self, y, p, stop) -> tuple[FloatArray, float]:
         """Impulses that zero the normal velocity of every contact in ``stop`` (bool (nc,)).
 
@@ -197,6 +212,11 @@ class CModel(Model):
         self._contact_state.argtypes = [ptr] * 7
         self._impact = lib.fb_impact
         self._impact.argtypes = [ptr] * 5
+        self._trajectory = lib.fb_trajectory
+        self._trajectory.argtypes = [ctypes.c_int] + [ptr] * 8
+        self._time_rhs = lib.fb_time_rhs
+        self._time_rhs.argtypes = [ctypes.c_int] + [ptr] * 4
+        self._time_rhs.restype = ctypes.c_double
         self._integrate = lib.fb_integrate
         d = ctypes.c_double
         self._integrate.argtypes = [ctypes.c_int, d, ptr, d, ptr, ptr, ptr, ptr, ptr, d, d, d, ptr, ctypes.c_int,
@@ -259,6 +279,24 @@ class CModel(Model):
         f.keep = keep  # keep the buffers alive as long as f
         return f
 
+
+    def trajectory(self, Y, p, held, push):
+        Y = np.ascontiguousarray(Y, dtype=float)
+        held = np.ascontiguousarray(held, dtype=np.intc)
+        push = np.ascontiguousarray(push, dtype=float)
+        n = len(Y)
+        X, V = np.empty((n, self.n_particles, 2)), np.empty((n, self.n_particles, 2))
+        E, lam = np.empty((n, 4)), np.empty((n, self.n_contacts))
+        self._trajectory(n, Y.ctypes.data, p.ctypes.data, held.ctypes.data, push.ctypes.data, X.ctypes.data,
+                         V.ctypes.data, E.ctypes.data, lam.ctypes.data)
+        return X, V, E, lam
+
+    def time_rhs(self, y, p, held, push, calls: int = 20000) -> float:
+        """Mean seconds per right-hand-side call at ``y``, timed inside C (no Python overhead)."""
+        y = np.ascontiguousarray(y, dtype=float)
+        held = np.ascontiguousarray(held, dtype=np.intc)
+        push = np.ascontiguousarray(push, dtype=float)
+        return self._time_rhs(calls, y.ctypes.data, p.ctypes.data, held.ctypes.data, push.ctypes.data)
 
     def integrate(self, method: int, t0: float, y0, t_bound: float, p, phase, push, floor, force_tol,
                   gap_tol: float, rtol: float, atol: float, grid, counters, min_gap: float):

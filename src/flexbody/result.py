@@ -25,6 +25,7 @@ STATUSES = {
     "step_size_collapse": "The integrator's step size collapsed.",
     "blow_up": "The state became non-finite or the mass matrix singular.",
     "max_events": "The maximum number of events was reached.",
+    "too_slow": "The run exceeded its max_wall_time.",
 }
 
 

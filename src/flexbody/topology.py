@@ -9,14 +9,35 @@ on T's x-axis), so that choice is part of the topology too.
 
 from __future__ import annotations
 
+import functools
 import hashlib
+import importlib.util
 import json
 from dataclasses import asdict, dataclass
+from pathlib import Path
 
 import numpy as np
 
-#: Bump when the derivation or templates change what is generated for the same topology.
+#: A manual tag; the digest also covers the generator's source files (see generator_fingerprint).
 GENERATOR_VERSION = "2"
+
+
+@functools.cache
+def generator_fingerprint() -> str:
+    """Hash of the derivation package's sources and templates (found without importing it).
+
+    Any change to how models are generated changes every digest, so a cached model built by
+    an older generator is never reused, and committed models show up as stale.
+    """
+    spec = importlib.util.find_spec("derivation")
+    if spec is None or not spec.submodule_search_locations:
+        return GENERATOR_VERSION
+    folder = Path(next(iter(spec.submodule_search_locations)))
+    files = sorted(folder.glob("*.py")) + sorted((folder / "templates").glob("*.jinja"))
+    digest = hashlib.sha256(GENERATOR_VERSION.encode())
+    for path in files:
+        digest.update(path.name.encode() + b"\0" + path.read_bytes())
+    return digest.hexdigest()[:16]
 
 
 @dataclass(frozen=True)
@@ -60,8 +81,8 @@ class Topology:
         return cls(dim=data["dim"], n_grounds=data["n_grounds"], bodies=bodies)
 
     def digest(self, formulation: str) -> str:
-        """Hash of topology, formulation and generator version (16 hex digits)."""
-        text = f"{self.to_json()}|{formulation}|{GENERATOR_VERSION}"
+        """Hash of topology, formulation and generator (16 hex digits)."""
+        text = f"{self.to_json()}|{formulation}|{generator_fingerprint()}"
         return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 

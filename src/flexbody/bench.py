@@ -1,0 +1,404 @@
+"""``flexbody bench``: speed and accuracy, charted (a benchmark, not a test).
+
+Three studies, each printed as a table and saved as JSON and PNG in ``--out``:
+
+* ``wp`` — work-precision diagram on the thesis ball: error against wall time over
+  methods, backends, formulations and tolerances, against a tight reference run.  The
+  SciPy + NumPy baseline runs in the same process and the speed ratios are printed, with
+  each run's distance from the limit ``RHS evaluations x C RHS cost``.
+* ``stability`` — where methods fail: stiffness 1e2..1e7 N/m x damping ratio x method,
+  then the thesis impact ΔT and the tolerance; success, time, error, penetration and
+  energy drift, or the failure and its cause.
+* ``resolution`` — model no more than a scene needs: the ball with 6 to 64 perimeter
+  particles; how rebound height, contact duration and peak contact force converge, what
+  each costs, and the coarsest model within 1 %.
+
+Timings are medians over ``--repeats`` runs (the machine is shared and noisy).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import platform
+import statistics
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from .driver import simulate
+from .model import load_model
+from .scene import Scene, load_scene
+
+TOLERANCES = (1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9, 1e-10)
+
+
+def _environment() -> dict:
+    import scipy
+
+    return {"python": platform.python_version(), "numpy": np.__version__, "scipy": scipy.__version__,
+            "machine": platform.machine(), "cpus": os.cpu_count(), "processor": platform.processor()}
+
+
+def _save(out: Path, name: str, data: dict, fig=None) -> None:
+    out.mkdir(parents=True, exist_ok=True)
+    (out / f"{name}.json").write_text(json.dumps(data, indent=1) + "\n")
+    if fig is not None:
+        fig.savefig(out / f"{name}.png", dpi=110)
+    print(f"  saved {out / name}.json" + (f" and {name}.png" if fig is not None else ""))
+
+
+def _timed(scene, repeats: int, **options):
+    """Run ``repeats`` times; return the last result and the median integration wall time."""
+    times, result = [], None
+    for _ in range(repeats):
+        result = simulate(scene, **options)
+        times.append(result.stats["wall_time_s"])
+        if not result.success:
+            break
+    return result, statistics.median(times)
+
+
+def _sequence(result) -> list:
+    return list(zip(result.events_particle.tolist(), result.events_kind.tolist()))
+
+
+def _rhs_cost(model, scene, reference) -> float:
+    """Mean C RHS cost (s) over states of the reference trajectory, with their contact sets."""
+    from .state import initial_coordinates
+
+    p = model.parameters(scene)
+    q0, u0 = initial_coordinates(scene, model)
+    costs = []
+    for k in np.linspace(0, len(reference.t) - 1, 25).astype(int):
+        y = np.concatenate([reference.positions[k].ravel(), reference.velocities[k].ravel(), [0.0, 0.0]])
+        if model.formulation != "particles":
+            y = np.concatenate([q0, u0, [0.0, 0.0]])
+        held = (reference.contact_force[k] > 0).astype(np.intc)[model.contacts[:, 0]]
+        costs.append(model.time_rhs(y, p, held, np.zeros(model.n_contacts)))
+    return float(np.mean(costs))
+
+
+# ---------------------------------------------------------------------------- work-precision
+
+
+def work_precision(out: Path, repeats: int, quick: bool) -> dict:
+    scene = load_scene("thesis_ball")
+    t_end = 1.0 if quick else scene.simulation.t_end
+    tolerances = TOLERANCES[1:-1:2] if quick else TOLERANCES
+    print(f"work-precision: thesis ball, {t_end:g} s; reference dop853 at rtol 1e-13")
+    reference = simulate(scene, t_end=t_end, method="dop853", rtol=1e-13, atol=1e-16)
+    check = simulate(scene, t_end=t_end, method="DOP853", rtol=1e-12, atol=1e-15)
+    ref_gap = float(np.abs(check.positions - reference.positions).max())
+    print(f"  reference cross-check (SciPy DOP853, rtol 1e-12): max position difference {ref_gap:.2g} m")
+    configs = [
+        ("C dopri5", "dopri5", "c", "particles", tolerances, repeats),
+        ("C dop853", "dop853", "c", "particles", tolerances, repeats),
+        ("C dopri5, floating", "dopri5", "c", "floating", tolerances, repeats),
+        ("C dop853, floating", "dop853", "c", "floating", tolerances, repeats),
+        ("SciPy RK45 + C RHS", "RK45", "c", "particles", tolerances, max(1, repeats // 2)),
+        ("SciPy DOP853 + C RHS", "DOP853", "c", "particles", tolerances, max(1, repeats // 2)),
+        ("SciPy LSODA + C RHS", "LSODA", "c", "particles", tolerances[:-2], 1),
+        ("SciPy Radau + C RHS + Jacobian", "Radau", "c", "particles", tolerances[1:-3], 1),
+        ("SciPy RK45 + NumPy RHS (baseline)", "RK45", "numpy", "particles", tolerances[:-2], 1 if quick else 3),
+    ]
+    cost = {f: _rhs_cost(load_model(scene, "c", f), scene, reference) for f in ("particles", "floating")}
+    print(f"  C RHS cost, mean over the trajectory: {cost['particles'] * 1e6:.3f} us (particles), "
+          f"{cost['floating'] * 1e6:.3f} us (floating)")
+    rows = []
+    print(f"  {'configuration':36s} {'rtol':>7s} {'time ms':>9s} {'nfev':>7s} {'error m':>9s} {'limit x':>8s}  events")
+    for label, method, backend, formulation, tols, reps in configs:
+        for rtol in tols:
+            result, wall = _timed(scene, reps, t_end=t_end, method=method, backend=backend,
+                                  formulation=formulation, rtol=rtol, atol=rtol * 1e-3, max_wall_time=120.0)
+            s = result.stats
+            ok = result.success and len(result.t) == len(reference.t)
+            error = float(np.abs(result.positions - reference.positions).max()) if ok else float("nan")
+            same = ok and _sequence(result) == _sequence(reference)
+            evals = s["rhs_evaluations"] + s.get("event_rhs_evaluations", 0)
+            limit = evals * cost[formulation]
+            row = {"label": label, "method": method, "backend": backend, "formulation": formulation, "rtol": rtol,
+                   "time_s": wall, "rhs_evaluations": s["rhs_evaluations"], "event_rhs_evaluations":
+                   s.get("event_rhs_evaluations", 0), "steps": s["steps"], "error_m": error,
+                   "events_match_reference": same, "status": result.status,
+                   "energy_drift_J": s["energy_drift_J"], "max_penetration_m": s["max_penetration_m"],
+                   "rhs_limit_s": limit, "time_over_limit": wall / limit}
+            rows.append(row)
+            print(f"  {label:36s} {rtol:7.0e} {wall * 1e3:9.2f} {s['rhs_evaluations']:7d} {error:9.2e} "
+                  f"{wall / limit:8.2f}  {'same' if same else 'DIFFERENT' if ok else result.status}")
+    ratios = _ratios(rows)
+    for line in ratios["lines"]:
+        print("  " + line)
+    data = {"t_end": t_end, "reference": {"method": "dop853", "rtol": 1e-13, "cross_check_m": ref_gap},
+            "rhs_cost_s": cost, "rows": rows, "ratios": ratios, "environment": _environment()}
+    _save(out, "work_precision", data, _plot_work_precision(rows))
+    return data
+
+
+def _ratios(rows: list[dict]) -> dict:
+    """Speed ratios at equal rtol (the same steps, hence the same error) and at equal error."""
+    by = {(r["label"], r["rtol"]): r for r in rows if r["status"] == "success"}
+    base = "SciPy RK45 + NumPy RHS (baseline)"
+    lines: list[str] = []
+    out: dict = {"same_rtol": {}, "lines": lines}
+    for label in ("C dopri5", "C dop853", "SciPy RK45 + C RHS"):
+        for rtol in (1e-6, 1e-8):
+            if (label, rtol) in by and (base, rtol) in by:
+                r = by[base, rtol]["time_s"] / by[label, rtol]["time_s"]
+                out["same_rtol"][f"{label} @ {rtol:g}"] = r
+                lines.append(f"{label} is {r:.0f}x faster than the baseline at rtol {rtol:g} "
+                             f"(errors {by[label, rtol]['error_m']:.1e} and {by[base, rtol]['error_m']:.1e} m)")
+    best = {}
+    for r in rows:
+        if r["status"] == "success" and np.isfinite(r["error_m"]) and r["events_match_reference"]:
+            best.setdefault(r["label"], []).append((r["error_m"], r["time_s"]))
+    if base in best and "C dop853" in best:
+        for target in (1e-6, 1e-8):
+            t_base = _time_at_error(best[base], target)
+            t_fast = min(_time_at_error(best[k], target) for k in ("C dopri5", "C dop853") if k in best)
+            if np.isfinite(t_base) and np.isfinite(t_fast):
+                out[f"equal_error_{target:g}"] = t_base / t_fast
+                lines.append(f"at equal error {target:g} m the best compiled method is {t_base / t_fast:.0f}x faster "
+                             f"than the baseline")
+    return out
+
+
+def _time_at_error(points: list[tuple[float, float]], target: float) -> float:
+    """Time to reach ``target`` error, interpolated log-log between measured points."""
+    points = sorted(points)
+    for (e0, t0), (e1, t1) in zip(points, points[1:]):
+        if e0 <= target <= e1 and e1 > e0:
+            w = np.log(target / e0) / np.log(e1 / e0)
+            return float(np.exp(np.log(t0) + w * (np.log(t1) - np.log(t0))))
+    return float("nan")
+
+
+def _plot_work_precision(rows: list[dict]):
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(8.5, 6), layout="constrained")
+    ax = fig.add_subplot()
+    for label in dict.fromkeys(r["label"] for r in rows):
+        mine = [r for r in rows if r["label"] == label and r["status"] == "success" and np.isfinite(r["error_m"])]
+        if not mine:
+            continue
+        t = [r["time_s"] for r in mine]
+        e = [r["error_m"] for r in mine]
+        (line,) = ax.loglog(t, e, "o-", ms=4, label=label, lw=1.2, ls="--" if "floating" in label else "-")
+        wrong = [r for r in mine if not r["events_match_reference"]]
+        ax.loglog([r["time_s"] for r in wrong], [r["error_m"] for r in wrong], "x", ms=9, color=line.get_color())
+    ax.set_xlabel("wall time of the integration (s)")
+    ax.set_ylabel("max position error vs reference (m)")
+    ax.set_title("Work-precision, thesis ball (x: event sequence differs from the reference)")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=7)
+    return fig
+
+
+# ---------------------------------------------------------------------------- stability map
+
+
+def _ball(k: float, zeta: float, **simulation) -> Scene:
+    """The thesis ball with stiffness k and the damping c = 2 zeta sqrt(k mu) of a link (mu = m/2)."""
+    c = 2.0 * zeta * np.sqrt(k * 0.05 / 2.0)
+    table = {
+        "name": "thesis_ball",
+        "bodies": [{"name": "ball", "shape": "ring", "count": 22, "radius": 0.1, "center": True, "mass": 0.05,
+                    "stiffness": k, "damping": c, "damper": "relative", "position": [0.0, 0.5], "angle": 0.05}],
+        "simulation": {"t_end": 0.5, "output_dt": 1e-3, **simulation},
+    }
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # critically damped cells are part of the sweep
+        return load_scene(table)
+
+
+def _classify(result, reference, energy0: float) -> tuple[str, float]:
+    if not result.success:
+        return result.status, float("nan")
+    if len(result.t) != len(reference.t):
+        return "incomplete", float("nan")
+    error = float(np.abs(result.positions - reference.positions).max())
+    if result.stats["max_penetration_m"] > 1e-6:
+        return "penetration", error
+    if result.stats["energy_drift_J"] > 1e-3 * energy0:
+        return "energy_drift", error
+    if error > 1e-3:
+        return "inaccurate", error
+    return "ok", error
+
+
+def stability_map(out: Path, quick: bool) -> dict:
+    stiffness = (1e2, 1e4, 1e6) if quick else (1e2, 1e3, 1e4, 1e5, 1e6, 1e7)
+    zetas = (0.05,) if quick else (0.005, 0.05, 0.5)
+    methods = ("dopri5", "dop853", "Radau", "LSODA") if quick else ("dopri5", "dop853", "RK45", "Radau", "BDF", "LSODA")
+    cap = 20.0 if quick else 60.0
+    print(f"stability map: thesis ball for 0.5 s, rtol 1e-6; cap {cap:g} s per run")
+    cells = []
+    for zeta in zetas:
+        for k in stiffness:
+            scene = _ball(k, zeta)
+            reference = simulate(scene, method="dop853", rtol=1e-11, atol=1e-14, max_wall_time=10 * cap)
+            e0 = float(reference.total_energy[0])
+            for method in methods:
+                result = simulate(scene, method=method, rtol=1e-6, atol=1e-9, max_wall_time=cap)
+                verdict, error = _classify(result, reference, e0) if reference.success else ("no_reference", np.nan)
+                s = result.stats
+                cells.append({"zeta": zeta, "stiffness": k, "method": method, "verdict": verdict, "status": result.status,
+                              "message": result.message if not result.success else "", "time_s": s["wall_time_s"],
+                              "rhs_evaluations": s["rhs_evaluations"], "error_m": error,
+                              "max_penetration_m": s["max_penetration_m"], "energy_drift_J": s["energy_drift_J"]})
+                print(f"  zeta {zeta:5.3f} k {k:7.0e} {method:7s} {verdict:13s} {s['wall_time_s']:8.3f} s "
+                      f"nfev {s['rhs_evaluations']:8d} error {error:9.2e}")
+    sweeps = _impact_and_tolerance_sweeps(quick)
+    data = {"cells": cells, "sweeps": sweeps, "environment": _environment()}
+    _save(out, "stability_map", data, _plot_stability(cells, stiffness, zetas, methods))
+    return data
+
+
+def _impact_and_tolerance_sweeps(quick: bool) -> list[dict]:
+    scene = _ball(2000.0, 0.5 / (2 * np.sqrt(2000.0 * 0.025)))
+    reference = simulate(scene, method="dop853", rtol=1e-11, atol=1e-14)
+    e0 = float(reference.total_energy[0])
+    rows = []
+    for dt in ((1e-3, 1e-5) if quick else (1e-2, 1e-3, 1e-4, 1e-5, 1e-6)):
+        r = simulate(scene, method="dopri5", rtol=1e-8, atol=1e-11, impact="thesis", impact_dt=dt, max_wall_time=60)
+        verdict, error = _classify(r, reference, e0)
+        rows.append({"sweep": "impact_dt", "value": dt, "verdict": verdict, "error_m": error, "time_s":
+                     r.stats["wall_time_s"], "max_penetration_m": r.stats["max_penetration_m"]})
+        print(f"  thesis impact dT {dt:7.0e}: {verdict:13s} error vs instant {error:9.2e} m, "
+              f"penetration {r.stats['max_penetration_m']:.2e} m")
+    for method in ("dopri5", "RK45", "LSODA"):
+        for rtol in ((1e-2, 1e-4) if quick else (1e-1, 1e-2, 1e-3, 1e-4)):
+            r = simulate(scene, method=method, rtol=rtol, atol=rtol * 1e-3, max_wall_time=60)
+            verdict, error = _classify(r, reference, e0)
+            rows.append({"sweep": "rtol", "method": method, "value": rtol, "verdict": verdict, "error_m": error,
+                         "time_s": r.stats["wall_time_s"], "events": r.stats["events"]})
+            print(f"  {method:7s} rtol {rtol:7.0e}: {verdict:13s} error {error:9.2e} m, {r.stats['events']} events")
+    return rows
+
+
+def _plot_stability(cells, stiffness, zetas, methods):
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(3.2 + 2.6 * len(zetas), 0.6 + 0.45 * len(methods)), layout="constrained")
+    axes = np.atleast_1d(fig.subplots(1, len(zetas), sharey=True))
+    for ax, zeta in zip(axes, zetas):
+        grid = np.full((len(methods), len(stiffness)), np.nan)
+        for c in cells:
+            if c["zeta"] == zeta:
+                i, j = methods.index(c["method"]), stiffness.index(c["stiffness"])
+                grid[i, j] = np.log10(c["time_s"]) if c["verdict"] == "ok" else np.nan
+                ax.text(j, i, "" if c["verdict"] == "ok" else c["verdict"].replace("_", "\n"), ha="center",
+                        va="center", fontsize=6, color="k")
+        image = ax.imshow(grid, cmap="viridis", aspect="auto", vmin=-3, vmax=2)
+        ax.set_xticks(range(len(stiffness)), [f"{k:.0e}" for k in stiffness], fontsize=7)
+        ax.set_yticks(range(len(methods)), methods, fontsize=8)
+        ax.set_xlabel("stiffness k (N/m)")
+        ax.set_title(f"damping ratio {zeta:g}", fontsize=9)
+    fig.colorbar(image, ax=list(axes), label="log10 wall time (s), successful runs")
+    fig.suptitle("Stability map: time, or why a method fails (rtol 1e-6, 0.5 s)", fontsize=10)
+    return fig
+
+
+# ---------------------------------------------------------------------------- resolution
+
+
+def _resolution_ball(n: int, k22: float = 2000.0, c22: float = 0.5) -> Scene:
+    """A ball of n perimeter particles + centre with the thesis ball's total mass and radius.
+
+    Stiffness and damping are scaled so the body keeps the same elastic character: spokes
+    act in parallel (k ~ 22/n), rim links in series around the perimeter (k ~ n/22).
+    """
+    total = 23 * 0.05
+    links = [(0, i) for i in range(1, n + 1)] + [(i, i % n + 1) for i in range(1, n + 1)]
+    k = [k22 * 22 / n] * n + [k22 * n / 22] * n
+    c = [c22 * 22 / n] * n + [c22 * n / 22] * n
+    angles = 2 * np.pi * np.arange(n) / n
+    points = [[0.0, 0.0]] + [[0.1 * np.cos(a), 0.1 * np.sin(a)] for a in angles]
+    table = {"name": f"resolution_ball_{n}",
+             "bodies": [{"name": "ball", "particles": points, "links": [list(x) for x in links],
+                         "mass": total / (n + 1), "stiffness": k, "damping": c, "damper": "relative",
+                         "position": [0.0, 0.5], "angle": 0.05}],
+             "simulation": {"t_end": 1.0, "output_dt": 1e-4}}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return load_scene(table)
+
+
+def _observables(result) -> dict:
+    m = result.masses
+    y_cm = result.positions[:, :, 1] @ m / m.sum()
+    force = result.contact_force.sum(axis=1)
+    first = result.events_time[0]
+    touching = force > 0
+    after = np.flatnonzero((result.t > first) & ~touching)
+    end_contact = result.t[after[0]] if len(after) else result.t[-1]
+    bottom = np.argmin(y_cm)
+    return {"rebound_height_m": float(y_cm[bottom:].max()), "contact_duration_s": float(end_contact - first),
+            "peak_contact_force_N": float(force.max())}
+
+
+def resolution_study(out: Path, quick: bool) -> dict:
+    counts = (6, 11, 22, 32) if quick else (6, 8, 11, 16, 22, 32, 45, 64)
+    print(f"resolution study: ball with {counts} perimeter particles, same mass and radius, dopri5 rtol 1e-8")
+    rows = []
+    for n in counts:
+        scene = _resolution_ball(n)
+        start = time.perf_counter()
+        load_model(scene, "c")  # derive and compile on demand (cached): reported apart from the run
+        prepare = time.perf_counter() - start
+        result = simulate(scene, method="dopri5", rtol=1e-8, atol=1e-11)
+        row = {"perimeter_particles": n, "dof": 2 * (n + 1), "status": result.status, "time_s":
+               result.stats["wall_time_s"], "rhs_evaluations": result.stats["rhs_evaluations"],
+               "model_prepare_s": prepare, **(_observables(result) if result.success else {})}
+        rows.append(row)
+        print(f"  n {n:3d}: {result.status}, {row['time_s'] * 1e3:8.1f} ms, rebound "
+              f"{row.get('rebound_height_m', np.nan):.4f} m, contact {row.get('contact_duration_s', np.nan):.4f} s, "
+              f"peak force {row.get('peak_contact_force_N', np.nan):8.2f} N (model ready in {prepare:.1f} s)")
+    finest = rows[-1]
+    keys = ("rebound_height_m", "contact_duration_s", "peak_contact_force_N")
+    for row in rows:
+        row["relative_change_vs_finest"] = {k: abs(row[k] / finest[k] - 1.0) for k in keys if k in row}
+    within = [r["perimeter_particles"] for r in rows if r["relative_change_vs_finest"]
+              and max(r["relative_change_vs_finest"].values()) <= 0.01]
+    coarsest = min(within) if within else None
+    print(f"  coarsest model within 1 % of n = {finest['perimeter_particles']} on all three observables: "
+          f"{coarsest if coarsest is not None else 'none'}")
+    data = {"rows": rows, "coarsest_within_1_percent": coarsest, "environment": _environment()}
+    _save(out, "resolution", data, _plot_resolution(rows, keys))
+    return data
+
+
+def _plot_resolution(rows, keys):
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(10, 3.2), layout="constrained")
+    axes = fig.subplots(1, len(keys) + 1)
+    n = [r["perimeter_particles"] for r in rows]
+    for ax, key in zip(axes, keys):
+        ax.plot(n, [r.get(key, np.nan) for r in rows], "o-")
+        ax.set_xscale("log")
+        ax.set_title(key.replace("_", " "), fontsize=9)
+        ax.set_xlabel("perimeter particles")
+    axes[-1].loglog(n, [r["time_s"] for r in rows], "o-")
+    axes[-1].set_title("cost: wall time (s)", fontsize=9)
+    axes[-1].set_xlabel("perimeter particles")
+    return fig
+
+
+STUDIES = {"wp": work_precision, "stability": stability_map, "resolution": resolution_study}
+
+
+def bench_command(args) -> int:
+    """Run the chosen studies; print and save their numbers and charts."""
+    out = Path(args.out)
+    for name in args.study or list(STUDIES):
+        start = time.perf_counter()
+        if name == "wp":
+            work_precision(out, args.repeats if not args.quick else 1, args.quick)
+        else:
+            STUDIES[name](out, args.quick)
+        print(f"  ({name} took {time.perf_counter() - start:.0f} s)\n")
+    return 0
