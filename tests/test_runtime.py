@@ -233,3 +233,14 @@ def test_compiled_methods_need_the_c_backend(ball):
     with pytest.raises(ValueError, match="`method` = 'dopri5': is compiled C and needs backend 'c'"):
         flexbody.simulate(ball, method="dopri5", backend="numpy")
     assert flexbody.simulate(ball, backend="numpy", t_end=0.05).stats["method"] == "RK45"
+
+
+@pytest.mark.parametrize("method", ["RK45", "dopri5"] if "c" in BACKENDS else ["RK45"])
+def test_stiff_lift_off_is_located_on_the_released_side(method):
+    """At k = 1e7 N/m the contact force moves ~1e-8 N within the root's 1e-15 s: the event
+    must be reported where the force already pulls, or the restart finds it again."""
+    from flexbody.bench import _ball
+
+    r = flexbody.simulate(_ball(1e7, 0.005), method=method, rtol=1e-6, atol=1e-9, t_end=0.3, max_wall_time=60)
+    assert r.success, r.message
+    assert "liftoff" in r.events_kind.tolist()

@@ -186,7 +186,7 @@ def _plot_work_precision(rows: list[dict]):
             continue
         t = [r["time_s"] for r in mine]
         e = [r["error_m"] for r in mine]
-        (line,) = ax.loglog(t, e, "o-", ms=4, label=label, lw=1.2, ls="--" if "floating" in label else "-")
+        (line,) = ax.loglog(t, e, marker="o", ms=4, label=label, lw=1.2, ls="--" if "floating" in label else "-")
         wrong = [r for r in mine if not r["events_match_reference"]]
         ax.loglog([r["time_s"] for r in wrong], [r["error_m"] for r in wrong], "x", ms=9, color=line.get_color())
     ax.set_xlabel("wall time of the integration (s)")
@@ -306,12 +306,13 @@ def _plot_stability(cells, stiffness, zetas, methods):
 
 
 def _resolution_ball(n: int, k22: float = 2000.0, c22: float = 0.5) -> Scene:
-    """A ball of n perimeter particles + centre with the thesis ball's total mass and radius.
+    """A ball of n perimeter particles + centre with the thesis ball's mass and radius.
 
-    Stiffness and damping are scaled so the body keeps the same elastic character: spokes
-    act in parallel (k ~ 22/n), rim links in series around the perimeter (k ~ n/22).
+    The centre keeps its 0.05 kg and the perimeter shares the other 1.1 kg, so the mass
+    distribution does not change with n.  Stiffness and damping are scaled so the body
+    keeps the same elastic character: spokes act in parallel (k ~ 22/n), rim links in
+    series around the perimeter (k ~ n/22).
     """
-    total = 23 * 0.05
     links = [(0, i) for i in range(1, n + 1)] + [(i, i % n + 1) for i in range(1, n + 1)]
     k = [k22 * 22 / n] * n + [k22 * n / 22] * n
     c = [c22 * 22 / n] * n + [c22 * n / 22] * n
@@ -319,7 +320,7 @@ def _resolution_ball(n: int, k22: float = 2000.0, c22: float = 0.5) -> Scene:
     points = [[0.0, 0.0]] + [[0.1 * np.cos(a), 0.1 * np.sin(a)] for a in angles]
     table = {"name": f"resolution_ball_{n}",
              "bodies": [{"name": "ball", "particles": points, "links": [list(x) for x in links],
-                         "mass": total / (n + 1), "stiffness": k, "damping": c, "damper": "relative",
+                         "masses": [0.05] + [1.1 / n] * n, "stiffness": k, "damping": c, "damper": "relative",
                          "position": [0.0, 0.5], "angle": 0.05}],
              "simulation": {"t_end": 1.0, "output_dt": 1e-4}}
     with warnings.catch_warnings():
