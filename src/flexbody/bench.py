@@ -380,12 +380,15 @@ def _plot_resolution(rows, keys):
     n = [r["perimeter_particles"] for r in rows]
     for ax, key in zip(axes, keys):
         ax.plot(n, [r.get(key, np.nan) for r in rows], "o-")
-        ax.set_xscale("log")
         ax.set_title(key.replace("_", " "), fontsize=9)
-        ax.set_xlabel("perimeter particles")
-    axes[-1].loglog(n, [r["time_s"] for r in rows], "o-")
+    axes[-1].plot(n, [r["time_s"] for r in rows], "o-")
+    axes[-1].set_yscale("log")
     axes[-1].set_title("cost: wall time (s)", fontsize=9)
-    axes[-1].set_xlabel("perimeter particles")
+    for ax in axes:
+        ax.set_xscale("log")
+        ax.set_xticks(n, [str(x) for x in n], fontsize=7)
+        ax.minorticks_off()
+        ax.set_xlabel("perimeter particles")
     return fig
 
 
