@@ -216,7 +216,9 @@ def test_result_contract(ball, tmp_path):
 @pytest.mark.parametrize("compiled, scipy_method", [("dopri5", "RK45"), ("dop853", "DOP853")])
 @pytest.mark.parametrize("formulation", ["particles", "floating"])
 def test_compiled_integrator_reproduces_the_scipy_path(ball, compiled, scipy_method, formulation):
-    """Same tableau and step-size controller: the same steps, events and trajectory."""
+    """Same tableau and step-size controller: the same events and trajectory, and the same
+    steps up to rounding (C and NumPy sum the stages in different orders, which can flip a
+    step that is accepted by a hair)."""
     options = dict(rtol=1e-7, atol=1e-10, t_end=0.8, formulation=formulation)
     a = flexbody.simulate(ball, method=compiled, **options)
     b = flexbody.simulate(ball, method=scipy_method, **options)
@@ -224,9 +226,8 @@ def test_compiled_integrator_reproduces_the_scipy_path(ball, compiled, scipy_met
     assert list(zip(a.events_particle, a.events_kind)) == list(zip(b.events_particle, b.events_kind))
     np.testing.assert_allclose(a.events_time, b.events_time, atol=1e-10)
     np.testing.assert_allclose(a.positions, b.positions, atol=1e-9)
-    if compiled == "dopri5":  # DOP853's dense output stages are counted differently
-        assert a.stats["steps"] == b.stats["steps"]
-        assert abs(a.stats["rhs_evaluations"] - b.stats["rhs_evaluations"]) <= 2 * a.stats["segments"]
+    assert abs(a.stats["steps"] - b.stats["steps"]) <= 0.01 * b.stats["steps"]
+    assert abs(a.stats["rhs_evaluations"] - b.stats["rhs_evaluations"]) <= 0.02 * b.stats["rhs_evaluations"]
 
 
 def test_compiled_methods_need_the_c_backend(ball):
