@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -103,9 +105,9 @@ def test_unknown_scene_name_lists_bundled_scenes():
 
 def test_scene_objects_are_immutable():
     s = make_scene(body())
-    with pytest.raises(Exception):
+    with pytest.raises(ValueError, match="read-only"):
         s.bodies[0].masses[0] = 1.0
-    with pytest.raises(Exception):
+    with pytest.raises(dataclasses.FrozenInstanceError):
         s.name = "other"
 
 

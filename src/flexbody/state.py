@@ -24,7 +24,7 @@ def initial_coordinates(scene: Scene, model: Model) -> tuple[np.ndarray, np.ndar
     if model.formulation == "particles":
         return x.ravel().copy(), v.ravel().copy()
     q, u, first = [], [], 0
-    for b, body in enumerate(model.manifest["topology"]["bodies"]):
+    for body in model.manifest["topology"]["bodies"]:
         n = body["n_particles"]
         anchor, reference = body["gauge"]
         xb, vb = x[first : first + n], v[first : first + n]
