@@ -245,3 +245,43 @@ def test_stiff_lift_off_is_located_on_the_released_side(method):
     r = flexbody.simulate(_ball(1e7, 0.005), method=method, rtol=1e-6, atol=1e-9, t_end=0.3, max_wall_time=60)
     assert r.success, r.message
     assert "liftoff" in r.events_kind.tolist()
+
+
+def test_particle_slides_down_a_frictionless_incline():
+    """Inclined ground (normal at angle th): the contact force is m g cos th and the slide
+    along the slope is s = g sin th t^2 / 2, from rest, whatever the impact did."""
+    th, m, g, lift = 0.3, 0.2, 9.81, 1e-3
+    n, s_dir = np.array([-np.sin(th), np.cos(th)]), np.array([np.cos(th), np.sin(th)])
+    scene = make_scene(body(particles=[[0.0, 0.0]], links=[], stiffness=[], damping=[], mass=m,
+                            position=(lift * n).tolist()),
+                       grounds=[{"point": [0.0, 0.0], "normal": n.tolist()}], simulation={"t_end": 0.5})
+    r = flexbody.simulate(scene, **TIGHT)
+    assert r.success and list(r.events_kind) == ["impact"]
+    assert r.events_time[0] == pytest.approx(np.sqrt(2 * lift / (g * np.cos(th))), abs=1e-12)
+    after = r.t > r.events_time[0]
+    np.testing.assert_allclose(r.contact_force[after, 0], m * g * np.cos(th), rtol=1e-12)
+    np.testing.assert_allclose(r.positions[after, 0] @ n, 0.0, atol=1e-12)
+    np.testing.assert_allclose(r.positions[:, 0] @ s_dir, -0.5 * g * np.sin(th) * r.t**2, atol=1e-10)
+
+
+def test_particle_lands_in_a_corner_of_two_grounds():
+    scene = make_scene(body(particles=[[0.0, 0.0]], links=[], stiffness=[], damping=[], mass=0.2,
+                            position=[0.1, 0.1], velocity=[-1.0, 0.0]),
+                       grounds=[{"point": [0.0, 0.0], "normal": [0.0, 1.0]}, {"point": [0.0, 0.0], "normal": [1.0, 0.0]}],
+                       simulation={"t_end": 0.5})
+    r = flexbody.simulate(scene, **TIGHT)
+    assert r.success and list(r.events_kind) == ["impact", "impact"]
+    np.testing.assert_allclose(r.events_time, [0.1, np.sqrt(0.2 / 9.81)], atol=1e-12)
+    np.testing.assert_allclose(r.positions[-1, 0], [0.0, 0.0], atol=1e-12)
+    assert r.contact_force[-1, 0] == pytest.approx(0.2 * 9.81, rel=1e-12)  # the floor's; the wall's is 0
+
+
+@pytest.mark.parametrize("formulation", ["particles", "floating"])
+def test_two_bodies_move_independently(formulation):
+    a, b = body(name="a"), body(name="b", position=[1.0, 0.5], angle=0.2)
+    both = flexbody.simulate(make_scene(a, b, simulation={"t_end": 0.6}), formulation=formulation, **TIGHT)
+    alone_a = flexbody.simulate(make_scene(a, simulation={"t_end": 0.6}), formulation=formulation, **TIGHT)
+    alone_b = flexbody.simulate(make_scene(b, simulation={"t_end": 0.6}), formulation=formulation, **TIGHT)
+    np.testing.assert_allclose(both.positions[:, :2], alone_a.positions, atol=1e-11)
+    np.testing.assert_allclose(both.positions[:, 2:], alone_b.positions, atol=1e-11)
+    assert sorted(both.events_time) == pytest.approx(sorted(np.r_[alone_a.events_time, alone_b.events_time]), abs=1e-11)
