@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -102,6 +103,10 @@ def build_blocks(model: SymbolicModel) -> list[Block]:
     where = {s: (g, i) for g, syms in groups.items() for i, s in enumerate(syms)}
     c_printer = CPrinter({s.name: f"{g}[{i}]" for s, (g, i) in where.items()})
     py_printer = PyPrinter()
+
+    def py(expr) -> str:
+        # Functions print as `_m.sqrt`: `_m` is numpy for batches, a scalar math namespace otherwise.
+        return re.sub(r"\bnumpy\.", "_m.", py_printer.doprint(expr))
     defined = dict(temporaries)
     order = {t: k for k, (t, _) in enumerate(temporaries)}
     blocks = []
@@ -123,7 +128,7 @@ def build_blocks(model: SymbolicModel) -> list[Block]:
         unpack = sorted(((s.name, *where[s]) for s in free if s in where), key=lambda x: ("qupa".index(x[1]), x[2]))
         cols = shape[1] if len(shape) == 2 else 1
         entries = [
-            (k, divmod(k, cols) if len(shape) == 2 else (k,), c_printer.doprint(e), py_printer.doprint(e))
+            (k, divmod(k, cols) if len(shape) == 2 else (k,), c_printer.doprint(e), py(e))
             for k, e in enumerate(exprs)
             if e != 0
         ]
@@ -134,9 +139,7 @@ def build_blocks(model: SymbolicModel) -> list[Block]:
                 shape=tuple(shape),
                 inputs=inputs,
                 unpack=unpack,
-                temporaries=[
-                    (t.name, c_printer.doprint(defined[t]), py_printer.doprint(defined[t])) for t in used_temps
-                ],
+                temporaries=[(t.name, c_printer.doprint(defined[t]), py(defined[t])) for t in used_temps],
                 entries=entries,
                 ops=int(sp.count_ops([defined[t] for t in used_temps] + list(exprs))),
             )
@@ -315,6 +318,7 @@ def render(model: SymbolicModel, *, source: str, command: str) -> dict[str, str]
         "energy_names": list(ENERGY_NAMES),
         "mass_matrix_diagonal": model.mass_matrix_is_diagonal,
         "functions": {b.name: {"shape": list(b.shape), "ops_after_cse": b.ops} for b in blocks},
+        "python_math": sorted(set(re.findall(r"\b_m\.(\w+)", files["model.py"]))),
         "versions": {"generator": GENERATOR_VERSION, "sympy": sp.__version__, "jinja2": _jinja2.__version__},
         "sha256": {name: hashlib.sha256(text.encode()).hexdigest() for name, text in sorted(files.items())},
     }

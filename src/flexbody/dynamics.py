@@ -18,10 +18,19 @@ if TYPE_CHECKING:
     from .model import Model
 
 
+def mass_solver(model: Model, q, p):
+    """``x -> M(q)^-1 x`` for x of shape (nu,) or (nu, k): a division when M is diagonal."""
+    if model.manifest["mass_matrix_diagonal"]:
+        d = model._call("mass_diagonal", q, None, p)
+        return lambda x: x / (d if np.ndim(x) == 1 else d[:, None])
+    M = model.mass_matrix(q, p)
+    return lambda x: np.linalg.solve(M, x)
+
+
 def constrained_rhs(model: Model, y, p, held, push) -> tuple[np.ndarray, np.ndarray]:
     """``(ydot (ny,), lam (nc,))`` for state ``y = [q, u, w]``; see :meth:`Model.rhs`."""
     q, u = y[: model.nq], y[model.nq : model.nq + model.nu]
-    M = model.mass_matrix(q, p)
+    solve = mass_solver(model, q, p)
     F = model.forcing(q, u, p)
     held = np.asarray(held, dtype=bool)
     push = np.asarray(push, dtype=float)
@@ -32,10 +41,10 @@ def constrained_rhs(model: Model, y, p, held, push) -> tuple[np.ndarray, np.ndar
         bias = model.gap_bias(q, u, p)
         F = F + J.T @ push
         impact_power = -float(push @ (J @ u))
-    acc = np.linalg.solve(M, F)
+    acc = solve(F)
     if held.any():
         Js = J[held]
-        X = np.linalg.solve(M, Js.T)
+        X = solve(Js.T)
         lam_s = np.linalg.solve(Js @ X, -(Js @ acc + bias[held]))
         acc = acc + X @ lam_s
         lam[held] = lam_s
@@ -59,8 +68,7 @@ def impact(model: Model, y, p, stop) -> tuple[np.ndarray, float]:
     q, u = y[:nq], y[nq : nq + nu]
     stop = np.asarray(stop, dtype=bool)
     J = model.gap_jacobian(q, p)[stop]
-    M = model.mass_matrix(q, p)
-    X = np.linalg.solve(M, J.T)
+    X = mass_solver(model, q, p)(J.T)
     out = y.copy()
     out[nq : nq + nu] = u + X @ np.linalg.solve(J @ X, -(J @ u))
     loss = model.energies(q, u, p)[0] - model.energies(q, out[nq : nq + nu], p)[0]

@@ -12,6 +12,7 @@ from __future__ import annotations
 import ctypes
 import importlib.util
 import json
+import math
 import os
 import subprocess
 import sys
@@ -165,8 +166,22 @@ class Model:
         return lambda t, y: dynamics.state_jacobian(self, y, p, held)
 
 
+class _ScalarMath:
+    """The functions generated expressions call, on Python floats (for single states)."""
+
+    sqrt, sin, cos = staticmethod(math.sqrt), staticmethod(math.sin), staticmethod(math.cos)
+
+    @staticmethod
+    def sign(x: float) -> float:
+        return float((x > 0.0) - (x < 0.0))
+
+
 class NumpyModel(Model):
-    """Evaluates the generated NumPy module (``model.py``); accepts batched q and u."""
+    """Evaluates the generated NumPy module (``model.py``); accepts batched q and u.
+
+    A single state is evaluated on Python floats with scalar math functions (about 3x
+    faster than on NumPy scalars); batches, on NumPy arrays.
+    """
 
     backend = "numpy"
 
@@ -177,9 +192,16 @@ class NumpyModel(Model):
         module = importlib.util.module_from_spec(spec)
         spec.loader.exec_module(module)
         self.module = module
+        self.scalar = all(hasattr(_ScalarMath, f) for f in self.manifest.get("python_math", ["?"]))
 
     def _call(self, name, q, u, p, a=None):
-        out = getattr(self.module, name)(np.asarray(q, float), u, np.asarray(p, float), a)
+        q = np.asarray(q, float)
+        fn = getattr(self.module, name)
+        if q.ndim == 1 and self.scalar:
+            lists = [None if x is None else np.asarray(x, float).tolist() for x in (u, a)]
+            out = fn(q.tolist(), lists[0], np.asarray(p, float).tolist(), lists[1], _ScalarMath)
+        else:
+            out = fn(q, u, np.asarray(p, float), a)
         return out[0] if name == "damping_power" else out
 
     def rhs(self, y, p, held, push):
