@@ -375,4 +375,4 @@ def simulate(
     return run.result(status, message, wall)
 
 
-__all__ = ["simulate", "SimulationFailed", "FREE", "HELD"]
+__all__ = ["simulate", "SimulationFailed"]
