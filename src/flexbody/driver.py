@@ -106,6 +106,7 @@ class _Run:
         self.losses: list[tuple[float, float]] = []
         self.nfev = self.njev = self.steps = self.segments = 0
         self.counters = np.zeros(4, np.int64)  # compiled path: nfev, steps, rejected, event evaluations
+        self.segment_log: list[tuple[int, np.ndarray, np.ndarray, np.ndarray]] = []
         self.min_gap = np.inf
         self.stalled = 0
 
@@ -121,12 +122,15 @@ class _Run:
         model, s = self.model, self.settings
         grid = self.grid[self.next_sample :]
         grid = grid[: np.searchsorted(grid, t_bound, side="right")]
+        evaluations = self.counters[0] + self.counters[3]
         status, t_stop, y_stop, fired, samples, self.min_gap = model.integrate(
             COMPILED_METHODS.index(s.method), t0, y0, t_bound, self.p, phases.phase, phases.push, phases.floor,
             self.force_tolerance, self.gap_tolerance, s.rtol, s.atol, grid, self.counters, self.min_gap,
         )
         self.segments += 1
         held, push = phases.held.astype(bool), phases.push.copy()
+        # (RHS evaluations, start state, contact set) of each segment: what the work cost
+        self.segment_log.append((int(self.counters[0] + self.counters[3] - evaluations), y0, held, push))
         self.samples += [(t, y, held, push) for t, y in zip(grid, samples)]
         self.next_sample += len(samples)
         if self.progress:
