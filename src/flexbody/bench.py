@@ -12,6 +12,8 @@ Three studies, each printed as a table and saved as JSON and PNG in ``--out``:
 * ``resolution`` — model no more than a scene needs: the ball with 6 to 64 perimeter
   particles; how rebound height, contact duration and peak contact force converge, what
   each costs, and the coarsest model within 1 %.
+* ``mujoco`` — the same ball in MuJoCo (optional extra ``flexbody[mujoco]``): time,
+  penetration, rebound height and height error against the tight flexbody reference.
 
 Timings are medians over ``--repeats`` runs (the machine is shared and noisy).
 """
@@ -393,7 +395,79 @@ def _plot_resolution(rows, keys):
     return fig
 
 
-STUDIES = {"wp": work_precision, "stability": stability_map, "resolution": resolution_study}
+# ---------------------------------------------------------------------------- MuJoCo side by side
+
+
+def mujoco_comparison(out: Path, quick: bool) -> dict | None:
+    """The thesis ball (axial dampers, as MuJoCo's tendons) in flexbody and in MuJoCo."""
+    try:
+        from . import mujoco_compare
+        import mujoco  # noqa: F401
+    except ImportError:
+        print("mujoco comparison skipped: MuJoCo is not installed (pip install 'flexbody[mujoco]')")
+        return None
+    table = load_scene("thesis_ball")
+    scene = _ball_variant(table, damper="axial")
+    repeats = 3 if quick else 7
+    print("MuJoCo side by side: thesis ball with axial dampers, 2 s")
+    rows, curves = [], {}
+    reference = simulate(scene, method="dop853", rtol=1e-11, atol=1e-14)
+    for label, options in (("flexbody dopri5 rtol 1e-6", dict(method="dopri5", rtol=1e-6, atol=1e-9)),
+                           ("flexbody dop853 rtol 1e-9", dict(method="dop853", rtol=1e-9, atol=1e-12))):
+        result, wall = _timed(scene, repeats, **options)
+        y = result.positions[:, :, 1]
+        rows.append({"label": label, "time_s": wall, "max_penetration_m": result.stats["max_penetration_m"],
+                     **_rebound(result.t, y, result.masses),
+                     "max_height_error_m": float(np.abs(y - reference.positions[:, :, 1]).max())})
+        curves[label] = (result.t, y @ result.masses / result.masses.sum())
+    for dt in (1e-3, 1e-4):
+        m = mujoco_compare.run(scene, dt, repeats)
+        ref_y = np.array([np.interp(m["t"], reference.t, reference.positions[:, i, 1])
+                          for i in range(scene.n_particles)]).T
+        rows.append({"label": f"MuJoCo {m['version']} dt {dt:g} s", "time_s": m["time_s"],
+                     "max_penetration_m": m["max_penetration_m"], **_rebound(m["t"], m["heights"], scene.masses),
+                     "max_height_error_m": float(np.abs(m["heights"] - ref_y).max())})
+        curves[rows[-1]["label"]] = (m["t"], m["heights"] @ scene.masses / scene.masses.sum())
+    print(f"  {'run':32s} {'time ms':>9s} {'penetration m':>14s} {'rebound m':>10s} {'height error m':>15s}")
+    for r in rows:
+        print(f"  {r['label']:32s} {r['time_s'] * 1e3:9.2f} {r['max_penetration_m']:14.2e} "
+              f"{r['rebound_height_m']:10.4f} {r['max_height_error_m']:15.2e}")
+    data = {"rows": rows, "environment": _environment()}
+    _save(out, "mujoco", data, _plot_curves(curves))
+    return data
+
+
+def _ball_variant(scene: Scene, **body) -> Scene:
+    """The bundled scene's ball with some body fields changed (from its TOML)."""
+    import tomllib
+
+    table = tomllib.loads(Path(scene.source).read_text())
+    table["bodies"][0].update(body)
+    return load_scene(table)
+
+
+def _rebound(t: np.ndarray, heights: np.ndarray, masses: np.ndarray) -> dict:
+    y_cm = heights @ masses / masses.sum()
+    bottom = int(np.argmin(y_cm))
+    return {"rebound_height_m": float(y_cm[bottom:].max()), "lowest_centre_m": float(y_cm[bottom])}
+
+
+def _plot_curves(curves):
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(8, 4), layout="constrained")
+    ax = fig.add_subplot()
+    for label, (t, y) in curves.items():
+        ax.plot(t, y, lw=1.0, label=label)
+    ax.set_xlabel("t (s)")
+    ax.set_ylabel("height of the centre of mass (m)")
+    ax.legend(fontsize=8)
+    ax.set_title("Thesis ball (axial dampers): flexbody (exact contact) and MuJoCo (soft contact)")
+    return fig
+
+
+STUDIES = {"wp": work_precision, "stability": stability_map, "resolution": resolution_study,
+           "mujoco": mujoco_comparison}
 
 
 def bench_command(args) -> int:

@@ -63,8 +63,8 @@ def _parser() -> argparse.ArgumentParser:
     bench = sub.add_parser("bench", help="speed and accuracy benchmarks (prints and saves numbers)",
                            description="Benchmarks, not tests: work-precision diagram (wp), stability map "
                                        "(stability) and resolution study (resolution); JSON and PNG in --out.")
-    bench.add_argument("--study", choices=("wp", "stability", "resolution"), action="append",
-                       help="which study (repeatable; default: all)")
+    bench.add_argument("--study", choices=("wp", "stability", "resolution", "mujoco"), action="append",
+                       help="which study (repeatable; default: all; mujoco needs flexbody[mujoco])")
     bench.add_argument("--out", type=Path, default=Path("bench"), metavar="DIR", help="output folder")
     bench.add_argument("--repeats", type=int, default=5, help="timing repeats (median is reported)")
     bench.add_argument("--quick", action="store_true", help="fewer cases and repeats (about a minute)")
