@@ -87,12 +87,12 @@ def state_jacobian(model: Model, y, p, held) -> np.ndarray:
     ydot, _ = model.rhs(y, p, held, np.zeros(model.n_contacts))
     acc = ydot[nq : nq + nu]
     Jq, Ju = model.forcing_jacobians(q, u, p, acc)
-    M = model.mass_matrix(q, p)
-    A = np.linalg.solve(M, np.hstack([Jq, Ju]))
+    solve = mass_solver(model, q, p)
+    A = solve(np.hstack([Jq, Ju]))
     held = np.asarray(held, dtype=bool)
     if held.any():
         Js = model.gap_jacobian(q, p)[held]
-        X = np.linalg.solve(M, Js.T)
+        X = solve(Js.T)
         A = A - X @ np.linalg.solve(Js @ X, Js @ A)
     out = np.zeros((model.ny, model.ny))
     out[:nq, nq : nq + nu] = np.eye(nq, nu)

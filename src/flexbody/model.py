@@ -25,10 +25,6 @@ from .paths import cache_root, generated_root, model_dir_name
 from .scene import Scene, load_scene
 
 FloatArray = np.ndarray
-FUNCTIONS = (
-    "mass_matrix", "forcing", "energies", "damping_power", "positions", "velocities",
-    "gaps", "gap_jacobian", "gap_bias", "jacobian_q", "jacobian_u",
-)  # fmt: skip
 
 
 class ModelError(RuntimeError):
@@ -222,7 +218,7 @@ class CModel(Model):
             raise ModelError(f"{self.library_path} was built for another model than {self.directory}")
         ptr = ctypes.c_void_p
         self._fn = {}
-        for name in FUNCTIONS:
+        for name in self.shapes:  # every generated function the manifest lists
             fn = getattr(lib, f"fb_{name}")
             fn.argtypes = [ptr] * 5
             fn.restype = None
