@@ -332,15 +332,13 @@ def _resolution_ball(n: int, k22: float = 2000.0, c22: float = 0.5) -> Scene:
 
 
 def _observables(result) -> dict:
-    m = result.masses
-    y_cm = result.positions[:, :, 1] @ m / m.sum()
     force = result.contact_force.sum(axis=1)
     first = result.events_time[0]
     touching = force > 0
     after = np.flatnonzero((result.t > first) & ~touching)
     end_contact = result.t[after[0]] if len(after) else result.t[-1]
-    bottom = np.argmin(y_cm)
-    return {"rebound_height_m": float(y_cm[bottom:].max()), "contact_duration_s": float(end_contact - first),
+    rebound = _rebound(result.t, result.positions[:, :, 1], result.masses)["rebound_height_m"]
+    return {"rebound_height_m": rebound, "contact_duration_s": float(end_contact - first),
             "peak_contact_force_N": float(force.max())}
 
 

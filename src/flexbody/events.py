@@ -38,10 +38,8 @@ class EventFunctions:
         self.free = phases.phase == FREE
         self.held_mask = phases.phase == HELD
         self.held = phases.held
-        self.calls = 0
 
     def __call__(self, y: np.ndarray) -> np.ndarray:
-        self.calls += 1
         m = self.model
         g = np.full(m.n_contacts, np.inf)
         if self.free.any():
