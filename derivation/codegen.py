@@ -30,6 +30,7 @@ FILES = {
     "model.h.jinja": "model.h",
     "eom.md.jinja": "eom.md",
     "integrator.c.jinja": "integrator.c",
+    "phases.c.jinja": "phases.c",
 }
 #: Generated functions in the order they appear, with one-line descriptions.
 FUNCTIONS = {
@@ -219,20 +220,40 @@ def _c_array(values) -> str:
     return "{\n    " + ",\n    ".join(_c_array(row) for row in values) + "}"
 
 
-def _runge_kutta_tables() -> list[dict[str, str]]:
+def _combination(weights) -> str:
+    """``(w0 * K[0][i] + w2 * K[2][i] + ...)`` over the nonzero weights, each printed exactly.
+
+    The integrator's stage sums are unrolled this way, so each is one pass over the state."""
+    return "(" + " + ".join(f"{float(w)!r} * K[{j}][i]" for j, w in enumerate(weights) if w != 0.0) + ")"
+
+
+def _runge_kutta_tables() -> dict:
     """Butcher tableaux, error weights and dense-output coefficients (Dormand & Prince;
-    Hairer, Norsett & Wanner), read as data from SciPy so both integration paths agree."""
+    Hairer, Norsett & Wanner), read as data from SciPy so both integration paths agree,
+    as C initializers and as unrolled stage sums."""
     from scipy.integrate import RK45
     from scipy.integrate._ivp import dop853_coefficients as d8
 
-    tables = {
-        "D5_C": RK45.C, "D5_A": RK45.A, "D5_B": RK45.B, "D5_E": RK45.E, "D5_P": RK45.P,
-        "D8_C": d8.C, "D8_A": d8.A, "D8_B": d8.B, "D8_E3": d8.E3, "D8_E5": d8.E5, "D8_D": d8.D,
-    }  # fmt: skip
-    return [
-        {"name": name, "shape": "".join(f"[{n}]" for n in np.shape(values)), "init": _c_array(values)}
-        for name, values in tables.items()
-    ]
+    n8 = d8.N_STAGES
+    return {
+        "d5": {
+            "stages": [{"c": repr(float(RK45.C[s])), "sum": _combination(RK45.A[s, :s])} for s in range(1, 6)],
+            "solution": _combination(RK45.B),
+            "error": _combination(RK45.E),
+            # dense output: stage j's weight at x = (t - t_old) / h is sum_r P[j][r] x^(r+1)
+            "dense": _c_array(RK45.P),
+            "dense_stages": [j for j in range(len(RK45.P)) if np.any(RK45.P[j] != 0.0)],
+        },
+        "d8": {
+            "stages": [{"c": repr(float(d8.C[s])), "sum": _combination(d8.A[s, :s])} for s in range(1, n8)],
+            "solution": _combination(d8.B),
+            "error5": _combination(d8.E5),
+            "error3": _combination(d8.E3),
+            "dense_stages": [{"index": s, "c": repr(float(d8.C[s])), "sum": _combination(d8.A[s, :s])}
+                             for s in range(n8 + 1, 16)],
+            "dense": [_combination(row) for row in d8.D],
+        },
+    }
 
 
 def _equations(model: SymbolicModel) -> list[dict[str, str]]:
@@ -293,7 +314,7 @@ def render(model: SymbolicModel, *, source: str, command: str) -> dict[str, str]
         "diagonal": model.mass_matrix_is_diagonal,
         "blocks": blocks,
         "equations": _equations(model),
-        "tables": _runge_kutta_tables(),
+        "rk": _runge_kutta_tables(),
         "gj": gap_jacobian_pattern(model),
         "cholesky": cholesky_code(model.outputs["mass_matrix"]),
         "group_time": "1e-12",

@@ -45,7 +45,7 @@ def test_vertical_dumbbell_lifts_off_at_the_closed_form_time():
     model = load_model(scene, backend="numpy")
     run = _Run(scene, model, _settings(scene, dict(TIGHT, t_end=0.701213600681)), None, 100)
     run.run()
-    v2 = run.samples[-1][1][model.nq + 3]
+    v2 = run.Y[run.n_samples - 1][model.nq + 3]
     assert v2 == pytest.approx(4.361023317411, abs=1e-7)
 
 
@@ -187,11 +187,13 @@ def test_max_events_stops_with_status_and_message(ball):
 def test_chattering_is_reported_not_spun_on(ball):
     model = load_model(ball, backend="numpy")
     run = _Run(ball, model, _settings(ball, {}), None, 10**6)
-    run.events = [Event(0.5 + 1e-5 * k, 3, "impact", -1e-7) for k in range(30)]
+    impacts = [Event(0.5 + 1e-5 * k, 3, "impact", -1e-7) for k in range(30)]
+    for e in impacts[:25]:  # 25 impacts within 1 ms are tolerated
+        run.check_guards(e.t, [e])
     with pytest.raises(SimulationFailed) as info:
-        run.check_guards(0.5 + 3e-4, run.events[-1:])
+        run.check_guards(impacts[25].t, [impacts[25]])
     assert info.value.status == "chattering"
-    assert "particle 3 impacted 30 times" in info.value.message and "rtol" in info.value.message
+    assert "particle 3 impacted 26 times" in info.value.message and "rtol" in info.value.message
 
 
 def test_result_contract(ball, tmp_path):

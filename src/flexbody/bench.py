@@ -77,6 +77,7 @@ def _rhs_cost(model, scene, t_end: float) -> float:
     from .driver import _Run, _settings
 
     run = _Run(scene, model, _settings(scene, {"method": "dopri5", "t_end": t_end}), None, 10**6)
+    run.segment_log = []
     run.run()
     p = run.p
     total = sum(n * model.time_rhs(y, p, held.astype(np.intc), push, calls=5000)

@@ -30,7 +30,7 @@ FREE, HELD, PUSHED = 0, 1, 2
 class Phases:
     """Per-contact state of the phase machine, arrays of shape (nc,)."""
 
-    phase: np.ndarray  # FREE / HELD / PUSHED
+    phase: np.ndarray  # FREE / HELD / PUSHED, np.intc (the C ABI's int)
     floor: np.ndarray  # a FREE contact's event fires when its gap falls to this level (m): 0, or
     # a hair below where the contact was released on the ground
     push: np.ndarray  # normal force of PUSHED contacts (N), 0 elsewhere
@@ -39,7 +39,7 @@ class Phases:
     @classmethod
     def all_free(cls, nc: int) -> Phases:
         """Every contact free and armed at the ground itself (floor 0)."""
-        return cls(np.zeros(nc, int), np.zeros(nc), np.zeros(nc), np.full(nc, np.inf))
+        return cls(np.zeros(nc, np.intc), np.zeros(nc), np.zeros(nc), np.full(nc, np.inf))
 
     @property
     def held(self) -> np.ndarray:
@@ -48,6 +48,11 @@ class Phases:
 
     def copy(self) -> Phases:
         return Phases(self.phase.copy(), self.floor.copy(), self.push.copy(), self.push_until.copy())
+
+    def assign(self, other: Phases) -> None:
+        """Take ``other``'s values into these arrays (whose addresses C may hold)."""
+        for name in ("phase", "floor", "push", "push_until"):
+            getattr(self, name)[:] = getattr(other, name)
 
 
 @dataclass

@@ -1,17 +1,19 @@
 """The simulation driver: integrate smooth segments, stop at events, apply the phase machine.
 
-``simulate`` integrates the generated model with one of SciPy's ``solve_ivp`` methods
-(their stepper classes, driven step by step so that co-timed events are all found), from
-event instant to event instant.  At each instant :func:`flexbody.contact.resolve`
-applies impacts, contact and lift-off, then a fresh segment starts.  The phase machine
-is kept apart from the integration of a smooth segment (:meth:`_Run.segment`), so a
-faster integrator can replace the latter.
+``simulate`` integrates the generated model from event instant to event instant, either
+with the generated C integrator (``dopri5``, ``dop853``: one C call per smooth segment) or
+with one of SciPy's ``solve_ivp`` methods (their stepper classes, driven step by step so
+that co-timed events are all found).  At each instant the fixed point of
+:func:`flexbody.contact.resolve` applies impacts, contact and lift-off (with the C backend
+its compiled twin ``fb_resolve`` does), then a fresh segment starts.  The loop, the events
+and the guards stay here, whichever path integrates.
 """
 
 from __future__ import annotations
 
 import time
 from collections.abc import Callable
+from collections import defaultdict, deque
 from dataclasses import dataclass
 
 import numpy as np
@@ -19,6 +21,7 @@ import scipy
 from scipy.integrate import BDF, DOP853, LSODA, RK23, RK45, Radau
 
 from . import __version__
+from .compiled import IMPACT, CompiledPath
 from .contact import FREE, HELD, PUSHED, Event, Phases, resolve
 from .events import EventFunctions, locate
 from .model import Model, load_model
@@ -78,13 +81,17 @@ def _settings(scene: Scene, overrides: dict) -> SimulationSettings:
 @dataclass
 class _Stop:
     t: float
-    y: np.ndarray
-    touching: np.ndarray
-    leaving: np.ndarray
+    touching: np.ndarray  # bool (nc,): free contacts whose gap event fired
+    leaving: np.ndarray  # bool (nc,): held contacts whose force event fired
 
 
 class _Run:
-    """State of one simulation: model, phases, samples, counters."""
+    """State of one simulation: model, state and phases, samples, counters.
+
+    ``y`` and ``phases`` are updated in place from instant to instant, and the output
+    samples are written into preallocated arrays, so the compiled path can hand C their
+    addresses once (:class:`flexbody.compiled.CompiledPath`).
+    """
 
     def __init__(self, scene: Scene, model: Model, settings: SimulationSettings, progress: Progress | None,
                  max_events: int, max_wall_time: float = np.inf) -> None:
@@ -93,52 +100,73 @@ class _Run:
         self.deadline = time.perf_counter() + max_wall_time
         self.p = model.parameters(scene)
         q, u = initial_coordinates(scene, model)
-        self.y0 = np.concatenate([q, u, [0.0, 0.0]])
+        self.y = np.concatenate([q, u, [0.0, 0.0]])
+        self.phases = Phases.all_free(model.n_contacts)
         size = float(np.abs(scene.initial_positions()).max())
         self.gap_tolerance = 1e-12 * max(size, 1.0)
         # For point masses on flat grounds a contact's effective mass 1 / (J M^-1 J^T) is its particle's.
         self.contact_masses = scene.masses[model.contacts[:, 0]]
         self.force_tolerance = 1e-10 * self.contact_masses * max(float(np.hypot(*scene.gravity)), 1.0)
         self.grid = np.linspace(0.0, settings.t_end, int(round(settings.t_end / settings.output_dt)) + 1)
-        self.samples: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []  # (t, y, held, push)
-        self.next_sample = 0
+        n = len(self.grid)
+        self.Y = np.empty((n, model.ny))  # samples at the grid times, the first n_samples of them taken
+        self.sample_held = np.zeros((n, model.n_contacts), bool)
+        self.sample_push = np.zeros((n, model.n_contacts))
+        self.n_samples = 0
         self.events: list[Event] = []
+        self.impact_times: dict[int, deque[tuple[float, float]]] = defaultdict(deque)  # for the chatter guard
         self.losses: list[tuple[float, float]] = []
         self.nfev = self.njev = self.steps = self.segments = 0
-        self.counters = np.zeros(4, np.int64)  # compiled path: nfev, steps, rejected, event evaluations
-        self.segment_log: list[tuple[int, np.ndarray, np.ndarray, np.ndarray]] = []
+        self.segment_log: list | None = None  # set to [] to log (RHS evaluations, y0, held, push) per segment
         self.min_gap = np.inf
         self.stalled = 0
+        self.compiled = None
+        if model.backend == "c":
+            self.compiled = CompiledPath(model, self.p, self.y, self.phases, self.grid, self.Y,
+                                         self.force_tolerance, self.contact_masses, self.gap_tolerance)
+
+    @property
+    def counters(self) -> np.ndarray:
+        """Compiled-path counters: RHS evaluations, steps, rejected steps, event evaluations."""
+        return self.compiled.counters if self.compiled else np.zeros(4, np.int64)
+
+    def keep_samples(self, start: int, stop: int) -> None:
+        """Tag samples ``start:stop`` with the current contact set."""
+        if stop == start:
+            return
+        self.sample_held[start:stop] = self.phases.phase == HELD
+        self.sample_push[start:stop] = self.phases.push
+        self.n_samples = stop
 
     # ------------------------------------------------------------------ one smooth segment
-    def segment(self, t0: float, y0: np.ndarray, t_bound: float, phases: Phases) -> _Stop:
-        """Integrate with a fixed contact set from ``t0`` until an event or ``t_bound``."""
-        if self.settings.method in COMPILED_METHODS:
-            return self.segment_compiled(t0, y0, t_bound, phases)
-        return self.segment_scipy(t0, y0, t_bound, phases)
-
-    def segment_compiled(self, t0: float, y0: np.ndarray, t_bound: float, phases: Phases) -> _Stop:
-        """The same as :meth:`segment_scipy`, in one call of the generated C integrator."""
-        model, s = self.model, self.settings
-        grid = self.grid[self.next_sample :]
-        grid = grid[: np.searchsorted(grid, t_bound, side="right")]
-        evaluations = self.counters[0] + self.counters[3]
-        status, t_stop, y_stop, fired, samples, self.min_gap = model.integrate(
-            COMPILED_METHODS.index(s.method), t0, y0, t_bound, self.p, phases.phase, phases.push, phases.floor,
-            self.force_tolerance, self.gap_tolerance, s.rtol, s.atol, grid, self.counters, self.min_gap,
-        )
+    def segment(self, t0: float, t_bound: float) -> _Stop:
+        """Integrate with a fixed contact set from ``t0`` until an event or ``t_bound``; ``y`` becomes
+        the state there."""
+        if self.segment_log is not None:
+            before = self.nfev + int(self.counters[0] + self.counters[3])
+            y0, held, push = self.y.copy(), self.phases.phase == HELD, self.phases.push.copy()
         self.segments += 1
-        held, push = phases.held.astype(bool), phases.push.copy()
-        # (RHS evaluations, start state, contact set) of each segment: what the work cost
-        self.segment_log.append((int(self.counters[0] + self.counters[3] - evaluations), y0, held, push))
-        self.samples += [(t, y, held, push) for t, y in zip(grid, samples)]
-        self.next_sample += len(samples)
+        if self.settings.method in COMPILED_METHODS:
+            stop = self.segment_compiled(t0, t_bound)
+        else:
+            stop = self.segment_scipy(t0, t_bound)
+        if self.segment_log is not None:  # what the segment's work cost, for the benchmark's RHS limit
+            self.segment_log.append((self.nfev + int(self.counters[0] + self.counters[3]) - before, y0, held, push))
         if self.progress:
-            self.progress(t_stop, s.t_end, len(self.events))
+            self.progress(stop.t, self.settings.t_end, len(self.events))
+        return stop
+
+    def segment_compiled(self, t0: float, t_bound: float) -> _Stop:
+        """The same as :meth:`segment_scipy`, in one call of the generated C integrator."""
+        s, c, phase = self.settings, self.compiled, self.phases.phase
+        start = self.n_samples
+        status, t_stop, n_new = c.integrate(COMPILED_METHODS.index(s.method), t0, t_bound, s.rtol, s.atol, start)
+        self.keep_samples(start, start + n_new)
+        self.min_gap = c.min_gap.value
         if status < 0:
             raise SimulationFailed(*self.COMPILED_FAILURES[status](s.method, t_stop))
-        free, held_mask = phases.phase == FREE, phases.phase == HELD
-        return _Stop(t_stop, y_stop, fired & free, fired & held_mask)
+        fired = c.fired.astype(bool)
+        return _Stop(t_stop, fired & (phase == FREE), fired & (phase == HELD))
 
     COMPILED_FAILURES = {
         -1: lambda m, t: ("step_size_collapse", f"{m} failed at t = {t:.9g} s: the step size collapsed. The model "
@@ -148,16 +176,16 @@ class _Run:
         -3: lambda m, t: ("blow_up", f"at t = {t:.9g} s: mass or contact matrix not positive definite."),
     }
 
-    def segment_scipy(self, t0: float, y0: np.ndarray, t_bound: float, phases: Phases) -> _Stop:
+    def segment_scipy(self, t0: float, t_bound: float) -> _Stop:
         """Integrate with one of SciPy's steppers, locating events on its dense output."""
-        model, s = self.model, self.settings
+        model, s, phases = self.model, self.settings, self.phases
         options = {"rtol": s.rtol, "atol": s.atol}
         if s.method in IMPLICIT:
             options["jac"] = model.jacobian_function(self.p, phases.held)
-        solver = SOLVERS[s.method](model.rhs_function(self.p, phases.held, phases.push), t0, y0, t_bound, **options)
+        solver = SOLVERS[s.method](model.rhs_function(self.p, phases.held, phases.push), t0, self.y.copy(),
+                                   t_bound, **options)
         events = EventFunctions(model, self.p, phases, self.force_tolerance)
-        g_old = events(y0)
-        self.segments += 1
+        g_old = events(self.y)
         try:
             while True:
                 message = solver.step()
@@ -175,12 +203,12 @@ class _Run:
                 g_new = events(solver.y)
                 hit = locate(events, dense, solver.t_old, solver.t, g_old, g_new)
                 t_stop = hit.t if hit else solver.t
-                y_stop = dense(t_stop) if hit else solver.y
-                self.record(dense, t_stop, y_stop, phases)
+                self.y[:] = dense(t_stop) if hit else solver.y
+                self.record(dense, t_stop)
                 if hit:
-                    return _Stop(t_stop, y_stop, hit.contacts & events.free, hit.contacts & events.held_mask)
+                    return _Stop(t_stop, hit.contacts & events.free, hit.contacts & events.held_mask)
                 if solver.status == "finished":
-                    return _Stop(solver.t, solver.y.copy(), np.zeros_like(events.free), np.zeros_like(events.free))
+                    return _Stop(solver.t, np.zeros_like(events.free), np.zeros_like(events.free))
                 lowered = events.free & (phases.floor < 0.0)
                 if lowered.any():  # a particle clearly back above the ground is armed at the ground again
                     above = lowered & (model.gaps(solver.y[: model.nq], self.p) >= 2 * self.gap_tolerance)
@@ -197,35 +225,53 @@ class _Run:
             self.nfev += solver.nfev
             self.njev += getattr(solver, "njev", 0)
 
-    def record(self, dense, t_stop: float, y_stop: np.ndarray, phases: Phases) -> None:
+    def record(self, dense, t_stop: float) -> None:
         """Keep the output-grid samples up to ``t_stop`` and track penetration."""
-        grid = self.grid
-        end = np.searchsorted(grid, t_stop, side="right")
-        held, push = phases.held.astype(bool), phases.push.copy()
-        for k in range(self.next_sample, end):
-            self.samples.append((grid[k], dense(grid[k]), held, push))
-        self.next_sample = max(self.next_sample, end)
-        self.min_gap = min(self.min_gap, float(self.model.gaps(y_stop[: self.model.nq], self.p).min()))
+        start = self.n_samples
+        stop = max(start, int(np.searchsorted(self.grid, t_stop, side="right")))
+        for k in range(start, stop):
+            self.Y[k] = dense(self.grid[k])
+        self.keep_samples(start, stop)
+        self.min_gap = min(self.min_gap, float(self.model.gaps(self.y[: self.model.nq], self.p).min()))
 
     # ------------------------------------------------------------------ the phase machine
+    def resolve_at(self, t: float, touching: np.ndarray, leaving: np.ndarray) -> list[Event]:
+        """Apply the fixed point at instant ``t`` to ``y`` and the phases; return the new events."""
+        s = self.settings
+        if self.compiled:  # the compiled twin of contact.resolve
+            found, not_held, loss = self.compiled.resolve(t, touching, leaving, s.impact == "thesis", s.impact_dt)
+            new = [Event(t, c, "impact" if kind == IMPACT else "liftoff", speed) for c, kind, speed in found]
+        else:
+            res = resolve(self.model, t, self.y, self.p, self.phases, touching, leaving,
+                          gap_tolerance=self.gap_tolerance, force_tolerance=self.force_tolerance,
+                          masses=self.contact_masses, impact=s.impact, impact_dt=s.impact_dt)
+            self.y[:] = res.y
+            self.phases.assign(res.phases)
+            new, not_held, loss = res.events, res.not_held, res.impact_loss
+        self.events += new
+        if not_held.any():
+            for c in np.flatnonzero(not_held):
+                latest = next(e for e in reversed(self.events) if e.contact == c and e.kind == "impact")
+                latest.held = False
+        if loss:
+            self.losses.append((t, loss))
+        return new
+
     def run(self) -> tuple[str, str]:
-        s, model = self.settings, self.model
-        t, y = 0.0, self.y0.copy()
-        phases = Phases.all_free(model.n_contacts)
+        s, model, phases = self.settings, self.model, self.phases
+        t = 0.0
         # Particles starting on a ground at rest are held if the ground has to push them.
-        q, u = y[: model.nq], y[model.nq : model.nq + model.nu]
+        q, u = self.y[: model.nq], self.y[model.nq : model.nq + model.nu]
         resting = (model.gaps(q, self.p) <= self.gap_tolerance) & (model.gap_jacobian(q, self.p) @ u == 0.0)
         phases.phase[resting] = HELD
-        res = resolve(model, 0.0, y, self.p, phases, np.zeros_like(resting), np.zeros_like(resting),
-                      gap_tolerance=self.gap_tolerance, force_tolerance=self.force_tolerance,
-                      masses=self.contact_masses, impact=s.impact, impact_dt=s.impact_dt)
-        y, phases = res.y, res.phases
-        self.samples.append((0.0, y.copy(), phases.held.astype(bool), phases.push.copy()))
-        self.next_sample = 1
+        none = np.zeros(model.n_contacts, bool)
+        self.resolve_at(0.0, none, none)
+        self.Y[0] = self.y
+        self.keep_samples(0, 1)
         try:
             while t < s.t_end:
                 t_bound = min(s.t_end, float(phases.push_until.min()))
-                stop = self.segment(t, y, t_bound, phases)
+                stop = self.segment(t, t_bound)
                 touching, leaving = stop.touching, stop.leaving
                 if not (touching.any() or leaving.any()):
                     if stop.t >= s.t_end:
@@ -233,17 +279,7 @@ class _Run:
                     touching = (phases.phase == PUSHED) & (phases.push_until <= stop.t * (1 + 1e-15) + 1e-300)
                 self.stalled = self.stalled + 1 if stop.t - t < STALL_TIME else 0
                 t = stop.t
-                res = resolve(model, t, stop.y, self.p, phases, touching, leaving,
-                              gap_tolerance=self.gap_tolerance, force_tolerance=self.force_tolerance,
-                              masses=self.contact_masses, impact=s.impact, impact_dt=s.impact_dt)
-                y, phases = res.y, res.phases
-                self.events += res.events
-                for c in np.flatnonzero(res.not_held):
-                    latest = next(e for e in reversed(self.events) if e.contact == c and e.kind == "impact")
-                    latest.held = False
-                if res.impact_loss:
-                    self.losses.append((t, res.impact_loss))
-                self.check_guards(t, res.events)
+                self.check_guards(t, self.resolve_at(t, touching, leaving))
         except SimulationFailed as failure:
             return failure.status, failure.message
         return "success", STATUSES["success"]
@@ -263,11 +299,13 @@ class _Run:
         for e in new_events:
             if e.kind != "impact":
                 continue
-            recent = [x for x in self.events if x.kind == "impact" and x.contact == e.contact
-                      and x.t > t - CHATTER_WINDOW]
+            recent = self.impact_times[e.contact]
+            recent.append((e.t, e.normal_velocity))
+            while recent[0][0] <= t - CHATTER_WINDOW:
+                recent.popleft()
             if len(recent) > CHATTER_IMPACTS:
                 particle = int(self.model.contacts[e.contact][0])
-                speed = max(abs(x.normal_velocity) for x in recent[-5:])
+                speed = max(abs(v) for _, v in list(recent)[-5:])
                 raise SimulationFailed(
                     "chattering",
                     f"particle {particle} impacted {len(recent)} times within {CHATTER_WINDOW * 1e3:g} ms up to "
@@ -279,21 +317,20 @@ class _Run:
     def result(self, status: str, message: str, wall: float) -> SimulationResult:
         model, p, s = self.model, self.p, self.settings
         nq, nu = model.nq, model.nu
-        T = np.array([x[0] for x in self.samples])
-        Y = np.array([x[1] for x in self.samples])
+        k = self.n_samples
+        T, Y, held, push = self.grid[:k], self.Y[:k], self.sample_held[:k].astype(np.intc), self.sample_push[:k]
         n = model.n_particles
-        held = np.array([x[2] for x in self.samples], dtype=np.intc).reshape(len(T), model.n_contacts)
-        push = np.array([x[3] for x in self.samples], dtype=float).reshape(len(T), model.n_contacts)
         X, V, E, lam = model.trajectory(Y, p, held, push)
         force = np.zeros((len(T), n))
         np.add.at(force, (slice(None), model.contacts[:, 0]), lam + push)
         self.min_gap = min(self.min_gap, float(np.min(model.gaps(Y[-1, :nq], p))) if len(Y) else np.inf)
-        loss_t = np.array([x[0] for x in self.losses])
-        loss_v = np.array([x[1] for x in self.losses])
-        instant = np.array([loss_v[loss_t < t].sum() for t in T]) if len(loss_t) else np.zeros(len(T))
+        # Energy taken by instant impacts strictly before each sample time (losses come in time order).
+        loss_t = np.array([x[0] for x in self.losses], dtype=float)
+        lost = np.concatenate([[0.0], np.cumsum([x[1] for x in self.losses])])
+        instant = lost[np.searchsorted(loss_t, T, side="left")]
         ev = self.events
         result = SimulationResult(
-            t=T, positions=X, velocities=V, contact_force=force,
+            t=T.copy(), positions=X, velocities=V, contact_force=force,
             kinetic=E[:, 0], spring=E[:, 1], gravity=E[:, 2],
             damping_work=Y[:, nq + nu], impact_loss=instant + Y[:, nq + nu + 1],
             events_time=np.array([e.t for e in ev], dtype=float),

@@ -235,11 +235,14 @@ class CModel(Model):
         self._time_rhs = lib.fb_time_rhs
         self._time_rhs.argtypes = [ctypes.c_int] + [ptr] * 4
         self._time_rhs.restype = ctypes.c_double
-        self._integrate = lib.fb_integrate
-        d = ctypes.c_double
-        self._integrate.argtypes = [ctypes.c_int, d, ptr, d, ptr, ptr, ptr, ptr, ptr, d, d, d, ptr, ctypes.c_int,
-                                    ptr, ptr, ptr, ptr, ptr, ptr, ptr, ptr]
-        self._integrate.restype = ctypes.c_int
+        # Raw entry points of the compiled path (addresses, not arrays): see flexbody.compiled.
+        d, i = ctypes.c_double, ctypes.c_int
+        self.fb_integrate = lib.fb_integrate
+        self.fb_integrate.argtypes = [i, d, ptr, d, ptr, ptr, ptr, ptr, ptr, d, d, d, ptr, i] + [ptr] * 8
+        self.fb_integrate.restype = i
+        self.fb_resolve = lib.fb_resolve
+        self.fb_resolve.argtypes = [d] + [ptr] * 8 + [d, ptr, ptr, i, d] + [ptr] * 7
+        self.fb_resolve.restype = i
         self._zeros = np.zeros(max(self.nu, self.nq, 1))
 
     def _call(self, name, q, u, p, a=None):
@@ -315,50 +318,6 @@ class CModel(Model):
         held = np.ascontiguousarray(held, dtype=np.intc)
         push = np.ascontiguousarray(push, dtype=float)
         return self._time_rhs(calls, y.ctypes.data, p.ctypes.data, held.ctypes.data, push.ctypes.data)
-
-    def integrate(self, method: int, t0: float, y0, t_bound: float, p, phase, push, floor, force_tol,
-                  gap_tol: float, rtol: float, atol: float, grid, counters, min_gap: float):
-        """Integrate one smooth segment in C (``fb_integrate`` in ``integrator.c``).
-
-        Parameters
-        ----------
-        method : int
-            0 for dopri5, 1 for dop853.
-        y0 : ndarray, shape (ny,)
-        phase : ndarray of int, shape (nc,)
-            0 free, 1 held, 2 pushed.
-        floor : ndarray, shape (nc,)
-            Updated in place (contacts re-armed at the ground).
-        grid : ndarray, shape (k,)
-            Output times in (t0, t_bound].
-        counters : ndarray of int64, shape (4,)
-            nfev, steps, rejected steps, event evaluations; incremented in place.
-
-        Returns
-        -------
-        status : int
-            0 reached t_bound, 1 event, -1 step-size collapse, -2 non-finite, -3 singular.
-        t_stop : float
-        y_stop : ndarray, shape (ny,)
-        fired : ndarray of bool, shape (nc,)
-        samples : ndarray, shape (m, ny)
-            States at the first m grid times.
-        min_gap : float
-        """
-        y0 = np.ascontiguousarray(y0, dtype=float)
-        phase = np.ascontiguousarray(phase, dtype=np.intc)
-        grid = np.ascontiguousarray(grid, dtype=float)
-        samples = np.empty((len(grid), self.ny))
-        n_sampled, fired = ctypes.c_int(0), np.zeros(self.n_contacts, np.intc)
-        t_stop, gap, h_next = ctypes.c_double(0.0), ctypes.c_double(min_gap), ctypes.c_double(0.0)
-        y_stop = np.empty(self.ny)
-        status = self._integrate(
-            method, t0, y0.ctypes.data, t_bound, p.ctypes.data, phase.ctypes.data, push.ctypes.data,
-            floor.ctypes.data, force_tol.ctypes.data, gap_tol, rtol, atol, grid.ctypes.data, len(grid),
-            samples.ctypes.data, ctypes.addressof(n_sampled), ctypes.addressof(t_stop), y_stop.ctypes.data,
-            fired.ctypes.data, counters.ctypes.data, ctypes.addressof(gap), ctypes.addressof(h_next),
-        )
-        return status, t_stop.value, y_stop, fired.astype(bool), samples[: n_sampled.value], gap.value
 
 
 BACKENDS = {"c": CModel, "numpy": NumpyModel}

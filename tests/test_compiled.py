@@ -1,0 +1,77 @@
+"""The compiled fixed point (``fb_resolve``) against its Python reference, instant by instant."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import flexbody
+from flexbody.compiled import IMPACT, CompiledPath
+from flexbody.contact import PUSHED, Phases, resolve
+from flexbody.model import load_model
+
+from .conftest import HAS_CC
+from .test_runtime import level_ring
+
+pytestmark = pytest.mark.skipif(not HAS_CC, reason="no C compiler")
+
+
+def compiled_instants(monkeypatch, scene, **options) -> list[dict]:
+    """Every event instant of a compiled run: the inputs of the fixed point and what C made of them."""
+    instants = []
+    original = CompiledPath.resolve
+
+    def spy(self, t, touching, leaving, thesis, impact_dt):
+        before = dict(t=t, y=self.y.copy(), phases=self.phases.copy(), touching=np.array(touching, bool),
+                      leaving=np.array(leaving, bool), impact="thesis" if thesis else "instant", impact_dt=impact_dt)
+        events, not_held, loss = original(self, t, touching, leaving, thesis, impact_dt)
+        instants.append(dict(before, after=dict(y=self.y.copy(), phases=self.phases.copy(), events=events,
+                                                not_held=not_held.astype(bool), loss=loss),
+                             run=dict(p=self.p, gap_tolerance=self.gap_tolerance,
+                                      force_tolerance=self.force_tolerance, masses=self.masses)))
+        return events, not_held, loss
+
+    monkeypatch.setattr(CompiledPath, "resolve", spy)
+    result = flexbody.simulate(scene, backend="c", **options)
+    assert result.success, result.message
+    return instants
+
+
+def assert_same_as_reference(model, instant):
+    run, after = instant["run"], instant["after"]
+    ref = resolve(model, instant["t"], instant["y"], run["p"], instant["phases"], instant["touching"],
+                  instant["leaving"], gap_tolerance=run["gap_tolerance"], force_tolerance=run["force_tolerance"],
+                  masses=run["masses"], impact=instant["impact"], impact_dt=instant["impact_dt"])
+    # The same arithmetic (both call the generated fb_contact_state and fb_impact): exactly equal.
+    np.testing.assert_array_equal(after["y"], ref.y)
+    for name in Phases.__dataclass_fields__:
+        np.testing.assert_array_equal(getattr(after["phases"], name), getattr(ref.phases, name), err_msg=name)
+    assert after["events"] == [(e.contact, IMPACT if e.kind == "impact" else 1, e.normal_velocity)
+                               for e in ref.events]
+    np.testing.assert_array_equal(after["not_held"], ref.not_held)
+    assert after["loss"] == ref.impact_loss
+
+
+@pytest.mark.parametrize("case", ["thesis_ball", "thesis_ball, thesis impacts", "flat landing"])
+def test_compiled_fixed_point_equals_the_python_one(monkeypatch, case):
+    if case == "flat landing":
+        scene, options = level_ring(), {"rtol": 1e-10, "atol": 1e-13}
+    else:
+        scene = flexbody.load_scene("thesis_ball")
+        options = {"t_end": 1.2}
+        if "thesis" in case:
+            options.update(impact="thesis", impact_dt=1e-3)
+    instants = compiled_instants(monkeypatch, scene, **options)
+    model = load_model(scene, backend="c")
+    for instant in instants:
+        assert_same_as_reference(model, instant)
+    # The instants exercised what they should: multiple impacts, releases, lift-offs, windows.
+    kinds = [kind for i in instants for _, kind, _ in i["after"]["events"]]
+    assert kinds.count(IMPACT) >= 2 and len(kinds) > kinds.count(IMPACT)
+    if case == "flat landing":
+        assert max(len(i["after"]["events"]) for i in instants) >= 2  # two particles hit at once
+    elif "thesis" in case:
+        assert any((i["phases"].phase == PUSHED).any() for i in instants)
+        assert any((i["after"]["phases"].phase == PUSHED).any() for i in instants)
+    else:
+        assert any(i["after"]["not_held"].any() for i in instants)
