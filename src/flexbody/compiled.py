@@ -49,7 +49,7 @@ class CompiledPath:
                  samples: np.ndarray, force_tolerance: np.ndarray, masses: np.ndarray, gap_tolerance: float) -> None:
         nc = model.n_contacts
         self.model, self.gap_tolerance, self.n_grid = model, gap_tolerance, len(grid)
-        self.fired, self.touching, self.leaving = (np.zeros(nc, np.intc) for _ in range(3))
+        self.touching, self.leaving = np.zeros(nc, np.intc), np.zeros(nc, np.intc)  # events at a stop
         self.not_held = np.zeros(nc, np.intc)
         self.event_contact, self.event_kind = np.zeros(2 * nc, np.intc), np.zeros(2 * nc, np.intc)
         self.event_speed = np.zeros(2 * nc)
@@ -65,11 +65,11 @@ class CompiledPath:
         self._push, self._push_until = _address(phases.push), _address(phases.push_until)
         self._grid, self._samples, self._row = _address(grid), _address(samples), samples.strides[0]
         self._force_tol, self._masses = _address(force_tolerance), _address(masses)
-        self._fired, self._touching, self._leaving = map(_address, (self.fired, self.touching, self.leaving))
+        self._touching, self._leaving = _address(self.touching), _address(self.leaving)
         self._events = tuple(map(_address, (self.event_contact, self.event_kind, self.event_speed)))
         self._not_held, self._counters = _address(self.not_held), _address(self.counters)
         self._integrate_out = tuple(map(ctypes.addressof, (self.n_sampled, self.t_stop)))
-        self._integrate_tail = (self._fired, self._counters, ctypes.addressof(self.min_gap),
+        self._integrate_tail = (self._touching, self._leaving, self._counters, ctypes.addressof(self.min_gap),
                                 ctypes.addressof(self.h_next))
         self._resolve_out = (ctypes.addressof(self.n_events), self._not_held, ctypes.addressof(self.loss),
                              ctypes.addressof(self.iterations))
@@ -79,7 +79,8 @@ class CompiledPath:
                   first_sample: int) -> tuple[int, float, int]:
         """One smooth segment from ``t0`` until the first event or ``t_bound``.
 
-        The state ``y`` becomes the state at the stop; ``fired`` marks the events there.
+        The state ``y`` becomes the state at the stop; ``touching`` and ``leaving`` mark the
+        gap events of free contacts and the force events of held ones that fired there.
         Grid samples are written from row ``first_sample`` on.
 
         Returns
@@ -109,8 +110,10 @@ class CompiledPath:
         loss : float
             Kinetic energy removed by instant impacts (J).
         """
-        self.touching[:] = touching
-        self.leaving[:] = leaving
+        if touching is not self.touching:  # the integrator's own buffers need no copy
+            self.touching[:] = touching
+        if leaving is not self.leaving:
+            self.leaving[:] = leaving
         status = self.model.fb_resolve(
             t, self._y, self._p, self._phase, self._floor, self._push, self._push_until, self._touching,
             self._leaving, self.gap_tolerance, self._force_tol, self._masses, int(thesis), impact_dt or 0.0,

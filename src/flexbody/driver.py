@@ -81,8 +81,9 @@ def _settings(scene: Scene, overrides: dict) -> SimulationSettings:
 @dataclass
 class _Stop:
     t: float
-    touching: np.ndarray  # bool (nc,): free contacts whose gap event fired
-    leaving: np.ndarray  # bool (nc,): held contacts whose force event fired
+    touching: np.ndarray  # (nc,), nonzero: free contacts whose gap event fired
+    leaving: np.ndarray  # (nc,), nonzero: held contacts whose force event fired
+    fired: bool  # whether any did
 
 
 class _Run:
@@ -158,15 +159,14 @@ class _Run:
 
     def segment_compiled(self, t0: float, t_bound: float) -> _Stop:
         """The same as :meth:`segment_scipy`, in one call of the generated C integrator."""
-        s, c, phase = self.settings, self.compiled, self.phases.phase
+        s, c = self.settings, self.compiled
         start = self.n_samples
         status, t_stop, n_new = c.integrate(COMPILED_METHODS.index(s.method), t0, t_bound, s.rtol, s.atol, start)
         self.keep_samples(start, start + n_new)
         self.min_gap = c.min_gap.value
         if status < 0:
             raise SimulationFailed(*self.COMPILED_FAILURES[status](s.method, t_stop))
-        fired = c.fired.astype(bool)
-        return _Stop(t_stop, fired & (phase == FREE), fired & (phase == HELD))
+        return _Stop(t_stop, c.touching, c.leaving, status == 1)
 
     COMPILED_FAILURES = {
         -1: lambda m, t: ("step_size_collapse", f"{m} failed at t = {t:.9g} s: the step size collapsed. The model "
@@ -206,9 +206,9 @@ class _Run:
                 self.y[:] = dense(t_stop) if hit else solver.y
                 self.record(dense, t_stop)
                 if hit:
-                    return _Stop(t_stop, hit.contacts & events.free, hit.contacts & events.held_mask)
+                    return _Stop(t_stop, hit.contacts & events.free, hit.contacts & events.held_mask, True)
                 if solver.status == "finished":
-                    return _Stop(solver.t, np.zeros_like(events.free), np.zeros_like(events.free))
+                    return _Stop(solver.t, np.zeros_like(events.free), np.zeros_like(events.free), False)
                 lowered = events.free & (phases.floor < 0.0)
                 if lowered.any():  # a particle clearly back above the ground is armed at the ground again
                     above = lowered & (model.gaps(solver.y[: model.nq], self.p) >= 2 * self.gap_tolerance)
@@ -270,10 +270,11 @@ class _Run:
         self.keep_samples(0, 1)
         try:
             while t < s.t_end:
-                t_bound = min(s.t_end, float(phases.push_until.min()))
+                # Only the thesis impact mode has windows (push_until < inf) that end a segment.
+                t_bound = s.t_end if s.impact == "instant" else min(s.t_end, float(phases.push_until.min()))
                 stop = self.segment(t, t_bound)
                 touching, leaving = stop.touching, stop.leaving
-                if not (touching.any() or leaving.any()):
+                if not stop.fired:
                     if stop.t >= s.t_end:
                         break
                     touching = (phases.phase == PUSHED) & (phases.push_until <= stop.t * (1 + 1e-15) + 1e-300)

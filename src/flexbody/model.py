@@ -238,7 +238,7 @@ class CModel(Model):
         # Raw entry points of the compiled path (addresses, not arrays): see flexbody.compiled.
         d, i = ctypes.c_double, ctypes.c_int
         self.fb_integrate = lib.fb_integrate
-        self.fb_integrate.argtypes = [i, d, ptr, d, ptr, ptr, ptr, ptr, ptr, d, d, d, ptr, i] + [ptr] * 8
+        self.fb_integrate.argtypes = [i, d, ptr, d, ptr, ptr, ptr, ptr, ptr, d, d, d, ptr, i] + [ptr] * 9
         self.fb_integrate.restype = i
         self.fb_resolve = lib.fb_resolve
         self.fb_resolve.argtypes = [d] + [ptr] * 8 + [d, ptr, ptr, i, d] + [ptr] * 7
