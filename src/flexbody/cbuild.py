@@ -38,20 +38,20 @@ def compiler() -> str:
     return cc
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _compiler_identity(cc: str) -> str:
     run = subprocess.run([cc, "--version"], capture_output=True, text=True, check=False)
     return run.stdout.splitlines()[0] if run.stdout else cc
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def flags(cc: str) -> tuple[str, ...]:
     """The compile flags: FLAGS, plus NATIVE if ``cc`` accepts it."""
     probe = subprocess.run([cc, NATIVE, "-x", "c", "-E", os.devnull], capture_output=True, check=False)
     return FLAGS + (NATIVE,) if probe.returncode == 0 else FLAGS
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _cpu_identity() -> str:
     """Model name and feature flags of this CPU (what -march=native compiles for)."""
     try:

@@ -20,8 +20,11 @@ from .model import CModel
 IMPACT, LIFTOFF = 0, 1  # event kinds as fb_resolve reports them
 
 
-def _address(a: np.ndarray) -> int:
-    assert a.flags.c_contiguous, "a buffer handed to C must be contiguous"
+def _address(a: np.ndarray, dtype=np.float64) -> int:
+    """The address of a buffer C will read or write: it must have C's layout."""
+    if a.dtype != dtype or not a.flags.c_contiguous:
+        raise TypeError(f"a buffer handed to C must be contiguous {np.dtype(dtype)}, not {a.dtype} "
+                        f"(contiguous: {a.flags.c_contiguous})")
     return a.ctypes.data
 
 
@@ -53,7 +56,7 @@ class CompiledPath:
         self.not_held = np.zeros(nc, np.intc)
         self.event_contact, self.event_kind = np.zeros(2 * nc, np.intc), np.zeros(2 * nc, np.intc)
         self.event_speed = np.zeros(2 * nc)
-        self.counters = np.zeros(4, np.int64)  # nfev, steps, rejected steps, event evaluations
+        self.counters = np.zeros(4, ctypes.c_long)  # C long: nfev, steps, rejected steps, event evaluations
         self.n_sampled, self.n_events, self.iterations = ctypes.c_int(0), ctypes.c_int(0), ctypes.c_int(0)
         self.t_stop, self.loss, self.h_next = ctypes.c_double(0.0), ctypes.c_double(0.0), ctypes.c_double(0.0)
         self.min_gap = ctypes.c_double(np.inf)
@@ -61,19 +64,20 @@ class CompiledPath:
         self.p, self.y, self.phases, self.grid, self.samples = p, y, phases, grid, samples
         self.force_tolerance, self.masses = force_tolerance, masses
         self._y, self._p = _address(y), _address(p)
-        self._phase, self._floor = _address(phases.phase), _address(phases.floor)
+        self._phase, self._floor = _address(phases.phase, np.intc), _address(phases.floor)
         self._push, self._push_until = _address(phases.push), _address(phases.push_until)
         self._grid, self._samples, self._row = _address(grid), _address(samples), samples.strides[0]
         self._force_tol, self._masses = _address(force_tolerance), _address(masses)
-        self._touching, self._leaving = _address(self.touching), _address(self.leaving)
-        self._events = tuple(map(_address, (self.event_contact, self.event_kind, self.event_speed)))
-        self._not_held, self._counters = _address(self.not_held), _address(self.counters)
+        self._touching, self._leaving = _address(self.touching, np.intc), _address(self.leaving, np.intc)
+        self._events = (_address(self.event_contact, np.intc), _address(self.event_kind, np.intc),
+                        _address(self.event_speed))
+        self._not_held = _address(self.not_held, np.intc)
+        self._counters = _address(self.counters, np.dtype(ctypes.c_long))
         self._integrate_out = tuple(map(ctypes.addressof, (self.n_sampled, self.t_stop)))
         self._integrate_tail = (self._touching, self._leaving, self._counters, ctypes.addressof(self.min_gap),
                                 ctypes.addressof(self.h_next))
         self._resolve_out = (ctypes.addressof(self.n_events), self._not_held, ctypes.addressof(self.loss),
                              ctypes.addressof(self.iterations))
-        assert phases.phase.dtype == np.intc
 
     def integrate(self, method: int, t0: float, t_bound: float, rtol: float, atol: float,
                   first_sample: int) -> tuple[int, float, int]:

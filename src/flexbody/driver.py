@@ -12,8 +12,8 @@ and the guards stay here, whichever path integrates.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
 from collections import defaultdict, deque
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -22,11 +22,18 @@ from scipy.integrate import BDF, DOP853, LSODA, RK23, RK45, Radau
 
 from . import __version__
 from .compiled import IMPACT, CompiledPath
-from .contact import FREE, HELD, PUSHED, Event, Phases, resolve
+from .contact import HELD, PUSHED, Event, Phases, resolve
 from .events import EventFunctions, locate
 from .model import Model, load_model
 from .result import STATUSES, SimulationResult
-from .scene import COMPILED_METHODS, IMPACT_MODES, METHODS, Scene, SimulationSettings, load_scene
+from .scene import (
+    COMPILED_METHODS,
+    IMPACT_MODES,
+    METHODS,
+    Scene,
+    SimulationSettings,
+    load_scene,
+)
 from .state import initial_coordinates
 
 SOLVERS = {"RK45": RK45, "RK23": RK23, "DOP853": DOP853, "Radau": Radau, "BDF": BDF, "LSODA": LSODA}
