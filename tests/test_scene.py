@@ -81,6 +81,7 @@ def test_overdamped_link_warns():
         (scene_table(body(damping=[0.1, 0.2])), "bodies[0].damping", "1 such numbers"),
         (scene_table(body(damper="viscous")), "bodies[0].damper", "one of ['relative', 'axial']"),
         (scene_table(body(), grounds=[{"point": [0, 0], "normal": [0, 0]}]), "grounds[0].normal", "non-zero"),
+        (scene_table(body(), grounds=[]), "grounds", "at least one ground"),
         (scene_table(body(), simulation={"t_end": 1.0, "method": "Euler"}), "simulation.method", "one of"),
         (scene_table(body(), simulation={"t_end": 1.0, "impact": "thesis"}), "simulation.impact_dt", "required"),
         (scene_table(body(), simulation={}), "simulation.t_end", "required"),

@@ -329,8 +329,8 @@ class _Run:
         T, Y, held, push = self.grid[:k], self.Y[:k], self.sample_held[:k].astype(np.intc), self.sample_push[:k]
         n = model.n_particles
         X, V, E, lam = model.trajectory(Y, p, held, push)
-        force = np.zeros((len(T), n))
-        np.add.at(force, (slice(None), model.contacts[:, 0]), lam + push)
+        # Contacts are every (particle, ground) pair, particle-major (the Model checks it).
+        force = (lam + push).reshape(len(T), n, model.n_contacts // n).sum(axis=2)
         self.min_gap = min(self.min_gap, float(np.min(model.gaps(Y[-1, :nq], p))) if len(Y) else np.inf)
         # Energy taken by instant impacts strictly before each sample time (losses come in time order).
         loss_t = np.array([x[0] for x in self.losses], dtype=float)

@@ -54,6 +54,9 @@ class Model:
         self.n_particles: int = m["n_particles"]
         self.n_contacts: int = m["n_contacts"]
         self.contacts = np.array(m["contacts"], dtype=int).reshape(-1, 2)  # (particle, ground)
+        n_grounds = self.n_contacts // max(self.n_particles, 1)
+        if not np.array_equal(self.contacts, np.indices((self.n_particles, n_grounds)).reshape(2, -1).T):
+            raise ModelError(f"{self.directory}: contacts must be every (particle, ground) pair, particle-major")
         self.shapes = {name: tuple(f["shape"]) for name, f in m["functions"].items()}
 
     def parameters(self, scene: Scene) -> FloatArray:

@@ -313,6 +313,9 @@ def _grounds(raw: Any, dim: int, problems: Problems) -> list[Ground]:
     if not isinstance(raw, list):
         problems.add("grounds", raw, "must be an array of [[grounds]] tables")
         return []
+    if not raw:  # contacts are the subject of flexbody; for free flight put a ground far below
+        problems.add("grounds", raw, "must have at least one ground (for free flight, put one far below)")
+        return []
     grounds = []
     for j, table in enumerate(raw):
         reader = TableReader(table, f"grounds[{j}]", problems, ("point", "normal"))
