@@ -237,6 +237,7 @@ def _runge_kutta_tables() -> dict:
     n8 = d8.N_STAGES
     return {
         "d5": {
+            "n_stages": RK45.n_stages,
             "stages": [{"c": repr(float(RK45.C[s])), "sum": _combination(RK45.A[s, :s])} for s in range(1, 6)],
             "solution": _combination(RK45.B),
             "error": _combination(RK45.E),
@@ -245,6 +246,7 @@ def _runge_kutta_tables() -> dict:
             "dense_stages": [j for j in range(len(RK45.P)) if np.any(RK45.P[j] != 0.0)],
         },
         "d8": {
+            "n_stages": n8,
             "stages": [{"c": repr(float(d8.C[s])), "sum": _combination(d8.A[s, :s])} for s in range(1, n8)],
             "solution": _combination(d8.B),
             "error5": _combination(d8.E5),
