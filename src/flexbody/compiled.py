@@ -15,7 +15,7 @@ import ctypes
 import numpy as np
 
 from .contact import Phases
-from .model import CModel
+from .model import CModel, singular_matrix_error
 
 IMPACT, LIFTOFF = 0, 1  # event kinds as fb_resolve reports them
 
@@ -124,7 +124,7 @@ class CompiledPath:
             *self._events, *self._resolve_out,
         )
         if status == -1:
-            raise FloatingPointError("mass or contact matrix not positive definite at this state")
+            raise singular_matrix_error()
         if status == -2:
             raise RuntimeError(f"contact resolution at t = {t:.17g} s did not settle after "
                                f"{self.iterations.value} passes")

@@ -31,6 +31,11 @@ class ModelError(RuntimeError):
     """A generated model is missing, stale or does not match the scene."""
 
 
+def singular_matrix_error() -> FloatingPointError:
+    """What a nonzero status of a generated C function means."""
+    return FloatingPointError("mass or contact matrix not positive definite at this state")
+
+
 class Model:
     """A generated model; the backend subclasses fill in the evaluation.
 
@@ -266,7 +271,7 @@ class CModel(Model):
         status = self._rhs(0.0, y.ctypes.data, p.ctypes.data, held.ctypes.data, push.ctypes.data,
                            ydot.ctypes.data, lam.ctypes.data)
         if status:
-            raise FloatingPointError("mass or contact matrix not positive definite at this state")
+            raise singular_matrix_error()
         return ydot, lam
 
     def contact_state(self, y, p, held, push):
@@ -275,7 +280,7 @@ class CModel(Model):
         gaps, vn, lam = np.empty(self.n_contacts), np.empty(self.n_contacts), np.empty(self.n_contacts)
         if self._contact_state(y.ctypes.data, p.ctypes.data, held.ctypes.data, push.ctypes.data, gaps.ctypes.data,
                                vn.ctypes.data, lam.ctypes.data):
-            raise FloatingPointError("mass or contact matrix not positive definite at this state")
+            raise singular_matrix_error()
         return gaps, vn, lam
 
     def impact(self, y, p, stop):
@@ -283,7 +288,7 @@ class CModel(Model):
         stop = np.ascontiguousarray(stop, dtype=np.intc)
         out, loss = np.empty(self.ny), ctypes.c_double(0.0)
         if self._impact(y.ctypes.data, p.ctypes.data, stop.ctypes.data, out.ctypes.data, ctypes.addressof(loss)):
-            raise FloatingPointError("mass or contact matrix not positive definite at this state")
+            raise singular_matrix_error()
         return out, loss.value
 
     def rhs_function(self, p, held, push):
@@ -297,12 +302,11 @@ class CModel(Model):
             y = np.ascontiguousarray(y, dtype=float)
             ydot = np.empty(ny)
             if rhs(t, y.ctypes.data, p_ptr, held_ptr, push_ptr, ydot.ctypes.data, lam_ptr):
-                raise FloatingPointError("mass or contact matrix not positive definite at this state")
+                raise singular_matrix_error()
             return ydot
 
         f.keep = keep  # keep the buffers alive as long as f
         return f
-
 
     def trajectory(self, Y, p, held, push):
         Y = np.ascontiguousarray(Y, dtype=float)
