@@ -53,6 +53,10 @@ class SimulationFailed(Exception):
         self.status, self.message = status, message
 
 
+def _non_finite(t: float) -> tuple[str, str]:
+    return "blow_up", f"the state became non-finite at t = {t:.9g} s; tighten --rtol/--atol or use an implicit method."
+
+
 def _settings(scene: Scene, overrides: dict) -> SimulationSettings:
     """The scene's settings with the given overrides, each validated (ValueError names it)."""
     s = scene.simulation
@@ -138,6 +142,11 @@ class _Run:
         """Compiled-path counters: RHS evaluations, steps, rejected steps, event evaluations."""
         return self.compiled.counters if self.compiled else np.zeros(4, np.int64)
 
+    @property
+    def evaluations(self) -> int:
+        """RHS evaluations so far, by either path, including those for event location."""
+        return self.nfev + int(self.counters[0] + self.counters[3])
+
     def keep_samples(self, start: int, stop: int) -> None:
         """Tag samples ``start:stop`` with the current contact set."""
         if stop == start:
@@ -151,7 +160,7 @@ class _Run:
         """Integrate with a fixed contact set from ``t0`` until an event or ``t_bound``; ``y`` becomes
         the state there."""
         if self.segment_log is not None:
-            before = self.nfev + int(self.counters[0] + self.counters[3])
+            before = self.evaluations
             y0, held, push = self.y.copy(), self.phases.phase == HELD, self.phases.push.copy()
         self.segments += 1
         if self.settings.method in COMPILED_METHODS:
@@ -159,7 +168,7 @@ class _Run:
         else:
             stop = self.segment_scipy(t0, t_bound)
         if self.segment_log is not None:  # what the segment's work cost, for the benchmark's RHS limit
-            self.segment_log.append((self.nfev + int(self.counters[0] + self.counters[3]) - before, y0, held, push))
+            self.segment_log.append((self.evaluations - before, y0, held, push))
         if self.progress:
             self.progress(stop.t, self.settings.t_end, len(self.events))
         return stop
@@ -178,8 +187,7 @@ class _Run:
     COMPILED_FAILURES = {
         -1: lambda m, t: ("step_size_collapse", f"{m} failed at t = {t:.9g} s: the step size collapsed. The model "
                           "is too stiff for this method or tolerance: try --method Radau or BDF, or a looser --rtol."),
-        -2: lambda m, t: ("blow_up", f"the state became non-finite at t = {t:.9g} s; tighten --rtol/--atol "
-                          "or use an implicit method."),
+        -2: lambda m, t: _non_finite(t),
         -3: lambda m, t: ("blow_up", f"at t = {t:.9g} s: mass or contact matrix not positive definite."),
     }
 
@@ -204,8 +212,7 @@ class _Run:
                         "method or tolerance: try an implicit method (--method Radau or BDF) or a looser --rtol.",
                     )
                 if not np.all(np.isfinite(solver.y)):
-                    raise SimulationFailed("blow_up", f"the state became non-finite at t = {solver.t:.9g} s; "
-                                           "tighten --rtol/--atol or use an implicit method.")
+                    raise SimulationFailed(*_non_finite(solver.t))
                 dense = solver.dense_output()
                 g_new = events(solver.y)
                 hit = locate(events, dense, solver.t_old, solver.t, g_old, g_new)
@@ -277,8 +284,7 @@ class _Run:
         self.keep_samples(0, 1)
         try:
             while t < s.t_end:
-                # Only the thesis impact mode has windows (push_until < inf) that end a segment.
-                t_bound = s.t_end if s.impact == "instant" else min(s.t_end, float(phases.push_until.min()))
+                t_bound = min(s.t_end, float(phases.push_until.min()))  # a thesis-mode window ends a segment
                 stop = self.segment(t, t_bound)
                 touching, leaving = stop.touching, stop.leaving
                 if not stop.fired:
