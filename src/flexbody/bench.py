@@ -214,15 +214,9 @@ def _plot_work_precision(rows: list[dict]):
 def _ball(k: float, zeta: float, **simulation) -> Scene:
     """The thesis ball with stiffness k and the damping c = 2 zeta sqrt(k mu) of a link (mu = m/2)."""
     c = 2.0 * zeta * np.sqrt(k * 0.05 / 2.0)
-    table = {
-        "name": "thesis_ball",
-        "bodies": [{"name": "ball", "shape": "ring", "count": 22, "radius": 0.1, "center": True, "mass": 0.05,
-                    "stiffness": k, "damping": c, "damper": "relative", "position": [0.0, 0.5], "angle": 0.05}],
-        "simulation": {"t_end": 0.5, "output_dt": 1e-3, **simulation},
-    }
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # critically damped cells are part of the sweep
-        return load_scene(table)
+        return _ball_variant({"t_end": 0.5, "output_dt": 1e-3, **simulation}, stiffness=k, damping=c)
 
 
 def _classify(result, reference, energy0: float) -> tuple[str, float]:
@@ -412,8 +406,7 @@ def mujoco_comparison(out: Path, quick: bool) -> dict | None:
     except ImportError:
         print("mujoco comparison skipped: MuJoCo is not installed (pip install 'flexbody[mujoco]')")
         return None
-    table = load_scene("thesis_ball")
-    scene = _ball_variant(table, damper="axial")
+    scene = _ball_variant(damper="axial")
     repeats = 3 if quick else 7
     print("MuJoCo side by side: thesis ball with axial dampers, 2 s")
     rows, curves = [], {}
@@ -443,12 +436,13 @@ def mujoco_comparison(out: Path, quick: bool) -> dict | None:
     return data
 
 
-def _ball_variant(scene: Scene, **body) -> Scene:
-    """The bundled scene's ball with some body fields changed (from its TOML)."""
+def _ball_variant(simulation: dict | None = None, **body) -> Scene:
+    """The bundled thesis ball (from its TOML) with some body and simulation fields changed."""
     import tomllib
 
-    table = tomllib.loads(Path(scene.source).read_text())
+    table = tomllib.loads(Path(load_scene("thesis_ball").source).read_text())
     table["bodies"][0].update(body)
+    table["simulation"].update(simulation or {})
     return load_scene(table)
 
 
