@@ -31,7 +31,13 @@ class CPrinter(C99CodePrinter):
             return f"1.0/{self.parenthesize(base, 100)}"
         if exp == sp.Rational(-1, 2):
             return f"1.0/sqrt({self._print(base)})"
+        if exp == sp.Rational(-3, 2):
+            b = self.parenthesize(base, 100)
+            return f"1.0/({b}*sqrt({self._print(base)}))"
         return super()._print_Pow(expr)
+
+    def _print_CopySign1(self, expr) -> str:
+        return f"copysign(1.0, {self._print(expr.args[0])})"
 
 
 class PyPrinter(NumPyPrinter):
@@ -46,3 +52,6 @@ class PyPrinter(NumPyPrinter):
             product = "*".join([self.parenthesize(base, 100)] * abs(int(exp)))
             return product if exp > 0 else f"1.0/({product})"
         return super()._print_Pow(expr, rational=rational)
+
+    def _print_CopySign1(self, expr) -> str:
+        return f"numpy.copysign(1.0, {self._print(expr.args[0])})"

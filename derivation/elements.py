@@ -1,0 +1,182 @@
+"""Equations of one element, in frame N, for d = 2 and 3 (build time only, SymPy).
+
+A scene's particles formulation is a sum over elements with a diagonal mass matrix, so
+its equations never need to be derived whole: each element is derived once here, the
+code generator turns it into a C kernel and a vectorised NumPy twin, and the runtime
+assembles them over the scene's index arrays (:mod:`flexbody.assembly`).
+
+Elements
+--------
+``link`` (one per damper law and dimension)
+    A Hooke spring (thesis eq. 3.7) and a damper (``relative``: eq. 3.8; ``axial``: the
+    relative velocity's component along the link) between particles i and j.  Its
+    generalised forces come from Kane's method on the two particles with the link as
+    the only load; the force on j is minus the force on i (checked here).  Also its
+    spring energy, damping power and the Jacobian of the force on i with respect to
+    ``[x_i, x_j, v_i, v_j]``.
+``particle``
+    Gravity's force and potential, and the kinetic energy, of a point mass.
+``ground``
+    A plane ground through ``P`` with unit normal ``n``: the gap ``(x - P) . n``, its
+    Jacobian with respect to x, the normal, and an orthonormal tangent basis (in 3D the
+    branch-free basis of Duff et al., "Building an orthonormal basis, revisited", 2017).
+
+Every kernel is a :class:`Kernel`: named inputs (flat arrays of given sizes) and named
+outputs (SymPy matrices of those inputs only).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import sympy as sp
+from sympy.physics.mechanics import KanesMethod, Particle, Point, ReferenceFrame, dynamicsymbols
+
+DIMENSIONS = (2, 3)
+DAMPERS = ("relative", "axial")
+AXES = "xyz"
+
+
+class CopySign1(sp.Function):
+    """``copysign(1, x)``: +1 or -1, never 0 (sympy's sign(0) is 0); its derivative is 0."""
+
+    nargs = 1
+
+    def fdiff(self, argindex: int = 1) -> sp.Expr:
+        return sp.S.Zero
+
+
+@dataclass
+class Kernel:
+    """One generated element function.
+
+    Attributes
+    ----------
+    name : str
+        C name ``fb_k_<name>``, NumPy name ``<name>``.
+    doc : str
+    inputs : list of (name, symbols)
+        Each input is a flat array; ``symbols[i]`` is its entry i.
+    outputs : dict of name -> sympy.Matrix
+        Each output is written as a flat row-major array.
+    """
+
+    name: str
+    doc: str
+    inputs: list[tuple[str, list[sp.Symbol]]]
+    outputs: dict[str, sp.Matrix] = field(default_factory=dict)
+
+
+def _vector_symbols(name: str, d: int) -> list[sp.Symbol]:
+    return [sp.Symbol(f"{name}_{AXES[a]}", real=True) for a in range(d)]
+
+
+def _frame_vector(N: ReferenceFrame, components) -> object:
+    return sum((c * axis for c, axis in zip(components, (N.x, N.y, N.z))), sp.S.Zero * N.x)
+
+
+def link_kernels(d: int, damper: str) -> list[Kernel]:
+    """The link element of dimension ``d`` with the ``damper`` law: force, energy, Jacobian."""
+    N = ReferenceFrame("N")
+    O = Point("O")
+    O.set_vel(N, 0)
+    coords = [dynamicsymbols(f"x{p}_{AXES[a]}") for p in "ij" for a in range(d)]
+    speeds = [dynamicsymbols(f"v{p}_{AXES[a]}") for p in "ij" for a in range(d)]
+    Pi = O.locatenew("Pi", _frame_vector(N, coords[:d]))
+    Pj = O.locatenew("Pj", _frame_vector(N, coords[d:]))
+    Pi.set_vel(N, _frame_vector(N, speeds[:d]))
+    Pj.set_vel(N, _frame_vector(N, speeds[d:]))
+    k, c, rest = sp.symbols("k c L", real=True)
+    P_ij = Pi.pos_from(Pj)  # thesis eq. 3.7: P_ij = x_i - x_j
+    length = sp.sqrt(P_ij.dot(P_ij))
+    e = P_ij / length
+    dv = Pj.vel(N) - Pi.vel(N)  # V_j - V_i
+    if damper == "relative":  # thesis eq. 3.8
+        f_damp, power = c * dv, c * dv.dot(dv)
+    else:
+        f_damp, power = c * dv.dot(e) * e, c * dv.dot(e) ** 2
+    f = k * (rest - length) * e + f_damp  # on i; j gets -f
+    mass_i, mass_j = sp.symbols("m_i m_j", positive=True)
+    kane = KanesMethod(N, q_ind=coords, u_ind=speeds, kd_eqs=[q.diff() - u for q, u in zip(coords, speeds)])
+    kane.kanes_equations([Particle("pi", Pi, mass_i), Particle("pj", Pj, mass_j)], [(Pi, f), (Pj, -f)])
+    plain = {q: s for q, s in zip(coords, _vector_symbols("xi", d) + _vector_symbols("xj", d))}
+    plain |= {u: s for u, s in zip(speeds, _vector_symbols("vi", d) + _vector_symbols("vj", d))}
+    generalized = kane.forcing.xreplace(plain)
+    force_i, force_j = generalized[:d, 0], generalized[d:, 0]
+    if sp.simplify(force_i + force_j) != sp.zeros(d, 1):
+        raise AssertionError("the link's forces on i and j are not equal and opposite")
+    xi, xj, vi, vj = (_vector_symbols(n, d) for n in ("xi", "xj", "vi", "vj"))
+    spring_energy = (k * (length - rest) ** 2 / 2).xreplace(plain)
+    params = [k, c, rest]
+    inputs = [("xi", xi), ("xj", xj), ("vi", vi), ("vj", vj), ("par", params)]
+    tag = f"link_{damper}_{d}d"
+    meaning = "relative (thesis eq. 3.8)" if damper == "relative" else "axial"
+    return [
+        Kernel(f"{tag}_force", f"Force on particle i of a spring (eq. 3.7) and {meaning} damper, and the "
+               "damping power (W, >= 0); par = [k, c, L]. The force on j is minus it.", inputs,
+               {"force": sp.Matrix(force_i), "power": sp.Matrix([power.xreplace(plain)])}),
+        Kernel(f"{tag}_energy", "Spring energy k (|x_i - x_j| - L)^2 / 2 (J); par = [k, c, L].", inputs,
+               {"energy": sp.Matrix([spring_energy])}),
+        Kernel(f"{tag}_jacobian", "d(force on i) / d[x_i, x_j, v_i, v_j], shape (d, 4d); par = [k, c, L].",
+               inputs, {"jacobian": sp.Matrix(force_i).jacobian(xi + xj + vi + vj)}),
+    ]
+
+
+def particle_kernel(d: int) -> Kernel:
+    """Gravity force and potential and kinetic energy of one particle of mass m."""
+    N = ReferenceFrame("N")
+    O = Point("O")
+    x, v, g = _vector_symbols("x", d), _vector_symbols("v", d), _vector_symbols("g", d)
+    m = sp.Symbol("m", positive=True)
+    P = O.locatenew("P", _frame_vector(N, x))
+    gravity = m * _frame_vector(N, g)
+    velocity = _frame_vector(N, v)
+    return Kernel(
+        f"particle_{d}d", "Gravity force m g (N), its potential -m g . x and the kinetic energy (J).",
+        [("x", x), ("v", v), ("m", [m]), ("g", g)],
+        {
+            "force": sp.Matrix([gravity.dot(axis) for axis in (N.x, N.y, N.z)[:d]]),
+            "potential": sp.Matrix([-gravity.dot(P.pos_from(O))]),
+            "kinetic": sp.Matrix([m * velocity.dot(velocity) / 2]),
+        },
+    )
+
+
+def _tangents(n: list[sp.Symbol]) -> list[list[sp.Expr]]:
+    """An orthonormal tangent basis of the unit normal n (right-handed with n in 3D)."""
+    if len(n) == 2:
+        return [[-n[1], n[0]]]
+    s = CopySign1(n[2])
+    a = -1 / (s + n[2])
+    b = n[0] * n[1] * a
+    return [[1 + s * n[0] ** 2 * a, s * b, -s * n[0]], [b, s + n[1] ** 2 * a, -n[1]]]
+
+
+def ground_kernel(d: int) -> Kernel:
+    """Gap, gap Jacobian, normal and tangent basis of a plane ground (point P, unit normal n)."""
+    N = ReferenceFrame("N")
+    x, point, n = _vector_symbols("x", d), _vector_symbols("P", d), _vector_symbols("n", d)
+    normal = _frame_vector(N, n)
+    gap = (_frame_vector(N, x) - _frame_vector(N, point)).dot(normal)
+    gap_m = sp.Matrix([gap])
+    return Kernel(
+        f"ground_{d}d", "Gap (x - P) . n (m, < 0 inside), d gap / dx, the normal and a tangent basis "
+        f"(({d - 1}, {d}), orthonormal, rows) of a plane ground with unit normal n.",
+        [("x", x), ("P", point), ("n", n)],
+        {
+            "gap": gap_m,
+            "gap_jacobian": gap_m.jacobian(x),
+            "normal": sp.Matrix(n),
+            "tangents": sp.Matrix(_tangents(n)),
+        },
+    )
+
+
+def all_kernels() -> list[Kernel]:
+    """Every element kernel, in the order they are generated."""
+    kernels: list[Kernel] = []
+    for d in DIMENSIONS:
+        for damper in DAMPERS:
+            kernels += link_kernels(d, damper)
+        kernels += [particle_kernel(d), ground_kernel(d)]
+    return kernels
