@@ -1,7 +1,9 @@
-"""``python -m derivation SCENE [--formulation F] [--out DIR] [--check]``.
+"""``python -m derivation SCENE [--formulation F] [--out DIR] [--check]`` or ``--runtime``.
 
 Derives a scene's equations of motion and renders them into ``generated/<scene>_<F>/``;
-with ``--check``, compares instead of writing and exits 1 when anything is stale.
+with ``--runtime``, derives the element kernels and renders them with the
+model-independent runtime into ``generated/kernels/`` and ``generated/runtime/``.  With
+``--check``, compares instead of writing and exits 1 when anything is stale.
 """
 
 from __future__ import annotations
@@ -20,7 +22,9 @@ from .writer import check_model, render_scene, write_model
 
 def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="flexbody derive", description=__doc__.splitlines()[2].strip())
-    parser.add_argument("scene", help="scene file or bundled scene name")
+    parser.add_argument("scene", nargs="?", help="scene file or bundled scene name")
+    parser.add_argument("--runtime", action="store_true",
+                        help="the element kernels and the runtime (generated/kernels, generated/runtime) instead")
     parser.add_argument("--formulation", choices=FORMULATIONS, action="append",
                         help="particles or floating (repeatable; default: both)")
     parser.add_argument("--out", type=Path, help="parent folder (default: the project's generated/)")
@@ -36,6 +40,8 @@ def main(argv: list[str] | None = None) -> int:
 
         env = dict(os.environ, PYTHONHASHSEED="0")
         return subprocess.call([sys.executable, "-m", "derivation", *(argv or sys.argv[1:])], env=env)
+    if args.runtime or args.scene is None:
+        return _runtime(args)
     try:
         scene = load_scene(args.scene)
     except SceneError as exc:
@@ -61,6 +67,32 @@ def main(argv: list[str] | None = None) -> int:
             print(f"wrote {folder} ({formulation}, derived and rendered in {seconds:.1f} s)")
     if stale:
         print("generated code is stale: regenerate with `flexbody derive SCENE` and commit it", file=sys.stderr)
+    return 1 if stale else 0
+
+
+def _runtime(args: argparse.Namespace) -> int:
+    """Render (or check) the model-independent files: element kernels and runtime."""
+    from .kernelgen import render_kernels
+    from .runtime import render_runtime
+
+    root = args.out or generated_root()
+    stale = 0
+    for name, render in (("kernels", render_kernels), ("runtime", render_runtime)):
+        start = time.perf_counter()
+        files = render()
+        seconds = time.perf_counter() - start
+        folder = root / name
+        if args.check:
+            problems = check_model(files, folder)
+            stale += bool(problems)
+            print(f"{folder}: {'STALE' if problems else 'fresh'} (rendered in {seconds:.1f} s)")
+            for problem in problems:
+                print(problem)
+        else:
+            write_model(files, folder)
+            print(f"wrote {folder} (rendered in {seconds:.1f} s)")
+    if stale:
+        print("generated code is stale: regenerate with `flexbody derive --runtime` and commit it", file=sys.stderr)
     return 1 if stale else 0
 
 

@@ -29,8 +29,6 @@ FILES = {
     "model.c.jinja": "model.c",
     "model.h.jinja": "model.h",
     "eom.md.jinja": "eom.md",
-    "integrator.c.jinja": "integrator.c",
-    "phases.c.jinja": "phases.c",
 }
 #: Generated functions in the order they appear, with one-line descriptions.
 FUNCTIONS = {
@@ -201,7 +199,7 @@ def cholesky_code(M: sp.Matrix) -> dict[str, list[str]]:
     return {"factor": factor, "solve": solve}
 
 
-def _environment() -> jinja2.Environment:
+def environment() -> jinja2.Environment:
     return jinja2.Environment(
         loader=jinja2.FileSystemLoader(str(TEMPLATES)),
         undefined=jinja2.StrictUndefined,
@@ -227,7 +225,7 @@ def _combination(weights) -> str:
     return "(" + " + ".join(f"{float(w)!r} * K[{j}][i]" for j, w in enumerate(weights) if w != 0.0) + ")"
 
 
-def _runge_kutta_tables() -> dict:
+def runge_kutta_tables() -> dict:
     """Butcher tableaux, error weights and dense-output coefficients (Dormand & Prince;
     Hairer, Norsett & Wanner), read as data from SciPy so both integration paths agree,
     as C initializers and as unrolled stage sums."""
@@ -316,12 +314,10 @@ def render(model: SymbolicModel, *, source: str, command: str) -> dict[str, str]
         "diagonal": model.mass_matrix_is_diagonal,
         "blocks": blocks,
         "equations": _equations(model),
-        "rk": _runge_kutta_tables(),
         "gj": gap_jacobian_pattern(model),
         "cholesky": cholesky_code(model.outputs["mass_matrix"]),
-        "group_time": "1e-12",
     }
-    env = _environment()
+    env = environment()
     files = {}
     for template, out in FILES.items():
         files[out] = env.get_template(template).render(template=template, **context)

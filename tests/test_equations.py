@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from flexbody.model import load_model
+from flexbody.model import load_derived_model as load_model  # the whole-scene derivation
 from flexbody.state import initial_coordinates
 
 from .conftest import BACKENDS, body, make_scene

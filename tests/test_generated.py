@@ -6,6 +6,7 @@ import os
 import shutil
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 
@@ -24,6 +25,36 @@ def test_generated_code_is_fresh(scene):
                          capture_output=True, text=True)
     assert run.returncode == 0, run.stdout + run.stderr
     assert run.stdout.count("fresh") == 2
+
+
+def test_generated_runtime_and_kernels_are_fresh():
+    """The element kernels and the runtime, rendered again in memory, equal what is committed."""
+    run = subprocess.run([sys.executable, "-m", "flexbody.cli", "derive", "--runtime", "--check"],
+                         capture_output=True, text=True)
+    assert run.returncode == 0, run.stdout + run.stderr
+    assert run.stdout.count("fresh") == 2
+
+
+@pytest.mark.parametrize("edited, changes", [("elements.py", False), ("runtime.py", False), ("mechanics.py", True)])
+def test_editing_a_derivation_module_marks_stale_only_what_it_generates(tmp_path, edited, changes):
+    """Whole-scene model digests depend on the whole-scene generator only (run from a copy
+    of derivation/ with one file edited): editing the element
+    kernels' or the runtime's module leaves every cached model valid; editing Kane's does not."""
+    import derivation
+
+    copy = tmp_path / "derivation"
+    shutil.copytree(Path(derivation.__file__).parent, copy, ignore=shutil.ignore_patterns("__pycache__"))
+    code = "from flexbody.topology import generator_fingerprint; print(generator_fingerprint())"
+
+    def fingerprint():
+        env = dict(os.environ, PYTHONPATH=str(tmp_path))
+        return subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, cwd=tmp_path,
+                              check=True).stdout.strip()
+
+    before = fingerprint()
+    with open(copy / edited, "a") as handle:
+        handle.write("\n# an edit\n")
+    assert (fingerprint() != before) == changes
 
 
 def test_check_detects_a_stale_file(tmp_path):

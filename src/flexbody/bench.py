@@ -466,8 +466,14 @@ def _plot_curves(curves):
     return fig
 
 
+def _scale(out: Path, quick: bool) -> dict:
+    from .bench_scale import scale_study
+
+    return scale_study(out, quick)
+
+
 STUDIES = {"wp": work_precision, "stability": stability_map, "resolution": resolution_study,
-           "mujoco": mujoco_comparison}
+           "mujoco": mujoco_comparison, "scale": _scale}
 
 
 def bench_command(args) -> int:

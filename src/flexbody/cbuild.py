@@ -13,10 +13,11 @@ import os
 import platform
 import shutil
 import subprocess
+import sys
 import tempfile
 from pathlib import Path
 
-from .paths import cache_root
+from .paths import cache_root, generated_root
 
 FLAGS = ("-O3", "-shared", "-fPIC", "-std=c99")  # -O3: the integrator's vector loops vectorise
 #: Used when the compiler accepts it: wider vector loops (measured ~10 % off the compiled
@@ -62,12 +63,16 @@ def _cpu_identity() -> str:
     return "\n".join(dict.fromkeys(wanted)) or f"{platform.machine()} {platform.processor()}"
 
 
-def library_path(model_dir: Path) -> Path:
-    """Compile ``model_dir/*.c`` (model and integrator) if needed; return the cached library."""
-    model_dir = Path(model_dir)
+def build(sources: list[Path], include_dirs: list[Path], what: str, announce: str = "") -> Path:
+    """Compile ``sources`` into one shared library if needed; return the cached library.
+
+    The cache key covers every source and every header in ``include_dirs``, so a library is
+    rebuilt exactly when something it is built from changed.  ``announce`` is printed to
+    stderr before a compile (first use can take seconds).
+    """
     cc = compiler()
-    sources = sorted(model_dir.glob("*.c"))
-    source = b"".join(path.read_bytes() for path in sources + [model_dir / "model.h"])
+    headers = [h for d in include_dirs for h in sorted(Path(d).glob("*.h"))]
+    source = b"".join(p.name.encode() + b"\0" + p.read_bytes() for p in list(sources) + headers)
     options = flags(cc)
     identity = "\n".join([_compiler_identity(cc), " ".join(options), _cpu_identity()])
     key = hashlib.sha256(source + identity.encode()).hexdigest()[:24]
@@ -75,15 +80,39 @@ def library_path(model_dir: Path) -> Path:
     if target.exists():
         return target
     target.parent.mkdir(parents=True, exist_ok=True)
+    if announce:
+        print(announce, file=sys.stderr, flush=True)
     fd, tmp = tempfile.mkstemp(suffix=".so", dir=target.parent)
     os.close(fd)
-    command = [cc, *options, "-I", str(model_dir), "-o", tmp, *map(str, sources), "-lm"]
+    includes = [arg for d in include_dirs for arg in ("-I", str(d))]
+    command = [cc, *options, *includes, "-o", tmp, *map(str, sources), "-lm"]
     run = subprocess.run(command, capture_output=True, text=True, check=False)
     if run.returncode != 0:
         os.unlink(tmp)
         raise CompilationError(
-            f"compiling {model_dir}/*.c failed (exit {run.returncode}):\n$ {' '.join(command)}\n"
-            f"{run.stdout}{run.stderr}"
+            f"compiling {what} failed (exit {run.returncode}):\n$ {' '.join(command)}\n{run.stdout}{run.stderr}"
         )
     os.replace(tmp, target)  # atomic: a concurrent build never sees a half-written library
     return target
+
+
+def library_path(model_dir: Path) -> Path:
+    """Compile a whole-scene model (``model_dir/model.c``, against the runtime's header)."""
+    model_dir = Path(model_dir)
+    return build(sorted(model_dir.glob("*.c")), [model_dir, runtime_dir()], f"{model_dir}/*.c")
+
+
+def runtime_dir() -> Path:
+    return generated_root() / "runtime"
+
+
+def kernels_dir() -> Path:
+    return generated_root() / "kernels"
+
+
+def runtime_library_path() -> Path:
+    """Compile the model-independent runtime (integrator, phase machine, assembly) with the
+    element kernels into one library, once per install (cached by content)."""
+    sources = sorted(runtime_dir().glob("*.c")) + [kernels_dir() / "kernels.c"]
+    return build(sources, [runtime_dir(), kernels_dir()], "the flexbody runtime (generated/runtime, generated/kernels)",
+                 announce="flexbody: compiling the runtime library once for this machine (usually 5-15 s) ...")

@@ -48,7 +48,11 @@ def _parser() -> argparse.ArgumentParser:
     derive = sub.add_parser("derive", help="derive and generate a scene's model into generated/",
                             description="Derive the equations of motion (SymPy, Kane's method) and render "
                                         "the NumPy module, C source, eom.md and manifest into generated/.")
-    _add_scene(derive)
+    derive.add_argument("scene", metavar="SCENE", nargs="?",
+                        help="a scene file (TOML) or a bundled scene's name; omit it (or give --runtime) for the "
+                             "element kernels and the runtime")
+    derive.add_argument("--runtime", action="store_true",
+                        help="derive the element kernels and render the runtime (generated/kernels, generated/runtime)")
     derive.add_argument("--formulation", choices=FORMULATIONS, action="append",
                         help="particles or floating (repeatable; default: both)")
     derive.add_argument("--out", type=Path, metavar="DIR", help="parent folder (default: the project's generated/)")
@@ -59,11 +63,13 @@ def _parser() -> argparse.ArgumentParser:
     _add_scene(show)
     show.add_argument("--latex", action="store_true", help="print LaTeX instead of plain text")
     show.add_argument("--formulation", choices=FORMULATIONS, default=None, help="default: the scene's")
+    show.add_argument("--force", action="store_true",
+                      help="derive a large scene's equations even when that takes minutes")
 
     bench = sub.add_parser("bench", help="speed and accuracy benchmarks (prints and saves numbers)",
                            description="Benchmarks, not tests: work-precision diagram (wp), stability map "
-                                       "(stability) and resolution study (resolution); JSON and PNG in --out.")
-    bench.add_argument("--study", choices=("wp", "stability", "resolution", "mujoco"), action="append",
+                                       "(stability), resolution study (resolution), cost vs size (scale); JSON and PNG in --out.")
+    bench.add_argument("--study", choices=("wp", "stability", "resolution", "mujoco", "scale"), action="append",
                        help="which study (repeatable; default: all; mujoco needs flexbody[mujoco])")
     bench.add_argument("--out", type=Path, default=Path("bench"), metavar="DIR", help="output folder")
     bench.add_argument("--repeats", type=int, default=5, help="timing repeats (median is reported)")
@@ -72,7 +78,9 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def _derive(args: argparse.Namespace) -> int:
-    command = [sys.executable, "-m", "derivation", args.scene]
+    command = [sys.executable, "-m", "derivation"] + ([args.scene] if args.scene else [])
+    if args.runtime:
+        command.append("--runtime")
     for formulation in args.formulation or []:
         command += ["--formulation", formulation]
     if args.out:
@@ -83,10 +91,17 @@ def _derive(args: argparse.Namespace) -> int:
 
 
 def _show(args: argparse.Namespace) -> int:
-    from .model import load_model
+    from .model import SHOW_MAX_PARTICLES, derivation_seconds, find_model_dir, load_derived_model
 
     scene = load_scene(args.scene)
-    model = load_model(scene, backend="numpy", formulation=args.formulation)
+    formulation = args.formulation or scene.simulation.formulation
+    if scene.n_particles > SHOW_MAX_PARTICLES and not args.force and find_model_dir(scene, formulation) is None:
+        print(f"error: {scene.source} has {scene.n_particles} particles: deriving its equations whole ({formulation}) "
+              f"would take about {derivation_seconds(scene.n_particles, formulation):.0f} s. Running it needs no "
+              "derivation (the particles formulation is assembled from element kernels); to print the equations "
+              "anyway, add --force.", file=sys.stderr)
+        return EXIT_USAGE
+    model = load_derived_model(scene, backend="numpy", formulation=formulation)
     text = (model.directory / "eom.md").read_text()
     if args.latex:
         body = text.split("## Equations (LaTeX)", 1)[1].strip()

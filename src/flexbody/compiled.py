@@ -1,6 +1,8 @@
 """The compiled path: smooth segments (``fb_integrate``) and event instants (``fb_resolve``) in C.
 
-Both C functions work on buffers that live as long as one run: the state, the phases,
+Both live in the runtime library (compiled once per install) and reach the model as an
+FbSystem, so any C model runs on them: the assembled particles formulation or a
+whole-scene derived one.  They work on buffers that live as long as one run: the state, the phases,
 the output samples.  Their addresses are taken once, so a call costs a few microseconds
 of ctypes instead of the ~30 us of converting a dozen arrays, and the fixed point at an
 instant costs ~5 us instead of the ~100 us of :func:`flexbody.contact.resolve` (its
@@ -14,10 +16,10 @@ import ctypes
 
 import numpy as np
 
+from . import runtime
+from .constants import IMPACT, LIFTOFF  # noqa: F401  (event kinds as fb_resolve reports them)
 from .contact import Phases
-from .model import CModel, singular_matrix_error
-
-IMPACT, LIFTOFF = 0, 1  # event kinds as fb_resolve reports them
+from .model import Model, singular_matrix_error
 
 
 def _address(a: np.ndarray, dtype=np.float64) -> int:
@@ -33,7 +35,8 @@ class CompiledPath:
 
     Parameters
     ----------
-    model : CModel
+    model : Model
+        A C model: it has ``system(p)``.
     p : ndarray, shape (np,)
     y : ndarray, shape (ny,)
         The state; both calls update it in place.
@@ -48,10 +51,14 @@ class CompiledPath:
     gap_tolerance : float
     """
 
-    def __init__(self, model: CModel, p: np.ndarray, y: np.ndarray, phases: Phases, grid: np.ndarray,
+    def __init__(self, model: Model, p: np.ndarray, y: np.ndarray, phases: Phases, grid: np.ndarray,
                  samples: np.ndarray, force_tolerance: np.ndarray, masses: np.ndarray, gap_tolerance: float) -> None:
         nc = model.n_contacts
         self.model, self.gap_tolerance, self.n_grid = model, gap_tolerance, len(grid)
+        self.lib = runtime.library()
+        self.system = model.system(p)
+        self.work = runtime.Work(model.ny, nc)
+        self._system, self._work = ctypes.addressof(self.system), self.work.address
         self.touching, self.leaving = np.zeros(nc, np.intc), np.zeros(nc, np.intc)  # events at a stop
         self.not_held = np.zeros(nc, np.intc)
         self.event_contact, self.event_kind = np.zeros(2 * nc, np.intc), np.zeros(2 * nc, np.intc)
@@ -63,7 +70,7 @@ class CompiledPath:
         # The buffers (kept alive as long as C holds their addresses):
         self.p, self.y, self.phases, self.grid, self.samples = p, y, phases, grid, samples
         self.force_tolerance, self.masses = force_tolerance, masses
-        self._y, self._p = _address(y), _address(p)
+        self._y = _address(y)
         self._phase, self._floor = _address(phases.phase, np.intc), _address(phases.floor)
         self._push, self._push_until = _address(phases.push), _address(phases.push_until)
         self._grid, self._samples, self._row = _address(grid), _address(samples), samples.strides[0]
@@ -95,8 +102,8 @@ class CompiledPath:
         n_samples : int
             Rows of ``samples`` written.
         """
-        status = self.model.fb_integrate(
-            method, t0, self._y, t_bound, self._p, self._phase, self._push, self._floor, self._force_tol,
+        status = self.lib.fb_integrate(
+            self._work, self._system, method, t0, self._y, t_bound, self._phase, self._push, self._floor, self._force_tol,
             self.gap_tolerance, rtol, atol, self._grid + 8 * first_sample, self.n_grid - first_sample,
             self._samples + self._row * first_sample, *self._integrate_out, self._y, *self._integrate_tail,
         )
@@ -118,8 +125,8 @@ class CompiledPath:
             self.touching[:] = touching
         if leaving is not self.leaving:
             self.leaving[:] = leaving
-        status = self.model.fb_resolve(
-            t, self._y, self._p, self._phase, self._floor, self._push, self._push_until, self._touching,
+        status = self.lib.fb_resolve(
+            self._work, self._system, t, self._y, self._phase, self._floor, self._push, self._push_until, self._touching,
             self._leaving, self.gap_tolerance, self._force_tol, self._masses, int(thesis), impact_dt or 0.0,
             *self._events, *self._resolve_out,
         )

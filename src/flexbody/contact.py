@@ -21,9 +21,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .constants import FREE, HELD, PUSHED
 from .model import Model
 
-FREE, HELD, PUSHED = 0, 1, 2
+__all__ = ["FREE", "HELD", "PUSHED", "Event", "Phases", "Resolution", "resolve"]
 
 
 @dataclass

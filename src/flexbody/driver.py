@@ -24,6 +24,7 @@ from . import __version__
 from .compiled import IMPACT, CompiledPath
 from .contact import HELD, PUSHED, Event, Phases, resolve
 from .events import EventFunctions, locate
+from .assembly import AssembledModel
 from .model import Model, load_model
 from .result import STATUSES, SimulationResult
 from .scene import (
@@ -55,6 +56,10 @@ class SimulationFailed(Exception):
 
 def _non_finite(t: float) -> tuple[str, str]:
     return "blow_up", f"the state became non-finite at t = {t:.9g} s; tighten --rtol/--atol or use an implicit method."
+
+
+def _dense(matrix) -> np.ndarray:
+    return matrix.toarray() if hasattr(matrix, "toarray") else matrix
 
 
 def _settings(scene: Scene, overrides: dict) -> SimulationSettings:
@@ -114,7 +119,7 @@ class _Run:
         q, u = initial_coordinates(scene, model)
         self.y = np.concatenate([q, u, [0.0, 0.0]])
         self.phases = Phases.all_free(model.n_contacts)
-        size = float(np.abs(scene.initial_positions()).max())
+        size = float(np.abs(scene.initial_positions()).max()) if scene.n_particles else 1.0
         self.gap_tolerance = 1e-12 * max(size, 1.0)
         # For point masses on flat grounds a contact's effective mass 1 / (J M^-1 J^T) is its particle's.
         self.contact_masses = scene.masses[model.contacts[:, 0]]
@@ -196,7 +201,9 @@ class _Run:
         model, s, phases = self.model, self.settings, self.phases
         options = {"rtol": s.rtol, "atol": s.atol}
         if s.method in IMPLICIT:
-            options["jac"] = model.jacobian_function(self.p, phases.held)
+            options["jac"] = jacobian = model.jacobian_function(self.p, phases.held)
+            if s.method == "LSODA":  # Radau and BDF take the sparse Jacobian; LSODA only a dense one
+                options["jac"] = lambda t, y: _dense(jacobian(t, y))
         solver = SOLVERS[s.method](model.rhs_function(self.p, phases.held, phases.push), t0, self.y.copy(),
                                    t_bound, **options)
         events = EventFunctions(model, self.p, phases, self.force_tolerance)
@@ -275,8 +282,8 @@ class _Run:
         s, model, phases = self.settings, self.model, self.phases
         t = 0.0
         # Particles starting on a ground at rest are held if the ground has to push them.
-        q, u = self.y[: model.nq], self.y[model.nq : model.nq + model.nu]
-        resting = (model.gaps(q, self.p) <= self.gap_tolerance) & (model.gap_jacobian(q, self.p) @ u == 0.0)
+        gaps, vn, _ = model.contact_state(self.y, self.p, np.zeros(model.n_contacts, np.intc), np.zeros(model.n_contacts))
+        resting = (gaps <= self.gap_tolerance) & (vn == 0.0)
         phases.phase[resting] = HELD
         none = np.zeros(model.n_contacts, bool)
         self.resolve_at(0.0, none, none)
@@ -359,7 +366,8 @@ class _Run:
         result.stats = {
             "scene": self.scene.name, "source": self.scene.source,
             "method": s.method, "rtol": s.rtol, "atol": s.atol, "backend": model.backend,
-            "formulation": model.formulation, "impact": s.impact, "impact_dt": s.impact_dt,
+            "formulation": model.formulation, "model": "assembled" if isinstance(model, AssembledModel) else "derived",
+            "impact": s.impact, "impact_dt": s.impact_dt,
             "t_end": s.t_end, "t_reached": float(T[-1]) if len(T) else 0.0,
             "wall_time_s": wall, "rhs_evaluations": self.nfev + int(self.counters[0]),
             "jacobian_evaluations": self.njev, "steps": self.steps + int(self.counters[1]),

@@ -22,11 +22,10 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import brentq
 
-from .contact import FREE, HELD, Phases
+from .constants import FREE, GROUP_TIME, HELD
+from .contact import Phases
 from .model import Model
 
-#: Roots closer than this (s) are one instant.
-GROUP_TIME = 1e-12
 
 
 class EventFunctions:

@@ -8,6 +8,7 @@
 
 from __future__ import annotations
 
+import importlib.util
 import os
 from pathlib import Path
 
@@ -15,8 +16,17 @@ PROJECT_ROOT = Path(__file__).resolve().parents[2]
 
 
 def generated_root() -> Path:
-    """The committed ``generated/`` folder (it may not exist in a non-editable install)."""
-    return Path(os.environ.get("FLEXBODY_GENERATED", PROJECT_ROOT / "generated"))
+    """The committed ``generated/`` folder: the checkout's, or the installed data package
+    ``flexbody_generated`` (a non-editable install); ``FLEXBODY_GENERATED`` overrides both."""
+    if "FLEXBODY_GENERATED" in os.environ:
+        return Path(os.environ["FLEXBODY_GENERATED"])
+    local = PROJECT_ROOT / "generated"
+    if local.is_dir():
+        return local
+    spec = importlib.util.find_spec("flexbody_generated")
+    if spec is not None and spec.submodule_search_locations:
+        return Path(next(iter(spec.submodule_search_locations)))
+    return local
 
 
 def cache_root() -> Path:

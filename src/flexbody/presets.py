@@ -66,3 +66,33 @@ def chain(count: int, spacing: float) -> tuple[np.ndarray, Links]:
     x = spacing * (np.arange(count) - (count - 1) / 2.0)
     points = np.column_stack([x, np.zeros(count)])
     return points, [(k, k + 1) for k in range(count - 1)]
+
+
+def disc(count: int, radius: float) -> tuple[np.ndarray, Links]:
+    """About ``count`` particles on a triangular lattice filling a disc of ``radius``.
+
+    Every particle is linked to its lattice neighbours (up to six), so the body is braced
+    against shear and its fastest mode does not grow with ``count`` (a spoked ring's centre
+    mode does).  The spacing is chosen so the disc holds about ``count`` particles; the
+    exact number is ``len(points)``.  Particles are ordered by row, bottom to top, and
+    left to right within a row.
+    """
+    spacing = radius * np.sqrt(np.pi / (count * np.sqrt(3.0) / 2.0))
+    height = spacing * np.sqrt(3.0) / 2.0
+    rows = int(np.ceil(radius / height))
+    columns = int(np.ceil(radius / spacing)) + 1
+    index: dict[tuple[int, int], int] = {}
+    points = []
+    for r in range(-rows, rows + 1):
+        for c in range(-columns, columns + 1):
+            x, y = c * spacing + 0.5 * spacing * (r % 2), r * height
+            if x * x + y * y <= radius * radius * (1 + 1e-9):
+                index[r, c] = len(points)
+                points.append((x, y))
+    links = []
+    for (r, c), i in index.items():  # right, and the two neighbours in the row above
+        up = (c, c + 1) if r % 2 else (c - 1, c)
+        for key in ((r, c + 1), (r + 1, up[0]), (r + 1, up[1])):
+            if key in index:
+                links.append((i, index[key]))
+    return np.array(points), links

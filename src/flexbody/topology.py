@@ -19,24 +19,30 @@ from pathlib import Path
 import numpy as np
 
 #: A manual tag; the digest also covers the generator's source files (see generator_fingerprint).
-GENERATOR_VERSION = "2"
+GENERATOR_VERSION = "3"
+
+
+#: What a whole-scene model is generated from (derivation/ and its templates); editing
+#: the element kernels or the runtime does not touch these models' digests.
+GENERATOR_SOURCES = ("mechanics.py", "codegen.py", "printers.py", "templates/model.py.jinja",
+                     "templates/model.c.jinja", "templates/model.h.jinja", "templates/eom.md.jinja")
 
 
 @functools.cache
 def generator_fingerprint() -> str:
-    """Hash of the derivation package's sources and templates (found without importing it).
+    """Hash of the sources that generate whole-scene models (found without importing them).
 
-    Any change to how models are generated changes every digest, so a cached model built by
+    A change to how models are generated changes every digest, so a cached model built by
     an older generator is never reused, and committed models show up as stale.
     """
     spec = importlib.util.find_spec("derivation")
     if spec is None or not spec.submodule_search_locations:
         return GENERATOR_VERSION
     folder = Path(next(iter(spec.submodule_search_locations)))
-    files = sorted(folder.glob("*.py")) + sorted((folder / "templates").glob("*.jinja"))
     digest = hashlib.sha256(GENERATOR_VERSION.encode())
-    for path in files:
-        digest.update(path.name.encode() + b"\0" + path.read_bytes())
+    for name in GENERATOR_SOURCES:
+        path = folder / name
+        digest.update(name.encode() + b"\0" + (path.read_bytes() if path.is_file() else b""))
     return digest.hexdigest()[:16]
 
 

@@ -1,0 +1,181 @@
+"""The assembled particles formulation against the whole-scene derivation (the oracle).
+
+The element kernels are derived once and assembled over a scene's index arrays at run
+time; the whole-scene Kane derivation of the same topology must give the same
+equations: accelerations, contact forces, normal velocities, impacts, energies, gaps
+and Jacobians, at random states, to 1e-12 relative.  Also: a never-seen topology runs at
+once (nothing derived or compiled), and a 400-particle ring lands cleanly.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import flexbody
+from flexbody.assembly import assembled_model
+from flexbody.dynamics import state_jacobian
+from flexbody.model import NumpyModel, load_derived_model
+from flexbody.paths import cache_root
+
+from .conftest import BACKENDS, HAS_CC, body, make_scene
+
+RTOL = 1e-12
+
+
+def random_scene(seed: int) -> flexbody.Scene:
+    """A random topology: 1-2 bodies of 2-6 particles, random links and damper laws, 1-2 grounds."""
+    rng = np.random.default_rng(seed)
+    bodies = []
+    for b in range(rng.integers(1, 3)):
+        n = int(rng.integers(2, 7))
+        points = rng.uniform(-0.2, 0.2, (n, 2))
+        links = {(int(rng.integers(0, i)), i) for i in range(1, n)}  # a spanning tree: no lone particle
+        links |= {tuple(sorted(map(int, rng.choice(n, 2, replace=False)))) for _ in range(rng.integers(0, n))}
+        bodies.append(body(name=f"b{b}", particles=points.tolist(), links=sorted(map(list, links)),
+                           masses=rng.uniform(0.02, 0.2, n).tolist(), mass=None,
+                           stiffness=rng.uniform(100, 3000, len(links)).tolist(),
+                           damping=rng.uniform(0.0, 0.3, len(links)).tolist(),
+                           damper=str(rng.choice(["relative", "axial"])), position=[float(b), 1.0]))
+    grounds = [{"point": [0.0, 0.0], "normal": [0.0, 1.0]}]
+    if rng.random() < 0.6:
+        angle = rng.uniform(0.2, 1.2)
+        grounds.append({"point": [2.0, 0.0], "normal": [-np.sin(angle), np.cos(angle)]})
+    return make_scene(*bodies, grounds=grounds, gravity=[float(rng.normal()), -9.81])
+
+
+def derived_oracle(scene, tmp_path) -> NumpyModel:
+    """The whole-scene particles model of ``scene``, derived and rendered here (SymPy)."""
+    from derivation.codegen import render
+    from derivation.mechanics import derive
+    from derivation.writer import write_model
+
+    folder = tmp_path / "oracle"
+    write_model(render(derive(scene.topology(), "particles"), source="test", command="test"), folder)
+    return NumpyModel(folder)
+
+
+def random_state(model, rng, scene):
+    x = scene.initial_positions() + rng.normal(0, 0.01, (scene.n_particles, 2))
+    v = rng.normal(0, 1.0, (scene.n_particles, 2))
+    return np.concatenate([x.ravel(), v.ravel(), [0.3, 0.1]])
+
+
+def assert_close(a, b, what):
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    scale = max(float(np.abs(b).max(initial=0.0)), 1e-300)
+    np.testing.assert_allclose(a, b, rtol=0, atol=RTOL * scale, err_msg=what)
+
+
+def assert_same_equations(assembled, oracle, scene, rng, states=5):
+    p = assembled.parameters(scene)
+    np.testing.assert_array_equal(p, oracle.parameters(scene))  # the same parameter order
+    nc = assembled.n_contacts
+    for _ in range(states):
+        y = random_state(assembled, rng, scene)
+        held = (rng.random(nc) < 0.4).astype(np.intc)
+        if assembled.n_grounds > 1:  # at most one held ground per particle unless they are independent
+            held.reshape(-1, assembled.n_grounds)[:, 1:] &= rng.random((scene.n_particles, 1)) < 0.5
+        push = np.where(rng.random(nc) < 0.3, rng.uniform(0, 5, nc), 0.0) * (1 - held)
+        for name, a, b in zip(("ydot", "lam"), assembled.rhs(y, p, held, push), oracle.rhs(y, p, held, push)):
+            assert_close(a, b, name)
+        for name, a, b in zip(("gaps", "vn", "lam"), assembled.contact_state(y, p, held, push),
+                              oracle.contact_state(y, p, held, push)):
+            assert_close(a, b, name)
+        stop = (rng.random(nc) < 0.5).astype(np.intc)
+        (ya, la), (yb, lb) = assembled.impact(y, p, stop), oracle.impact(y, p, stop)
+        assert_close(ya, yb, "impact state")
+        assert la == pytest.approx(lb, rel=1e-12, abs=1e-15)
+        Xa, Va, Ea, lam_a = assembled.trajectory(y[None], p, held[None], push[None])
+        Xb, Vb, Eb, lam_b = oracle.trajectory(y[None], p, held[None], push[None])
+        for name, a, b in (("positions", Xa, Xb), ("velocities", Va, Vb), ("energies", Ea, Eb), ("lam", lam_a, lam_b)):
+            assert_close(a, b, name)
+        jac = assembled.jacobian_function(p, held)(0.0, y).toarray()
+        assert_close(jac, state_jacobian(oracle, y, p, held), "state Jacobian")
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+@pytest.mark.parametrize("name", ["thesis_ball", "dumbbell"])
+def test_assembled_equals_derived_for_bundled_scenes(name, backend, rng):
+    scene = flexbody.load_scene(name)
+    assert_same_equations(assembled_model(scene, backend), load_derived_model(scene, "numpy", "particles"), scene, rng)
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_assembled_equals_derived_for_random_topologies(seed, tmp_path, rng):
+    scene = random_scene(seed)
+    oracle = derived_oracle(scene, tmp_path)
+    for backend in BACKENDS:
+        assert_same_equations(assembled_model(scene, backend), oracle, scene, rng, states=3)
+
+
+@pytest.mark.skipif(not HAS_CC, reason="no C compiler")
+def test_c_kernels_equal_numpy_kernels(rng):
+    """The batched C kernels and their NumPy twins agree on random elements."""
+    import ctypes
+
+    from flexbody import runtime
+    from flexbody.assembly import _kernels_module
+
+    kernels, lib = _kernels_module(), runtime.library()
+    for d in (2, 3):
+        for law in ("relative", "axial"):
+            m = 7
+            xi, xj, vi, vj = (rng.normal(size=(m, d)) for _ in range(4))
+            par = np.column_stack([rng.uniform(1, 10, m), rng.uniform(0, 1, m), rng.uniform(0.1, 1, m)])
+            force, power = np.empty((m, d)), np.empty((m, 1))
+            fn = getattr(lib, f"fb_kb_link_{law}_{d}d_force")
+            fn.argtypes = [ctypes.c_long] + [ctypes.c_void_p] * 7
+            fn(m, *(a.ctypes.data for a in (xi, xj, vi, vj, par, force, power)))
+            f_np, p_np = getattr(kernels, f"link_{law}_{d}d_force")(xi.T, xj.T, vi.T, vj.T, par.T)
+            np.testing.assert_allclose(force, f_np.T, rtol=1e-14)
+            np.testing.assert_allclose(power[:, 0], p_np[0], rtol=1e-14)
+
+
+def test_ground_tangents_are_an_orthonormal_basis(rng):
+    """The ground kernel's normal and tangents form an orthonormal (right-handed in 3D) basis,
+    also for normals along -z, where the branch-free formula switches sign."""
+    from flexbody.assembly import _kernels_module
+
+    kernels = _kernels_module()
+    normals = np.vstack([rng.normal(size=(50, 3)), [[0, 0, -1.0], [0, 0, 1.0], [1.0, 0, 0], [0, 1e-30, -1]]])
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    _, _, normal, tangents = kernels.ground_3d(np.zeros((3, len(normals))), np.zeros((3, len(normals))), normals.T)
+    basis = np.stack([tangents[0], tangents[1], normal])  # (3, 3, m): rows t1, t2, n
+    for k in range(len(normals)):
+        B = basis[:, :, k]
+        np.testing.assert_allclose(B @ B.T, np.eye(3), atol=1e-14)
+        assert np.linalg.det(B) == pytest.approx(1.0, abs=1e-14)
+    _, _, normal2, tangents2 = kernels.ground_2d(np.zeros((2, 1)), np.zeros((2, 1)), np.array([[0.6], [0.8]]))
+    assert float(tangents2[0, :, 0] @ normal2[:, 0]) == 0.0
+
+
+def test_a_never_seen_topology_runs_without_deriving(tmp_path, monkeypatch):
+    """A 37-particle ring nobody has derived: it runs at once, and no model is derived or cached."""
+    monkeypatch.setenv("FLEXBODY_CACHE", str(tmp_path / "cache"))
+    scene = make_scene(body(particles=None, links=None, shape="ring", count=36, radius=0.1, center=True,
+                            mass=0.02, position=[0.0, 0.2]), simulation={"t_end": 0.05, "output_dt": 1e-3})
+    result = flexbody.simulate(scene, backend=BACKENDS[-1])
+    assert result.success, result.message
+    assert not (cache_root() / "models").exists()
+    assert result.stats["model"] == "assembled"
+
+
+def test_a_400_particle_ring_lands_and_lifts_off_cleanly():
+    """A ring of 399 perimeter particles and a centre lands flat-ish: no penetration, the
+    energy ledger closed, and it runs until its first lift-off."""
+    scene = make_scene(body(particles=None, links=None, shape="ring", count=399, radius=0.5, center=True,
+                            mass=0.01, stiffness=2000.0, damping=0.05, position=[0.0, 0.52]),
+                       simulation={"t_end": 0.2, "output_dt": 1e-3})
+    result = flexbody.simulate(scene, backend=BACKENDS[-1])
+    assert result.success, result.message
+    kinds = list(result.events_kind)
+    assert "impact" in kinds and "liftoff" in kinds, "the ring must touch down and lift off within 0.2 s"
+    # "No penetration" is the event tolerance, 1e-12 of the scene's size (here 1.02 m), below
+    # where a contact was released, which round-off may put a few ulps under the ground.
+    size = max(1.0, float(np.abs(scene.initial_positions()).max()))
+    tolerance = 1e-12 * size + 64 * np.finfo(float).eps * size
+    assert result.stats["max_penetration_m"] <= tolerance
+    assert result.positions[:, :, 1].min() >= -tolerance
+    total = result.total_energy
+    assert np.abs(total - total[0]).max() <= 1e-5 * abs(total[0])
