@@ -22,6 +22,7 @@
 #define FB_STEP_COLLAPSE -1
 #define FB_NON_FINITE -2
 #define FB_SINGULAR -3
+#define FB_TOO_SLOW -4
 
 typedef struct FbSystem FbSystem;
 
@@ -55,7 +56,7 @@ int fb_integrate(FbWork *w, const FbSystem *s, int method, double t0, const doub
                  const int *phase, const double *push, double *floor, const double *force_tol,
                  double gap_tol, double rtol, double atol, const double *grid, int n_grid,
                  double *samples, int *n_sampled, double *t_stop, double *y_stop, int *touching,
-                 int *leaving, long *counters, double *min_gap, double *h_next);
+                 int *leaving, long *counters, double *min_gap, double *h_next, double max_seconds);
 
 int fb_resolve(FbWork *w, const FbSystem *s, double t, double *y, int *phase, double *floor, double *push,
                double *push_until, const int *touching_in, const int *leaving, double gap_tol,

@@ -383,14 +383,16 @@ static int locate(Problem *P, Stepper *S, const double *g_old, const double *g_n
  *     rejected, event evaluations}, *min_gap (lowest gap at step ends, in/out), *h_next.
  * Returns FB_REACHED at t_bound, FB_EVENT at an event, FB_STEP_COLLAPSE if the step size
  * collapsed, FB_NON_FINITE if the state became non-finite, FB_SINGULAR if the mass or
- * contact matrix was not positive definite. */
+ * contact matrix was not positive definite, FB_TOO_SLOW after max_seconds of wall time. */
 int fb_integrate(FbWork *w, const FbSystem *s, int method, double t0, const double *y0, double t_bound,
                  const int *phase, const double *push, double *floor, const double *force_tol,
                  double gap_tol, double rtol, double atol, const double *grid, int n_grid,
                  double *samples, int *n_sampled, double *t_stop, double *y_stop, int *touching,
-                 int *leaving, long *counters, double *min_gap, double *h_next)
+                 int *leaving, long *counters, double *min_gap, double *h_next, double max_seconds)
 {
     const int ny = s->ny, nc = s->nc;
+    struct timespec clock_start, clock_now;
+    clock_gettime(CLOCK_MONOTONIC, &clock_start);
     Stepper S = {0};
     Problem P = {s, w, push, force_tol, floor, w->held, w->phase, 0, s->nq, ny, nc, gap_tol, 0, 0, 0};
     for (int c = 0; c < nc; ++c) {
@@ -431,8 +433,18 @@ int fb_integrate(FbWork *w, const FbSystem *s, int method, double t0, const doub
     double h_abs = fmin(fmin(100.0 * h0, h1), interval);
     const double exponent = -1.0 / (S.order + 1);
     if (P.failed) { status = FB_SINGULAR; goto done; }
+    /* SciPy's floor, 10 ulp of t, vanishes near t = 0 (a step of 1e-154 s "progresses"
+     * forever): below 10 ulp of the segment's end a step cannot matter either. */
+    const double end_ulp = 10.0 * fabs(nextafter(t_bound, INFINITY) - t_bound);
     while (t < t_bound) {
-        double min_step = 10.0 * fabs(nextafter(t, INFINITY) - t), error = 0.0, t_new = t;
+        double min_step = fmax(10.0 * fabs(nextafter(t, INFINITY) - t), end_ulp), error = 0.0, t_new = t;
+        if ((steps & 1023) == 1023) { /* the wall-time budget, checked every 1024 steps */
+            clock_gettime(CLOCK_MONOTONIC, &clock_now);
+            if ((clock_now.tv_sec - clock_start.tv_sec) + 1e-9 * (clock_now.tv_nsec - clock_start.tv_nsec) > max_seconds) {
+                status = FB_TOO_SLOW;
+                goto done;
+            }
+        }
         int rejected = 0;
         if (h_abs < min_step) h_abs = min_step;
         memcpy(S.y_old, S.y, sizeof(double) * ny);

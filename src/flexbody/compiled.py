@@ -18,7 +18,7 @@ import numpy as np
 
 from . import runtime
 from .constants import IMPACT, LIFTOFF  # noqa: F401  (event kinds as fb_resolve reports them)
-from .contact import Phases
+from .contact import Phases, UnsettledInstant
 from .model import Model, singular_matrix_error
 
 
@@ -87,17 +87,19 @@ class CompiledPath:
                              ctypes.addressof(self.iterations))
 
     def integrate(self, method: int, t0: float, t_bound: float, rtol: float, atol: float,
-                  first_sample: int) -> tuple[int, float, int]:
+                  first_sample: int, max_seconds: float = float("inf")) -> tuple[int, float, int]:
         """One smooth segment from ``t0`` until the first event or ``t_bound``.
 
         The state ``y`` becomes the state at the stop; ``touching`` and ``leaving`` mark the
         gap events of free contacts and the force events of held ones that fired there.
-        Grid samples are written from row ``first_sample`` on.
+        Grid samples are written from row ``first_sample`` on; after ``max_seconds`` of wall
+        time the segment stops with status TOO_SLOW.
 
         Returns
         -------
         status : int
-            0 reached t_bound, 1 event, -1 step-size collapse, -2 non-finite, -3 singular.
+            A status of :mod:`flexbody.constants`: REACHED, EVENT, STEP_COLLAPSE, NON_FINITE,
+            SINGULAR or TOO_SLOW.
         t_stop : float
         n_samples : int
             Rows of ``samples`` written.
@@ -106,6 +108,7 @@ class CompiledPath:
             self._work, self._system, method, t0, self._y, t_bound, self._phase, self._push, self._floor, self._force_tol,
             self.gap_tolerance, rtol, atol, self._grid + 8 * first_sample, self.n_grid - first_sample,
             self._samples + self._row * first_sample, *self._integrate_out, self._y, *self._integrate_tail,
+            max_seconds,
         )
         return status, self.t_stop.value, self.n_sampled.value
 
@@ -133,8 +136,7 @@ class CompiledPath:
         if status == -1:
             raise singular_matrix_error()
         if status == -2:
-            raise RuntimeError(f"contact resolution at t = {t:.17g} s did not settle after "
-                               f"{self.iterations.value} passes")
+            raise UnsettledInstant(t, self.iterations.value)
         n = self.n_events.value
         events = list(zip(self.event_contact[:n].tolist(), self.event_kind[:n].tolist(),
                           self.event_speed[:n].tolist()))

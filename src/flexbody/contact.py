@@ -24,7 +24,7 @@ import numpy as np
 from .constants import FREE, HELD, PUSHED
 from .model import Model
 
-__all__ = ["FREE", "HELD", "PUSHED", "Event", "Phases", "Resolution", "resolve"]
+__all__ = ["FREE", "HELD", "PUSHED", "Event", "Phases", "Resolution", "UnsettledInstant", "resolve"]
 
 
 @dataclass
@@ -54,6 +54,14 @@ class Phases:
         """Take ``other``'s values into these arrays (whose addresses C may hold)."""
         for name in ("phase", "floor", "push", "push_until"):
             getattr(self, name)[:] = getattr(other, name)
+
+
+class UnsettledInstant(RuntimeError):
+    """The fixed point at an event instant did not settle (contacts kept changing phase)."""
+
+    def __init__(self, t: float, passes: int) -> None:
+        super().__init__(f"contact resolution at t = {t:.17g} s did not settle after {passes} passes: contacts kept "
+                         "impacting and releasing at the same instant; tighten --rtol/--atol.")
 
 
 @dataclass
@@ -166,7 +174,7 @@ def resolve(
         else:
             events.append(Event(t, c, "liftoff"))
     else:
-        raise RuntimeError(f"contact resolution at t = {t:.17g} s did not settle after {iterations} passes")
+        raise UnsettledInstant(t, iterations)
     # A free contact too close to its floor to be armed (released on the ground, or left at
     # -1e-16 by round-off) gets a floor a hair below: its next event is a real approach.
     gaps = model.gaps(y[: model.nq], p)

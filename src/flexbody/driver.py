@@ -22,9 +22,10 @@ from scipy.integrate import BDF, DOP853, LSODA, RK23, RK45, Radau
 
 from . import __version__
 from .compiled import IMPACT, CompiledPath
-from .contact import HELD, PUSHED, Event, Phases, resolve
-from .events import EventFunctions, locate
+from .constants import EVENT, NON_FINITE, SINGULAR, STEP_COLLAPSE, TOO_SLOW
 from .assembly import AssembledModel
+from .contact import HELD, PUSHED, Event, Phases, UnsettledInstant, resolve
+from .events import EventFunctions, locate
 from .model import Model, load_model
 from .result import STATUSES, SimulationResult
 from .scene import (
@@ -40,6 +41,9 @@ from .state import initial_coordinates
 SOLVERS = {"RK45": RK45, "RK23": RK23, "DOP853": DOP853, "Radau": Radau, "BDF": BDF, "LSODA": LSODA}
 IMPLICIT = ("Radau", "BDF", "LSODA")
 
+#: Above these a run is flagged in ``stats["warnings"]``: relative energy drift, and rtol
+#: (looser tolerances can change the event sequence).
+DRIFT_WARNING, LOOSE_RTOL = 1e-3, 1e-4
 #: A particle with more impacts than this within CHATTER_WINDOW seconds is chattering.
 CHATTER_IMPACTS, CHATTER_WINDOW = 25, 1e-3
 #: Event instants closer than this (s) count as no progress; this many in a row is a failure.
@@ -56,6 +60,18 @@ class SimulationFailed(Exception):
 
 def _non_finite(t: float) -> tuple[str, str]:
     return "blow_up", f"the state became non-finite at t = {t:.9g} s; tighten --rtol/--atol or use an implicit method."
+
+
+def _lowest_gap(positions: np.ndarray, grounds) -> float:
+    """The lowest gap of any particle to any ground over samples ``positions (nt, n, dim)``."""
+    if not positions.size:
+        return np.inf
+    return min(float(((positions - np.asarray(g.point)) @ np.asarray(g.normal)).min()) for g in grounds)
+
+
+def _too_slow(t: float) -> tuple[str, str]:
+    return "too_slow", (f"stopped at t = {t:.6g} s: the run exceeded its max_wall_time. If the scene is very stiff "
+                        "(tiny steps), try an implicit method (--method Radau or BDF) or a softer body.")
 
 
 def _dense(matrix) -> np.ndarray:
@@ -182,18 +198,22 @@ class _Run:
         """The same as :meth:`segment_scipy`, in one call of the generated C integrator."""
         s, c = self.settings, self.compiled
         start = self.n_samples
-        status, t_stop, n_new = c.integrate(COMPILED_METHODS.index(s.method), t0, t_bound, s.rtol, s.atol, start)
+        budget = max(0.0, self.deadline - time.perf_counter())
+        status, t_stop, n_new = c.integrate(COMPILED_METHODS.index(s.method), t0, t_bound, s.rtol, s.atol, start,
+                                            budget)
         self.keep_samples(start, start + n_new)
         self.min_gap = c.min_gap.value
         if status < 0:
             raise SimulationFailed(*self.COMPILED_FAILURES[status](s.method, t_stop))
-        return _Stop(t_stop, c.touching, c.leaving, status == 1)
+        return _Stop(t_stop, c.touching, c.leaving, status == EVENT)
 
     COMPILED_FAILURES = {
-        -1: lambda m, t: ("step_size_collapse", f"{m} failed at t = {t:.9g} s: the step size collapsed. The model "
-                          "is too stiff for this method or tolerance: try --method Radau or BDF, or a looser --rtol."),
-        -2: lambda m, t: _non_finite(t),
-        -3: lambda m, t: ("blow_up", f"at t = {t:.9g} s: mass or contact matrix not positive definite."),
+        STEP_COLLAPSE: lambda m, t: (
+            "step_size_collapse", f"{m} failed at t = {t:.9g} s: the step size collapsed. The model is too stiff for "
+            "this method or tolerance: try --method Radau or BDF, or a looser --rtol."),
+        NON_FINITE: lambda m, t: _non_finite(t),
+        SINGULAR: lambda m, t: ("blow_up", f"at t = {t:.9g} s: mass or contact matrix not positive definite."),
+        TOO_SLOW: lambda m, t: _too_slow(t),
     }
 
     def segment_scipy(self, t0: float, t_bound: float) -> _Stop:
@@ -285,11 +305,13 @@ class _Run:
         gaps, vn, _ = model.contact_state(self.y, self.p, np.zeros(model.n_contacts, np.intc), np.zeros(model.n_contacts))
         resting = (gaps <= self.gap_tolerance) & (vn == 0.0)
         phases.phase[resting] = HELD
-        none = np.zeros(model.n_contacts, bool)
-        self.resolve_at(0.0, none, none)
+        # Sample 0 is the initial state as given; what the instant at t = 0 does (a particle
+        # starting on the ground while approaching it is stopped) is in the ledger from there on.
         self.Y[0] = self.y
         self.keep_samples(0, 1)
+        none = np.zeros(model.n_contacts, bool)
         try:
+            self.resolve_at(0.0, none, none)
             while t < s.t_end:
                 t_bound = min(s.t_end, float(phases.push_until.min()))  # a thesis-mode window ends a segment
                 stop = self.segment(t, t_bound)
@@ -303,11 +325,15 @@ class _Run:
                 self.check_guards(t, self.resolve_at(t, touching, leaving))
         except SimulationFailed as failure:
             return failure.status, failure.message
+        except FloatingPointError as exc:  # a singular mass or contact matrix at an event instant
+            return "blow_up", f"at t = {t:.9g} s: {exc}; the contacts at this instant are not independent."
+        except UnsettledInstant as exc:
+            return "no_progress", str(exc)
         return "success", STATUSES["success"]
 
     def check_deadline(self, t: float) -> None:
         if time.perf_counter() > self.deadline:
-            raise SimulationFailed("too_slow", f"stopped at t = {t:.6g} s: the run exceeded its max_wall_time.")
+            raise SimulationFailed(*_too_slow(t))
 
     def check_guards(self, t: float, new_events: list[Event]) -> None:
         self.check_deadline(t)
@@ -335,6 +361,23 @@ class _Run:
                 )
 
     # ------------------------------------------------------------------ results
+    def untrustworthy(self, relative_drift: float, penetration: float, min_force: float) -> list[str]:
+        """What makes this run's numbers untrustworthy, one sentence each (empty when nothing)."""
+        s, out = self.settings, []
+        if relative_drift > DRIFT_WARNING:
+            out.append(f"the energy ledger drifted by {relative_drift:.2g} of the energy (more than {DRIFT_WARNING:g}): "
+                       "tighten --rtol/--atol")
+        if penetration > 10 * self.gap_tolerance:
+            out.append(f"a particle went {penetration:.2g} m below a ground between event checks (an impact was "
+                       "missed at this tolerance): tighten --rtol/--atol")
+        if min_force < -float(self.force_tolerance.max(initial=0.0)):
+            out.append(f"a held contact's force turned negative ({min_force:.2g} N) between event checks (a lift-off "
+                       "was missed at this tolerance): tighten --rtol/--atol")
+        if s.rtol > LOOSE_RTOL:
+            out.append(f"rtol = {s.rtol:g} is loose: impacts and lift-offs can differ from a tight run's; check the "
+                       "event count against a run with a tighter --rtol")
+        return out
+
     def result(self, status: str, message: str, wall: float) -> SimulationResult:
         model, p, s = self.model, self.p, self.settings
         nq, nu = model.nq, model.nu
@@ -362,7 +405,14 @@ class _Run:
         )
         total = result.total_energy
         drift = float(np.abs(total - total[0]).max()) if len(total) else 0.0
+        relative_drift = drift / max(abs(float(total[0])), float(result.kinetic.max()), 1e-300) if len(total) else 0.0
+        # Penetration is also measured on the samples: between event checks a loose
+        # tolerance can let a particle dip below a ground with no event.
+        self.min_gap = min(self.min_gap, _lowest_gap(X, self.scene.grounds))
+        held_force = lam[held.astype(bool)]
+        min_force = float(held_force.min()) if held_force.size else 0.0
         impacts = [e for e in ev if e.kind == "impact"]
+        warnings = self.untrustworthy(relative_drift, max(0.0, -self.min_gap), min_force)
         result.stats = {
             "scene": self.scene.name, "source": self.scene.source,
             "method": s.method, "rtol": s.rtol, "atol": s.atol, "backend": model.backend,
@@ -378,7 +428,9 @@ class _Run:
             "max_penetration_m": max(0.0, -self.min_gap),
             "energy_initial_J": float(total[0]) if len(total) else 0.0,
             "energy_drift_J": drift,
-            "energy_drift_relative": drift / max(abs(float(total[0])), float(result.kinetic.max()), 1e-300),
+            "energy_drift_relative": relative_drift,
+            "min_held_contact_force_N": min_force,
+            "warnings": warnings,
             "model_digest": model.digest,
             "versions": {"flexbody": __version__, "numpy": np.__version__, "scipy": scipy.__version__},
         }

@@ -31,7 +31,7 @@ SIGNATURES = {
     "fb_work_new": (_ptr, [_int, _int]),
     "fb_work_free": (None, [_ptr]),
     "fb_integrate": (_int, [_ptr, _ptr, _int, _double, _ptr, _double, _ptr, _ptr, _ptr, _ptr, _double, _double,
-                            _double, _ptr, _int, _ptr, _ptr, _ptr, _ptr, _ptr, _ptr, _ptr, _ptr, _ptr]),
+                            _double, _ptr, _int, _ptr, _ptr, _ptr, _ptr, _ptr, _ptr, _ptr, _ptr, _ptr, _double]),
     "fb_resolve": (_int, [_ptr, _ptr, _double, _ptr, _ptr, _ptr, _ptr, _ptr, _ptr, _ptr, _double, _ptr, _ptr,
                           _int, _double, _ptr, _ptr, _ptr, _ptr, _ptr, _ptr, _ptr]),
     "fb_trajectory": (_int, [_ptr, _ptr, _long, _ptr, _ptr, _ptr, _ptr, _ptr, _ptr, _ptr]),
