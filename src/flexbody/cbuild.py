@@ -13,10 +13,9 @@ import os
 import platform
 import shutil
 import subprocess
-import tempfile
 from pathlib import Path
 
-from .paths import cache_root
+from .paths import cache_root, staged_file
 
 FLAGS = ("-O3", "-shared", "-fPIC", "-std=c99")  # -O3: the integrator's vector loops vectorise
 #: Used when the compiler accepts it: wider vector loops (measured ~10 % off the compiled
@@ -74,16 +73,12 @@ def library_path(model_dir: Path) -> Path:
     target = cache_root() / "lib" / f"{key}.so"
     if target.exists():
         return target
-    target.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(suffix=".so", dir=target.parent)
-    os.close(fd)
-    command = [cc, *options, "-I", str(model_dir), "-o", tmp, *map(str, sources), "-lm"]
-    run = subprocess.run(command, capture_output=True, text=True, check=False)
-    if run.returncode != 0:
-        os.unlink(tmp)
-        raise CompilationError(
-            f"compiling {model_dir}/*.c failed (exit {run.returncode}):\n$ {' '.join(command)}\n"
-            f"{run.stdout}{run.stderr}"
-        )
-    os.replace(tmp, target)  # atomic: a concurrent build never sees a half-written library
+    with staged_file(target, suffix=".so") as tmp:  # a concurrent build never sees a half-written library
+        command = [cc, *options, "-I", str(model_dir), "-o", str(tmp), *map(str, sources), "-lm"]
+        run = subprocess.run(command, capture_output=True, text=True, check=False)
+        if run.returncode != 0:
+            raise CompilationError(
+                f"compiling {model_dir}/*.c failed (exit {run.returncode}):\n$ {' '.join(command)}\n"
+                f"{run.stdout}{run.stderr}"
+            )
     return target
