@@ -349,14 +349,23 @@ def derive_on_demand(scene: Scene, formulation: str) -> Path:
     """Derive and generate ``scene``'s model into the cache, in a separate process.
 
     SymPy runs in a child process (with a fixed hash seed, for deterministic output), so
-    this process never imports it.
+    this process never imports it.  One line on standard error says what is happening
+    and roughly how long it takes.  The child ends with this process: it is killed if
+    this call is interrupted, and on Linux also if this process is killed
+    (:mod:`flexbody.subprocesses`).
     """
+    from .subprocesses import run_tied
+
     digest = scene.topology().digest(formulation)
     out = cache_root() / "models" / digest
+    n = scene.n_particles
+    # Measured (DESIGN.md §6): 16/32/64/100 particles take ~45/55/125/175 s to derive and compile.
+    estimate = 30 + 1.5 * n
+    print(f"deriving the equations of {scene.name} ({n} particles, formulation {formulation}) with SymPy; "
+          f"this usually takes ~{estimate:.0f} s (once: the model is cached in {out})", file=sys.stderr, flush=True)
     env = dict(os.environ, PYTHONHASHSEED="0")
-    command = [sys.executable, "-m", "derivation.ondemand", scene.topology().to_json(), formulation,
-               str(out), scene.source]
-    run = subprocess.run(command, capture_output=True, text=True, env=env, check=False)
+    args = [scene.topology().to_json(), formulation, str(out), scene.source]
+    run = run_tied("derivation.ondemand", args, env=env, capture=True)
     if run.returncode != 0:
         raise ModelError(f"deriving the model of {scene.source} failed:\n{run.stdout}{run.stderr}")
     return out
