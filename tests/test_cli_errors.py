@@ -263,6 +263,8 @@ def test_killing_run_while_it_derives_ends_the_derivation(tmp_path):
         while any(map(_alive, children)) and time.monotonic() < deadline:
             time.sleep(0.05)
         assert not any(map(_alive, children)), "the derivation outlived flexbody run"
+        said = parent.stderr.read()
+        assert "deriving the equations of ring (30 particles, formulation particles) with SymPy" in said, said
     finally:
         parent.kill()
         for pid in filter(_alive, children):  # an orphan is no longer our child: kill it by its id

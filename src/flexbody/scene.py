@@ -106,7 +106,9 @@ class Body:
         ``relative``: f = c (V_j - V_i) (thesis eq. 3.8); ``axial``: only the component of
         the relative velocity along the link (a central force, conserves angular momentum).
     position : tuple, (dim,)
-        Origin of T in N (q1, q2).
+        Origin of T in N (q1, q2): the centre of a ring or ellipse, the midpoint of a chain,
+        the origin of the coordinates of a polygon's ``vertices`` or of explicit
+        ``particles`` (see :mod:`flexbody.presets`).
     angle : float
         Rotation of T about N3 (q3), rad.
     velocity, angular_velocity : rigid-body initial velocity of T's origin and spin.
