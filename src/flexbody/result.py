@@ -92,6 +92,12 @@ class SimulationResult:
         replaces ``out_dir`` whole (:func:`flexbody.paths.staged_folder`): a crash leaves
         either the previous folder or the new one, never a mix, and the folder holds only
         this result's files (no figures of an earlier run beside it).
+
+        Raises
+        ------
+        flexbody.errors.InputError
+            If ``out_dir`` cannot be a result folder (see :func:`flexbody.paths.check_output_dir`):
+            a file, a folder of other files (it would be deleted), the current folder.
         """
         check_output_dir(str(out_dir), option="out_dir")  # never replace a folder of other files
         with staged_folder(out_dir) as staging:
