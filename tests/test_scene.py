@@ -118,3 +118,22 @@ def test_topology_ignores_parameter_values():
     c = make_scene(body(damper="axial")).topology()
     assert a.digest("particles") == b.digest("particles") != c.digest("particles")
     assert a.digest("particles") != a.digest("floating")
+
+
+def test_chain_position_is_its_midpoint_and_a_quarter_turn_stands_it_on_particle_0():
+    chain = make_scene(body(particles=None, links=None, shape="chain", count=3, spacing=0.1, position=[2.0, 1.0],
+                            angle=np.pi / 2))
+    x = chain.initial_positions()
+    np.testing.assert_allclose(x, [[2.0, 0.9], [2.0, 1.0], [2.0, 1.1]], atol=1e-15)
+
+
+def test_polygon_diagonals_are_the_second_neighbours_and_a_centre_replaces_them():
+    hexagon = [[np.cos(a), np.sin(a)] for a in np.arange(6) * np.pi / 3]
+    plain = make_scene(body(particles=None, links=None, shape="polygon", vertices=hexagon, position=[0, 2]))
+    diagonals = {tuple(sorted(link)) for link in plain.bodies[0].links} - {(k, (k + 1) % 6) for k in range(6)} \
+        - {(0, 5)}
+    assert diagonals == {(0, 2), (1, 3), (2, 4), (3, 5), (0, 4), (1, 5)}  # two triangles, not all nine
+    centred = make_scene(body(particles=None, links=None, shape="polygon", vertices=hexagon, center=True,
+                              position=[0, 2]))
+    assert len(centred.bodies[0].links) == 12  # 6 edges + 6 spokes
+    np.testing.assert_allclose(centred.bodies[0].points[1:], hexagon)  # vertices stay where given in T

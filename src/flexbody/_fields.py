@@ -11,6 +11,8 @@ import math
 from collections.abc import Callable, Mapping
 from typing import Any
 
+from .errors import shown
+
 _MISSING = object()
 
 
@@ -21,8 +23,8 @@ class Problems:
         self.items: list[str] = []
 
     def add(self, field: str, value: Any, rule: str) -> None:
-        shown = "missing" if value is _MISSING else repr(value)
-        self.items.append(f"`{field}` = {shown}: {rule}")
+        text = "missing" if value is _MISSING else shown(value)
+        self.items.append(f"`{field}` = {text}: {rule}")
 
     def __bool__(self) -> bool:
         return bool(self.items)
@@ -30,6 +32,16 @@ class Problems:
 
 def _is_number(value: Any) -> bool:
     return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+def _finite(value: Any) -> bool:
+    """A number that is a finite float: not a bool, inf or nan, nor an integer too large for a float."""
+    if not _is_number(value):
+        return False
+    try:
+        return math.isfinite(value)
+    except OverflowError:  # an integer literal of 400 digits
+        return False
 
 
 class TableReader:
@@ -72,23 +84,31 @@ class TableReader:
             return None
         if value is None:
             return None
-        if not _is_number(value) or not math.isfinite(value):
-            self.fail(key, value, "must be a finite number")
+        if not _finite(value):
+            self.fail(key, value, "must be a finite number (a float: at most about 1.8e308)")
             return None
         if check is not None and not check(float(value)):
             self.fail(key, value, rule)
             return None
         return float(value)
 
-    def integer(self, key: str, default: Any = _MISSING, *, minimum: int = 0) -> int | None:
+    def integer(self, key: str, default: Any = _MISSING, *, minimum: int = 0, maximum: int | None = None,
+                why: str = "") -> int | None:
+        """An integer in ``[minimum, maximum]``; ``why`` explains the maximum."""
         value = self.raw(key, default)
+        rule = f"an integer >= {minimum}" if maximum is None else f"an integer in [{minimum}, {maximum}]{why}"
         if value is _MISSING:
-            self.fail(key, value, f"is required (an integer >= {minimum})")
+            self.fail(key, value, f"is required ({rule})")
             return None
         if value is None:
             return None
-        if not isinstance(value, int) or isinstance(value, bool) or value < minimum:
-            self.fail(key, value, f"must be an integer >= {minimum}")
+        if (
+            not isinstance(value, int)
+            or isinstance(value, bool)
+            or value < minimum
+            or (maximum is not None and value > maximum)
+        ):
+            self.fail(key, value, f"must be {rule}")
             return None
         return value
 
@@ -123,7 +143,7 @@ class TableReader:
         if (
             not isinstance(value, (list, tuple))
             or len(value) != length
-            or not all(_is_number(v) and math.isfinite(v) for v in value)
+            or not all(_finite(v) for v in value)
         ):
             self.fail(key, value, f"must be a list of {length} finite numbers")
             return None
@@ -141,7 +161,7 @@ class TableReader:
             or not all(
                 isinstance(v, (list, tuple))
                 and len(v) == length
-                and all(_is_number(x) and math.isfinite(x) for x in v)
+                and all(_finite(x) for x in v)
                 for v in value
             )
         ):
@@ -165,7 +185,7 @@ class TableReader:
         if (
             not isinstance(values, (list, tuple))
             or (count is not None and len(values) != count)
-            or not all(_is_number(v) and math.isfinite(v) for v in values)
+            or not all(_finite(v) for v in values)
         ):
             self.fail(key, value, rule)
             return None

@@ -14,10 +14,9 @@ import platform
 import shutil
 import subprocess
 import sys
-import tempfile
 from pathlib import Path
 
-from .paths import cache_root, generated_root
+from .paths import cache_root, generated_root, staged_file
 
 FLAGS = ("-O3", "-shared", "-fPIC", "-std=c99")  # -O3: the integrator's vector loops vectorise
 #: Used when the compiler accepts it: wider vector loops (measured ~10 % off the compiled
@@ -79,20 +78,16 @@ def build(sources: list[Path], include_dirs: list[Path], what: str, announce: st
     target = cache_root() / "lib" / f"{key}.so"
     if target.exists():
         return target
-    target.parent.mkdir(parents=True, exist_ok=True)
     if announce:
         print(announce, file=sys.stderr, flush=True)
-    fd, tmp = tempfile.mkstemp(suffix=".so", dir=target.parent)
-    os.close(fd)
     includes = [arg for d in include_dirs for arg in ("-I", str(d))]
-    command = [cc, *options, *includes, "-o", tmp, *map(str, sources), "-lm"]
-    run = subprocess.run(command, capture_output=True, text=True, check=False)
-    if run.returncode != 0:
-        os.unlink(tmp)
-        raise CompilationError(
-            f"compiling {what} failed (exit {run.returncode}):\n$ {' '.join(command)}\n{run.stdout}{run.stderr}"
-        )
-    os.replace(tmp, target)  # atomic: a concurrent build never sees a half-written library
+    with staged_file(target, suffix=".so") as tmp:  # a concurrent build never sees a half-written library
+        command = [cc, *options, *includes, "-o", str(tmp), *map(str, sources), "-lm"]
+        run = subprocess.run(command, capture_output=True, text=True, check=False)
+        if run.returncode != 0:
+            raise CompilationError(
+                f"compiling {what} failed (exit {run.returncode}):\n$ {' '.join(command)}\n{run.stdout}{run.stderr}"
+            )
     return target
 
 

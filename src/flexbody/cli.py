@@ -1,22 +1,31 @@
 """The ``flexbody`` command: run, derive, show, bench.
 
-Every command is a thin wrapper over library functions.  A user mistake (bad scene,
-bad option) prints one clear error and exits 2, without a traceback and without writing
-anything; a failed simulation exits 1 and says why.
+Every command is a thin wrapper over library functions.  Exit codes:
+
+* 0: done;
+* 2: a user mistake (bad scene, option or output folder, :class:`flexbody.errors.InputError`):
+  one clear error, no traceback, nothing written;
+* 1: a failed simulation, derivation or compilation (it says why; nothing written), or a
+  bug in flexbody (any other exception: its traceback and a request to report it).
+
+Only the standard library is imported until a command runs, so ``--help`` and argument
+errors answer at once.
 """
 
 from __future__ import annotations
 
 import argparse
-import os
-import subprocess
 import sys
+import traceback
 import warnings
-from pathlib import Path
 
-from .scene import BACKENDS, FORMULATIONS, IMPACT_MODES, METHODS, SceneError, load_scene
+from .choices import BACKENDS, DEFAULT_MAX_WALL_TIME, FORMULATIONS, IMPACT_MODES, METHODS
+from .errors import InputError
 
-EXIT_FAILED, EXIT_USAGE = 1, 2
+EXIT_FAILED, EXIT_USAGE, EXIT_INTERRUPTED = 1, 2, 130
+BUG = "this is a bug in flexbody: please report it with the command and scene"
+#: Options that take a number, which may be negative (``--rtol -1e-6`` must reach the range check).
+NUMERIC_OPTIONS = ("--rtol", "--atol", "--impact-dt", "--t-end", "--output-dt", "--max-wall-time", "--repeats")
 
 
 def _add_scene(parser: argparse.ArgumentParser) -> None:
@@ -27,22 +36,35 @@ def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="flexbody",
         description="Flexible bodies as particles, springs and dampers: derive, inspect and simulate.",
+        epilog="Exit codes: 0 done; 1 the simulation (or derivation) failed; 2 a mistake in the scene or options.",
     )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
 
-    run = sub.add_parser("run", help="simulate a scene and write result.npz, summary.json and figures",
-                         description="Simulate a scene; write DIR/result.npz, DIR/summary.json and figures.")
+    run = sub.add_parser(
+        "run", help="simulate a scene and write result.npz, summary.json and figures",
+        description="Simulate a scene; write DIR/result.npz, DIR/summary.json and figures.  DIR is replaced "
+                    "whole, in one step, when the run succeeds: it must be new, empty or an earlier result.  "
+                    "Options override the scene's [simulation] table and are checked before any work.",
+    )  # fmt: skip
     _add_scene(run)
-    run.add_argument("--out", type=Path, required=True, metavar="DIR", help="output folder")
+    run.add_argument("--out", required=True, metavar="DIR",
+                     help="output folder (new, empty, or an earlier result, which is replaced)")
     run.add_argument("--no-figures", action="store_true", help="skip the figures and the animation")
     run.add_argument("--method", choices=METHODS, help="integration method: dopri5 or dop853 (compiled C; default dopri5) or a SciPy solve_ivp method")
-    run.add_argument("--rtol", type=float, help="relative tolerance")
-    run.add_argument("--atol", type=float, help="absolute tolerance")
+    run.add_argument("--rtol", type=float, metavar="X", help="relative tolerance, in [1e-14, 1)")
+    run.add_argument("--atol", type=float, metavar="X", help="absolute tolerance, in (0, 1)")
     run.add_argument("--backend", choices=BACKENDS, help="c (compiled, default) or numpy")
     run.add_argument("--formulation", choices=FORMULATIONS, help="particles (default) or floating")
     run.add_argument("--impact", choices=IMPACT_MODES, help="instant (default) or thesis (eq. 4.6)")
-    run.add_argument("--impact-dt", type=float, help="ΔT of the thesis impact mode (s)")
-    run.add_argument("--t-end", type=float, help="end time (s)")
+    run.add_argument("--impact-dt", type=float, metavar="S",
+                     help="ΔT of the thesis impact mode (s, > 0); only with impact thesis (from --impact or the "
+                          "scene), an error otherwise")
+    run.add_argument("--t-end", type=float, metavar="S", help="end time (s)")
+    run.add_argument("--output-dt", type=float, metavar="S",
+                     help="output sample interval (s), <= t_end; at most 10 million samples")
+    run.add_argument("--max-wall-time", type=float, default=DEFAULT_MAX_WALL_TIME, metavar="S",
+                     help=f"stop a run that takes longer than this (s; default {DEFAULT_MAX_WALL_TIME:g}; 'inf' for "
+                          "no limit) with status too_slow and exit 1")
     run.add_argument("--quiet", action="store_true", help="no progress bar")
 
     derive = sub.add_parser("derive", help="derive and generate a scene's model into generated/",
@@ -55,7 +77,7 @@ def _parser() -> argparse.ArgumentParser:
                         help="derive the element kernels and render the runtime (generated/kernels, generated/runtime)")
     derive.add_argument("--formulation", choices=FORMULATIONS, action="append",
                         help="particles or floating (repeatable; default: both)")
-    derive.add_argument("--out", type=Path, metavar="DIR", help="parent folder (default: the project's generated/)")
+    derive.add_argument("--out", metavar="DIR", help="parent folder (default: the project's generated/)")
     derive.add_argument("--check", action="store_true", help="exit 1 if the generated files are stale; write nothing")
 
     show = sub.add_parser("show", help="print a scene's derived equations of motion",
@@ -71,14 +93,51 @@ def _parser() -> argparse.ArgumentParser:
                                        "(stability), resolution study (resolution), cost vs size (scale); JSON and PNG in --out.")
     bench.add_argument("--study", choices=("wp", "stability", "resolution", "mujoco", "scale"), action="append",
                        help="which study (repeatable; default: all; mujoco needs flexbody[mujoco])")
-    bench.add_argument("--out", type=Path, default=Path("bench"), metavar="DIR", help="output folder")
+    bench.add_argument("--out", default="bench", metavar="DIR", help="output folder")
     bench.add_argument("--repeats", type=int, default=5, help="timing repeats (median is reported)")
     bench.add_argument("--quick", action="store_true", help="fewer cases and repeats (about a minute)")
     return parser
 
 
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
+def _attach_negative_numbers(argv: list[str]) -> list[str]:
+    """``--rtol -1e-6`` -> ``--rtol=-1e-6``.
+
+    argparse takes ``-1e-6`` for an option and says "expected one argument"; joined, the
+    value reaches the range check and gets the same message as any other bad value.
+    """
+    out: list[str] = []
+    k = 0
+    while k < len(argv):
+        if argv[k] == "--":
+            return out + argv[k:]
+        if argv[k] in NUMERIC_OPTIONS and k + 1 < len(argv) and argv[k + 1].startswith("-") and _is_number(argv[k + 1]):
+            out.append(f"{argv[k]}={argv[k + 1]}")
+            k += 2
+        else:
+            out.append(argv[k])
+            k += 1
+    return out
+
+
 def _derive(args: argparse.Namespace) -> int:
-    command = [sys.executable, "-m", "derivation"] + ([args.scene] if args.scene else [])
+    import os
+
+    from .subprocesses import run_tied
+
+    if args.check and not args.out and args.scene:
+        note = _outside_package_note(args.scene)
+        if note:
+            print(note)
+            return 0
+    command = [args.scene] if args.scene else []
     if args.runtime:
         command.append("--runtime")
     for formulation in args.formulation or []:
@@ -87,11 +146,42 @@ def _derive(args: argparse.Namespace) -> int:
         command += ["--out", str(args.out)]
     if args.check:
         command.append("--check")
-    return subprocess.call(command, env=dict(os.environ, PYTHONHASHSEED="0"))
+    return run_tied("derivation", command, env=dict(os.environ, PYTHONHASHSEED="0")).returncode
+
+
+def _outside_package_note(scene_arg: str) -> str:
+    """For ``derive --check`` of a user's own scene: where its model lives; "" for a bundled scene.
+
+    Only the bundled scenes have committed models in ``generated/``; any other scene's
+    model is derived on demand into the cache and has nothing there to be stale against.
+    """
+    from importlib import resources
+    from pathlib import Path
+
+    from .model import find_model_dir
+    from .paths import cache_root
+    from .scene import load_scene, resolve_scene_path
+
+    bundled = Path(str(resources.files("flexbody") / "scenes")).resolve()
+    if resolve_scene_path(scene_arg).resolve().parent == bundled:
+        return ""
+    scene = load_scene(scene_arg)
+    lines = [f"{scene_arg}: not a bundled scene, so it has no committed model in generated/ to check."]
+    lines.append("  particles: runs assembled from the element kernels (generated/kernels): nothing to derive or "
+                 "check; `flexbody show` derives its equations whole on request")
+    folder = find_model_dir(scene, "floating")
+    where = f"derived, in {folder}" if folder else \
+        f"not derived yet; `flexbody run --formulation floating` derives it on first use into {cache_root() / 'models'}/"
+    lines.append(f"  floating: {where}")
+    lines.append("Models in the cache are keyed by the scene's topology (particles, links, dampers, grounds) and are "
+                 "never stale for it; to write the files somewhere to read or commit, use "
+                 f"`flexbody derive {scene_arg} --out DIR` (then `--check --out DIR` compares against DIR).")
+    return "\n".join(lines)
 
 
 def _show(args: argparse.Namespace) -> int:
     from .model import SHOW_MAX_PARTICLES, derivation_seconds, find_model_dir, load_derived_model
+    from .scene import load_scene
 
     scene = load_scene(args.scene)
     formulation = args.formulation or scene.simulation.formulation
@@ -113,30 +203,57 @@ def _show(args: argparse.Namespace) -> int:
     return 0
 
 
+def _run(args: argparse.Namespace) -> int:
+    from .runner import run_command
+
+    return run_command(args)
+
+
+def _bench(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from .bench import bench_command
+
+    args.out = Path(args.out)
+    return bench_command(args)
+
+
+COMMANDS = {"run": _run, "derive": _derive, "show": _show, "bench": _bench}
+
+
+def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    """A warning as one line for a user, without the source line Python would print."""
+    print(f"warning: {message}", file=sys.stderr)
+
+
+def _known_failure(exc: Exception) -> bool:
+    """A failure flexbody reports on purpose (not a bug): a derivation or a compilation failed."""
+    known = [getattr(sys.modules.get("flexbody.model"), "ModelError", None),
+             getattr(sys.modules.get("flexbody.cbuild"), "CompilationError", None)]
+    return any(isinstance(exc, kind) for kind in known if kind is not None)
+
+
 def main(argv: list[str] | None = None) -> int:
-    args = _parser().parse_args(argv)
+    argv = sys.argv[1:] if argv is None else list(argv)
+    args = _parser().parse_args(_attach_negative_numbers(argv))
     try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("default")
-            if args.command == "derive":
-                return _derive(args)
-            if args.command == "show":
-                return _show(args)
-            if args.command == "run":
-                from .runner import run_command
-
-                return run_command(args)
-            if args.command == "bench":
-                from .bench import bench_command
-
-                return bench_command(args)
-    except SceneError as exc:
+        with warnings.catch_warnings():  # restores showwarning afterwards
+            warnings.simplefilter("default")  # each distinct warning once
+            warnings.showwarning = _show_warning
+            return COMMANDS[args.command](args)
+    except InputError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_USAGE
-    except ValueError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return EXIT_USAGE
-    return EXIT_USAGE
+    except KeyboardInterrupt:
+        print("\ninterrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    except Exception as exc:  # noqa: BLE001 - the last resort: tell a failure from a bug
+        if _known_failure(exc):
+            print(f"error: {exc}", file=sys.stderr)
+        else:
+            traceback.print_exc()
+            print(f"error: {BUG}", file=sys.stderr)
+        return EXIT_FAILED
 
 
 if __name__ == "__main__":

@@ -79,7 +79,16 @@ def _dense(matrix) -> np.ndarray:
 
 
 def _settings(scene: Scene, overrides: dict) -> SimulationSettings:
-    """The scene's settings with the given overrides, each validated (ValueError names it)."""
+    """The scene's settings with the given overrides, each validated.
+
+    Raises
+    ------
+    flexbody.errors.InputError
+        Listing every bad option (name, value, rule), as for a scene file.
+    """
+    from .errors import InputError, shown  # here, not at the top: this function is the validation's only user
+    from .scene import timing_problems
+
     s = scene.simulation
     values = {k: getattr(s, k) for k in s.__dataclass_fields__}
     for key, value in overrides.items():
@@ -92,21 +101,20 @@ def _settings(scene: Scene, overrides: dict) -> SimulationSettings:
         problems.append(f"`method` = {values['method']!r}: is compiled C and needs backend 'c'; with backend "
                         f"{values['backend']!r} use a SciPy method ({', '.join(METHODS[len(COMPILED_METHODS):])})")
     if values["method"] not in METHODS:
-        problems.append(f"`method` = {values['method']!r}: must be one of {list(METHODS)}")
-    if not 1e-14 <= values["rtol"] < 1:
+        problems.append(f"`method` = {shown(values['method'])}: must be one of {list(METHODS)}")
+    if not 1e-14 <= values["rtol"] < 1:  # nan fails every comparison
         problems.append(f"`rtol` = {values['rtol']!r}: must be in [1e-14, 1)")
     if not 0 < values["atol"] < 1:
         problems.append(f"`atol` = {values['atol']!r}: must be in (0, 1)")
-    if not (np.isfinite(values["t_end"]) and values["t_end"] > 0):
-        problems.append(f"`t_end` = {values['t_end']!r}: must be a finite number > 0 (s)")
-    if not (np.isfinite(values["output_dt"]) and values["output_dt"] > 0):
-        problems.append(f"`output_dt` = {values['output_dt']!r}: must be a finite number > 0 (s)")
     if values["impact"] not in IMPACT_MODES:
-        problems.append(f"`impact` = {values['impact']!r}: must be one of {list(IMPACT_MODES)}")
-    if values["impact"] == "thesis" and not (values["impact_dt"] and values["impact_dt"] > 0):
-        problems.append(f"`impact_dt` = {values['impact_dt']!r}: the thesis impact mode needs a ΔT > 0 (s)")
+        problems.append(f"`impact` = {shown(values['impact'])}: must be one of {list(IMPACT_MODES)}")
+    if values["impact"] == "instant":
+        # The scene's ΔT is unused when the mode is switched to instant; a ΔT given as an option is a mistake.
+        values["impact_dt"] = overrides.get("impact_dt")
+    problems += [f"`{key}` = {value!r}: {rule}" for key, value, rule in
+                 timing_problems(values["t_end"], values["output_dt"], values["impact"], values["impact_dt"])]
     if problems:
-        raise ValueError("invalid simulation options:\n" + "\n".join(f"  - {p}" for p in problems))
+        raise InputError("invalid simulation options:\n" + "\n".join(f"  - {p}" for p in problems))
     return SimulationSettings(**values)
 
 

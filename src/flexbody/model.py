@@ -14,13 +14,13 @@ import importlib.util
 import json
 import math
 import os
-import subprocess
 import sys
 from pathlib import Path
 
 import numpy as np
 
 from . import cbuild, dynamics, runtime
+from .errors import InputError
 from .paths import cache_root, generated_root, model_dir_name
 from .scene import Scene, load_scene
 
@@ -412,14 +412,22 @@ def derive_on_demand(scene: Scene, formulation: str) -> Path:
     """Derive and generate ``scene``'s model into the cache, in a separate process.
 
     SymPy runs in a child process (with a fixed hash seed, for deterministic output), so
-    this process never imports it.
+    this process never imports it.  One line on standard error says what is happening
+    and roughly how long it takes.  The child ends with this process: it is killed if
+    this call is interrupted, and on Linux also if this process is killed
+    (:mod:`flexbody.subprocesses`).
     """
+    from .subprocesses import run_tied
+
     digest = scene.topology().digest(formulation)
     out = cache_root() / "models" / digest
+    n = scene.n_particles
+    estimate = derivation_seconds(n, formulation)
+    print(f"deriving the equations of {scene.name} ({n} particles, formulation {formulation}) with SymPy; "
+          f"this usually takes ~{estimate:.0f} s (once: the model is cached in {out})", file=sys.stderr, flush=True)
     env = dict(os.environ, PYTHONHASHSEED="0")
-    command = [sys.executable, "-m", "derivation.ondemand", scene.topology().to_json(), formulation,
-               str(out), scene.source]
-    run = subprocess.run(command, capture_output=True, text=True, env=env, check=False)
+    args = [scene.topology().to_json(), formulation, str(out), scene.source]
+    run = run_tied("derivation.ondemand", args, env=env, capture=True)
     if run.returncode != 0:
         raise ModelError(f"deriving the model of {scene.source} failed:\n{run.stdout}{run.stderr}")
     return out
@@ -448,10 +456,10 @@ def _scene_and_formulation(scene, backend: str, formulation: str | None) -> tupl
     if not isinstance(scene, Scene):
         scene = load_scene(scene)
     if backend not in BACKENDS:
-        raise ValueError(f"`backend` = {backend!r}: must be one of {sorted(BACKENDS)}")
+        raise InputError(f"`backend` = {backend!r}: must be one of {sorted(BACKENDS)}")
     formulation = formulation or scene.simulation.formulation
     if formulation not in ("particles", "floating"):
-        raise ValueError(f"`formulation` = {formulation!r}: must be 'particles' or 'floating'")
+        raise InputError(f"`formulation` = {formulation!r}: must be 'particles' or 'floating'")
     return scene, formulation
 
 
@@ -487,7 +495,7 @@ def load_model(scene: Scene | str | Path, backend: str = "c", formulation: str |
 
         return assembled_model(scene, backend)
     if scene.n_particles > FLOATING_MAX_PARTICLES:
-        raise ValueError(
+        raise InputError(
             f"`formulation` = 'floating' with {scene.n_particles} particles: the floating formulation is derived "
             f"whole per topology and is offered up to {FLOATING_MAX_PARTICLES} particles; use the particles "
             "formulation (the default), which runs any size at once"

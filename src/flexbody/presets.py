@@ -2,17 +2,29 @@
 
 Every preset returns ``(points, links)`` with ``points`` of shape (n, 2) in frame T and
 ``links`` a list of index pairs.  Index order is part of the contract (results are indexed
-by it):
+by it).  A body's ``position`` puts T's origin in N and ``angle`` turns T about it; where
+T's origin lies in each preset is said below.
 
 * ``ring`` / ``ellipse``: the centre particle (if any) is index 0, then the perimeter
   counter-clockwise starting on T's x-axis, which lies at the body's ``angle`` in N.
   Links: every perimeter neighbour pair, and a spoke from the centre to each perimeter
-  particle.
-* ``polygon``: the given vertices in order (centre first if ``center``); edges, plus
-  either spokes (with a centre) or second-neighbour braces (without one), so the shape
-  has stiffness against shear.
-* ``chain``: ``count`` particles on T's x-axis, ``spacing`` apart, centred on T's origin,
-  linked to their neighbours.
+  particle.  T's origin is the centre: ``position`` is where the centre starts.
+* ``polygon``: the given ``vertices`` in order (the centre first if ``center``), at the
+  coordinates given: T's origin is the origin of the vertex coordinates (not their
+  centroid), so ``position`` places that point.  Links: the edges, plus
+
+  - with ``center = true``: a spoke from the centre particle (at the vertices' centroid)
+    to every vertex, and no diagonals;
+  - without a centre: the second-neighbour diagonals ``(k, k + 2)`` (for 4 or more
+    vertices), which keep the shape from shearing flat.  For a quadrilateral these are
+    both diagonals; for a pentagon the five of the star; for six or more vertices only
+    these short diagonals (a hexagon gets two triangles, not all nine diagonals).  A
+    triangle needs none.  For other bracing, give explicit ``particles`` and ``links``.
+* ``chain``: ``count`` particles on T's x-axis, ``spacing`` apart, centred on T's origin
+  (index 0 at the -x end), linked to their neighbours.  ``position`` is the chain's
+  midpoint (the middle particle for an odd count), and ``angle`` tilts it: ``angle = 0``
+  lies flat, ``pi/2`` stands it on end with particle 0 at the bottom.  A chain has no
+  bending stiffness: it folds freely at every particle.
 """
 
 from __future__ import annotations
@@ -47,7 +59,21 @@ def ellipse(count: int, radii: tuple[float, float], center: bool) -> tuple[np.nd
 
 
 def polygon(vertices: list[tuple[float, float]], center: bool) -> tuple[np.ndarray, Links]:
-    """Particles at ``vertices``; braced by spokes (with a centre) or second neighbours."""
+    """Particles at ``vertices``; braced by spokes (with a centre) or second-neighbour diagonals.
+
+    Parameters
+    ----------
+    vertices : list of (x, y)
+        In frame T, in order around the polygon (3 or more).
+    center : bool
+        Add a particle at the vertices' centroid (index 0) with a spoke to each vertex.
+
+    Returns
+    -------
+    points : ndarray, shape (n, 2)
+    links : list of (int, int)
+        The edges, then the spokes or the diagonals ``(k, k + 2)`` (see the module docstring).
+    """
     perimeter = np.asarray(vertices, dtype=float)
     if center:
         centroid = perimeter.mean(axis=0)
@@ -62,7 +88,16 @@ def polygon(vertices: list[tuple[float, float]], center: bool) -> tuple[np.ndarr
 
 
 def chain(count: int, spacing: float) -> tuple[np.ndarray, Links]:
-    """``count`` particles in a straight line along T's x-axis, centred on the origin."""
+    """``count`` particles in a straight line along T's x-axis, centred on the origin.
+
+    Returns
+    -------
+    points : ndarray, shape (count, 2)
+        ``x = spacing * (k - (count - 1) / 2)``, ``y = 0``: the body's ``position`` is the
+        chain's midpoint.
+    links : list of (int, int)
+        ``(k, k + 1)``: neighbours only, so the chain bends freely.
+    """
     x = spacing * (np.arange(count) - (count - 1) / 2.0)
     points = np.column_stack([x, np.zeros(count)])
     return points, [(k, k + 1) for k in range(count - 1)]

@@ -1,15 +1,14 @@
-"""Simulation results: the arrays of DESIGN.md §2, status, statistics, atomic saving."""
+"""Simulation results: the arrays of DESIGN.md §2, status, statistics, saving as one folder."""
 
 from __future__ import annotations
 
 import json
-import os
-import shutil
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+
+from .paths import check_output_dir, staged_folder
 
 #: Array keys of result.npz, in the order of DESIGN.md §2 (plus events_held and links).
 ARRAY_KEYS = (
@@ -87,26 +86,27 @@ class SimulationResult:
         return {key: getattr(self, key) for key in ARRAY_KEYS}
 
     def save(self, out_dir: str | Path, extra_files: dict[str, bytes] | None = None) -> Path:
-        """Write ``result.npz`` and ``summary.json`` (and ``extra_files``) into ``out_dir``.
+        """Write ``result.npz`` and ``summary.json`` (and ``extra_files``) as the folder ``out_dir``.
 
-        All files are written to a temporary folder beside ``out_dir`` first and moved in
-        only when every one is complete, so a failure leaves no half-written result.
+        The files are written into a temporary folder beside ``out_dir``, which then
+        replaces ``out_dir`` whole (:func:`flexbody.paths.staged_folder`): a crash leaves
+        either the previous folder or the new one, never a mix, and the folder holds only
+        this result's files (no figures of an earlier run beside it).
+
+        Raises
+        ------
+        flexbody.errors.InputError
+            If ``out_dir`` cannot be a result folder (see :func:`flexbody.paths.check_output_dir`):
+            a file, a folder of other files (it would be deleted), the current folder.
         """
-        out_dir = Path(out_dir)
-        out_dir.parent.mkdir(parents=True, exist_ok=True)
-        staging = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}-", dir=out_dir.parent))
-        try:
+        check_output_dir(str(out_dir), option="out_dir")  # never replace a folder of other files
+        with staged_folder(out_dir) as staging:
             np.savez_compressed(staging / "result.npz", **self.arrays())
             summary = dict(self.stats, status=self.status, message=self.message)
             (staging / "summary.json").write_text(json.dumps(summary, indent=1, default=_plain) + "\n")
             for name, data in (extra_files or {}).items():
                 (staging / name).write_bytes(data)
-            out_dir.mkdir(exist_ok=True)
-            for item in staging.iterdir():
-                os.replace(item, out_dir / item.name)
-        finally:
-            shutil.rmtree(staging, ignore_errors=True)
-        return out_dir
+        return Path(out_dir)
 
 
 def _plain(value):

@@ -1,31 +1,62 @@
-"""``flexbody run``: simulate, then write the result, its summary and the figures atomically."""
+"""``flexbody run``: check everything, simulate, then write the result folder in one step.
+
+The order is the contract of the command line: the output folder and every option are
+checked before any work (a mistake costs nothing and writes nothing), then the model is
+loaded (derived and compiled if needed), then the run, then the figures, then one
+rename puts the folder in place.
+"""
 
 from __future__ import annotations
 
 import argparse
+import math
+import os
+import signal
 import sys
+import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
 
-from .driver import simulate
+from .driver import _settings, simulate
+from .errors import InputError
+from .model import load_model
+from .paths import check_output_dir
 from .progress import ProgressBar
 from .scene import load_scene
 
+#: Extra time the watchdog gives the driver's own max_wall_time check (between steps).
+WATCHDOG_GRACE = 1.0
+
+
+def _max_wall_time(value: float) -> float:
+    if not value > 0:  # nan fails too; inf means no limit
+        raise InputError(f"`--max-wall-time` = {value!r}: must be > 0 (s), or inf for no limit")
+    return value
+
 
 def run_command(args: argparse.Namespace) -> int:
-    """Run a scene from the command line; returns the exit code (0, or 1 if it failed)."""
+    """Run a scene from the command line; returns the exit code (0, or 1 if it failed).
+
+    Raises
+    ------
+    flexbody.errors.InputError
+        For a bad output folder, scene or option, before any work.
+    """
+    out = check_output_dir(args.out)
+    max_wall_time = _max_wall_time(args.max_wall_time)
     scene = load_scene(args.scene)
-    for note in scene.warnings:
-        print(f"warning: {note}", file=sys.stderr)
-    if args.out.exists() and not args.out.is_dir():
-        raise ValueError(f"`--out` = {str(args.out)!r}: exists and is not a folder")
+    overrides = dict(method=args.method, rtol=args.rtol, atol=args.atol, t_end=args.t_end,
+                     output_dt=args.output_dt, backend=args.backend, formulation=args.formulation,
+                     impact=args.impact, impact_dt=args.impact_dt)
+    settings = _settings(scene, overrides)  # every option checked before deriving or compiling
+    model = load_model(scene, backend=settings.backend, formulation=settings.formulation)
     bar = None if args.quiet else ProgressBar()
-    result = simulate(
-        scene, method=args.method, rtol=args.rtol, atol=args.atol, t_end=args.t_end, backend=args.backend,
-        formulation=args.formulation, impact=args.impact, impact_dt=args.impact_dt, progress=bar,
-    )
+    with _watchdog(max_wall_time, out, bar), _interrupt_kills():
+        result = simulate(scene, model=model, **overrides, max_wall_time=max_wall_time, progress=bar)
     if bar:
         bar.close()
     if not result.success:
-        print(f"error: simulation failed ({result.status}): {result.message}\nnothing was written to {args.out}",
+        print(f"error: simulation failed ({result.status}): {result.message}\nnothing was written to {out}",
               file=sys.stderr)
         return 1
     extra = {}
@@ -33,7 +64,11 @@ def run_command(args: argparse.Namespace) -> int:
         from .figures import render_all
 
         extra = render_all(result, result.links)
-    result.save(args.out, extra_files=extra)
+    try:
+        result.save(out, extra_files=extra)
+    except OSError as exc:  # the folder was checked before the run; something changed since
+        print(f"error: could not write {out}: {exc}\nnothing was written", file=sys.stderr)
+        return 1
     s = result.stats
     print(
         f"{s['scene']}: {s['method']} rtol={s['rtol']:g} atol={s['atol']:g} ({s['backend']}, {s['formulation']}, "
@@ -43,6 +78,52 @@ def run_command(args: argparse.Namespace) -> int:
         f"  {s['impacts']} impacts ({s['not_held']} not held), {s['liftoffs']} lift-offs; "
         f"max penetration {s['max_penetration_m']:.2g} m; energy drift {s['energy_drift_J']:.2g} J "
         f"({s['energy_drift_relative']:.2g} of E0)\n"
-        f"  wrote {args.out}/result.npz, summary.json" + (", figures and drop.gif" if extra else "")
+        f"  wrote {out}/result.npz, summary.json" + (", figures and drop.gif" if extra else "")
     )
     return 0
+
+
+@contextmanager
+def _watchdog(max_wall_time: float, out, bar: ProgressBar | None) -> Iterator[None]:
+    """End the process with status too_slow if the run outlives ``max_wall_time``.
+
+    The driver checks its deadline between steps and segments, but the compiled
+    integrator runs a whole smooth segment in one C call, which a very stiff scene
+    (``stiffness = 1e20``: steps of ~1e-12 s) never leaves.  Python cannot interrupt C, so
+    a timer thread (ctypes releases the GIL) reports the failure and exits; nothing has
+    been written yet (the result folder is written after the run).
+    """
+    if math.isinf(max_wall_time):
+        yield
+        return
+
+    def expire() -> None:
+        if bar:
+            bar.close()
+        print(f"error: simulation failed (too_slow): the run exceeded --max-wall-time {max_wall_time:g} s inside one "
+              "integration segment (the scene is too stiff for this method and tolerance: steps far below the "
+              "output interval); lower `stiffness`, loosen --rtol/--atol, try --method Radau, or raise "
+              f"--max-wall-time\nnothing was written to {out}", file=sys.stderr, flush=True)
+        os._exit(1)
+
+    timer = threading.Timer(max_wall_time + WATCHDOG_GRACE, expire)
+    timer.daemon = True
+    timer.start()
+    try:
+        yield
+    finally:
+        timer.cancel()
+
+
+@contextmanager
+def _interrupt_kills() -> Iterator[None]:
+    """Let Ctrl-C end the run at once, even inside a C call (Python's handler waits for it
+    to return); nothing is lost, the result folder is only written after the run."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_DFL)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)

@@ -1,0 +1,23 @@
+"""The named choices of a scene and of the command line.
+
+Kept apart from :mod:`flexbody.scene` (which needs NumPy) so that ``flexbody --help``
+and argument errors answer without importing NumPy, SciPy or matplotlib.
+"""
+
+from __future__ import annotations
+
+SHAPES = ("ring", "ellipse", "polygon", "chain")
+DAMPERS = ("relative", "axial")
+#: Compiled in C (generated integrator.c, needs backend "c"), then SciPy's solve_ivp methods.
+COMPILED_METHODS = ("dopri5", "dop853")
+METHODS = COMPILED_METHODS + ("RK45", "RK23", "DOP853", "Radau", "BDF", "LSODA")
+FORMULATIONS = ("particles", "floating")
+BACKENDS = ("c", "numpy")
+IMPACT_MODES = ("instant", "thesis")
+
+#: Upper bounds that keep a scene or a run allocatable (a typo such as ``count = 1e12``
+#: must be an error, not a MemoryError or an hour of swapping).
+MAX_PARTICLES = 1_000_000
+MAX_SAMPLES = 10_000_000
+#: Default ``--max-wall-time`` of ``flexbody run`` (s).
+DEFAULT_MAX_WALL_TIME = 600.0
