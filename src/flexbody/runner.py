@@ -32,7 +32,7 @@ def run_command(args: argparse.Namespace) -> int:
     if not args.no_figures:
         from .figures import render_all
 
-        extra = render_all(result, result.links)
+        extra = render_all(result, scene.grounds)
     result.save(args.out, extra_files=extra)
     s = result.stats
     print(
