@@ -466,8 +466,84 @@ def _plot_curves(curves):
     return fig
 
 
+# ---------------------------------------------------------------------------- the whole `run` command
+
+
+def _child(code: str, *args: str) -> tuple[float, float, str]:
+    """Run ``python -c code args`` in a fresh process: its wall time, CPU time (s) and stdout."""
+    import resource
+    import subprocess
+    import sys
+
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    start = time.perf_counter()
+    done = subprocess.run([sys.executable, "-c", code, *args], capture_output=True, text=True,
+                          env=dict(os.environ, PYTHONWARNINGS="ignore"))
+    wall = time.perf_counter() - start
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    if done.returncode:
+        raise RuntimeError(f"`python -c {code!r} {' '.join(args)}` failed:\n{done.stderr}")
+    cpu = after.ru_utime - before.ru_utime + after.ru_stime - before.ru_stime
+    return wall, cpu, done.stdout
+
+
+_CLI = "import sys; from flexbody.cli import main; sys.exit(main(sys.argv[1:]))"
+_IMPORTS = """import time
+t0 = time.perf_counter()
+import flexbody.runner
+t1 = time.perf_counter()
+import flexbody.figures
+t2 = time.perf_counter()
+print(t1 - t0, t2 - t1)"""
+
+
+def run_study(out: Path, repeats: int) -> dict:
+    """``flexbody run thesis_ball --out DIR``, whole and in parts: process, imports, each figure."""
+    import tempfile
+
+    from . import figures
+
+    print(f"run command: `flexbody run thesis_ball --out DIR --quiet` in fresh processes, median of {repeats}")
+    rows = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        _child(_CLI, "run", "thesis_ball", "--out", f"{tmp}/warm", "--quiet")  # compile the model once, outside
+        for label, extra in (("whole command", ()), ("without figures", ("--no-figures",))):
+            runs = [_child(_CLI, "run", "thesis_ball", "--out", f"{tmp}/run{k}", "--quiet", *extra)
+                    for k in range(repeats)]
+            rows[label] = {"wall_s": statistics.median(r[0] for r in runs), "cpu_s": statistics.median(r[1] for r in runs)}
+    runs = [_child("pass") for _ in range(repeats)]
+    rows["python start-up"] = {"wall_s": statistics.median(r[0] for r in runs), "cpu_s": statistics.median(r[1] for r in runs)}
+    parts = [tuple(map(float, _child(_IMPORTS)[2].split())) for _ in range(repeats)]
+    rows["import flexbody.runner (numpy, scipy, the runtime)"] = {"wall_s": statistics.median(p[0] for p in parts)}
+    rows["import flexbody.figures (matplotlib, on top)"] = {"wall_s": statistics.median(p[1] for p in parts)}
+
+    scene = load_scene("thesis_ball")
+    result = simulate(scene)
+    draws = {
+        "fig5_1_free_fall.png": lambda: figures._png(figures.figure_free_fall(result, scene.grounds)),
+        "fig5_2_impact.png": lambda: figures._png(figures.figure_impact(result, scene.grounds)),
+        "fig5_3_colliding_points.png": lambda: figures._png(figures.figure_colliding_points(result, scene.grounds)),
+        "fig5_4_energy.png": lambda: figures._png(figures.figure_energy(result)),
+        "drop.gif": lambda: figures.animation_gif(result, scene.grounds),
+    }
+    for name, draw in draws.items():
+        times = []
+        for _ in range(repeats):
+            start = time.perf_counter()
+            draw()
+            times.append(time.perf_counter() - start)
+        rows[f"draw {name} (in process, warm)"] = {"wall_s": statistics.median(times)}
+    for label, row in rows.items():
+        cpu = f"   cpu {row['cpu_s']:6.3f} s" if "cpu_s" in row else ""
+        print(f"  {label:52s} {row['wall_s']:6.3f} s{cpu}")
+    data = {"command": "flexbody run thesis_ball --out DIR --quiet", "repeats": repeats, "rows": rows,
+            "environment": _environment()}
+    _save(out, "run", data)
+    return data
+
+
 STUDIES = {"wp": work_precision, "stability": stability_map, "resolution": resolution_study,
-           "mujoco": mujoco_comparison}
+           "mujoco": mujoco_comparison, "run": run_study}
 
 
 def bench_command(args) -> int:
@@ -477,6 +553,8 @@ def bench_command(args) -> int:
         start = time.perf_counter()
         if name == "wp":
             work_precision(out, args.repeats if not args.quick else 1, args.quick)
+        elif name == "run":
+            run_study(out, args.repeats if not args.quick else 3)
         else:
             STUDIES[name](out, args.quick)
         print(f"  ({name} took {time.perf_counter() - start:.0f} s)\n")
