@@ -157,3 +157,18 @@ def test_every_figure_draws_a_failed_partial_run(corner):
     files = figures.render_all(result, scene.grounds)
     assert set(files) == {"fig5_1_free_fall.png", "fig5_2_impact.png", "fig5_3_colliding_points.png",
                           "fig5_4_energy.png", "drop.gif"}
+
+
+def test_bench_charts_redraw_from_the_committed_json_with_every_axis_labelled():
+    import json
+
+    from flexbody import bench
+    from flexbody.paths import generated_root
+
+    folder = generated_root() / "figures"
+    for name in ("work_precision", "resolution", "mujoco"):
+        fig = bench.PLOTS[name](json.loads((folder / f"{name}.json").read_text()))
+        assert all(ax.get_ylabel() for ax in fig.axes), f"{name}: a panel has no y label"
+    rows = [t.get_text() for t in bench.plot_stability(json.loads((folder / "stability_map.json").read_text()))
+            .axes[0].get_yticklabels()]
+    assert "dopri5 (compiled loop)" in rows and "RK45 (SciPy loop)" in rows
