@@ -324,7 +324,7 @@ class Animation:
     """
 
     def __init__(self, result: SimulationResult, grounds: Sequence | None = None, *, fps: int = 25,
-                 speed: float = 1.0, dpi: int = 72, max_frames: int = 200) -> None:
+                 speed: float = 1.0, dpi: int = 80, max_frames: int = 200) -> None:
         t = result.t
         span = float(t[-1] - t[0])
         speed = max(speed, span * fps / (max_frames - 1))
@@ -348,8 +348,8 @@ class Animation:
         self.canvas.draw()  # lays out and draws the static parts once
         self.background = self.canvas.copy_from_bbox(self.fig.bbox)
 
-    def frame(self, k: int) -> np.ndarray:
-        """Frame ``k`` as RGB pixels, shape (height, width, 3)."""
+    def frame(self, k: int):
+        """Frame ``k`` as an RGB ``PIL.Image``."""
         i = self.index[k]
         r = self.result
         x, touching = r.positions[i], r.contact_force[i] > 0
@@ -360,17 +360,22 @@ class Animation:
         self.label.set_text(f"t = {r.t[i]:.3f} s")
         for artist in (self.links, self.free, self.held, self.label):
             self.ax.draw_artist(artist)
-        return np.asarray(self.canvas.buffer_rgba())[..., :3]
+        return _image(self.canvas)
 
     def gif(self) -> bytes:
         """The animated GIF: every frame shows ``frame_ms`` ms; it loops."""
         from PIL import Image
 
-        frames = [Image.fromarray(self.frame(k)) for k in range(len(self.index))]
+        frames = [self.frame(k) for k in range(len(self.index))]
         # One palette for every frame, from the first and last frames and the two body colours
         # (red particles may appear only later): no colour flicker, one quantisation method.
         swatch = np.concatenate([np.asarray(frames[0]), np.asarray(frames[-1]), _swatch(frames[0].width)])
         palette = Image.fromarray(swatch).quantize(colors=64, method=Image.Quantize.MEDIANCUT)
+        colours = np.array(palette.getpalette()[: 3 * 64]).reshape(-1, 3)
+        # median cut averages white with its neighbours, and Pillow's palette lookup is coarse:
+        # make the near-whites white so the background stays white
+        colours[colours.min(axis=1) >= 246] = 255
+        palette.putpalette(colours.ravel().tolist())
         indexed = [f.quantize(palette=palette, dither=Image.Dither.NONE) for f in frames]
         buffer = io.BytesIO()
         indexed[0].save(buffer, format="GIF", save_all=True, append_images=indexed[1:], duration=self.frame_ms,
@@ -392,14 +397,19 @@ def animation_gif(result: SimulationResult, grounds: Sequence | None = None, **o
     return Animation(result, grounds, **options).gif()
 
 
-def _png(fig: Figure) -> bytes:
-    """PNG bytes of ``fig`` after one draw (``savefig`` draws twice with a layout engine)."""
+def _image(canvas: FigureCanvasAgg):
+    """The canvas's pixels as an RGB ``PIL.Image`` (one copy, done by Pillow)."""
     from PIL import Image
 
+    return Image.frombuffer("RGBA", canvas.get_width_height(), canvas.buffer_rgba(), "raw", "RGBA", 0, 1).convert("RGB")
+
+
+def _png(fig: Figure) -> bytes:
+    """PNG bytes of ``fig`` after one draw (``savefig`` draws a second time for nothing)."""
     canvas = FigureCanvasAgg(fig)
     canvas.draw()
     buffer = io.BytesIO()
-    Image.fromarray(np.asarray(canvas.buffer_rgba())[..., :3]).save(buffer, format="png", dpi=(fig.dpi, fig.dpi))
+    _image(canvas).save(buffer, format="png", compress_level=3, dpi=(fig.dpi, fig.dpi))
     return buffer.getvalue()
 
 
