@@ -14,6 +14,11 @@ Three studies, each printed as a table and saved as JSON and PNG in ``--out``:
   each costs, and the coarsest model within 1 %.
 * ``mujoco`` — the same ball in MuJoCo (optional extra ``flexbody[mujoco]``): time,
   penetration, rebound height and height error against the tight flexbody reference.
+* ``run`` — the whole default command ``flexbody run thesis_ball --out DIR`` in fresh
+  processes, with and without figures, its imports, and each figure drawn alone.
+
+Each chart is drawn from its study's JSON alone (:data:`PLOTS`): ``python -m
+flexbody.bench [FOLDER]`` redraws the PNGs beside the JSON files without running anything.
 
 Timings are medians over ``--repeats`` runs (the machine is shared and noisy).
 """
@@ -137,7 +142,7 @@ def work_precision(out: Path, repeats: int, quick: bool) -> dict:
         print("  " + line)
     data = {"t_end": t_end, "reference": {"method": "dop853", "rtol": 1e-13, "cross_check_m": ref_gap},
             "rhs_cost_s": cost, "rows": rows, "ratios": ratios, "environment": _environment()}
-    _save(out, "work_precision", data, _plot_work_precision(rows))
+    _save(out, "work_precision", data, plot_work_precision(data))
     return data
 
 
@@ -186,10 +191,12 @@ def _time_at_error(points: list[tuple[float, float]], target: float) -> float:
     return float("nan")
 
 
-def _plot_work_precision(rows: list[dict]):
+def plot_work_precision(data: dict):
+    """Error against time, one line per configuration, each end labelled with its rtol (from the JSON)."""
     from matplotlib.figure import Figure
 
-    fig = Figure(figsize=(8.5, 6), layout="constrained")
+    rows = data["rows"]
+    fig = Figure(figsize=(11, 6), layout="constrained")
     ax = fig.add_subplot()
     for label in dict.fromkeys(r["label"] for r in rows):
         mine = [r for r in rows if r["label"] == label and r["status"] == "success" and np.isfinite(r["error_m"])]
@@ -200,11 +207,15 @@ def _plot_work_precision(rows: list[dict]):
         (line,) = ax.loglog(t, e, marker="o", ms=4, label=label, lw=1.2, ls="--" if "floating" in label else "-")
         wrong = [r for r in mine if not r["events_match_reference"]]
         ax.loglog([r["time_s"] for r in wrong], [r["error_m"] for r in wrong], "x", ms=9, color=line.get_color())
+        for r in (mine[0], mine[-1]):
+            ax.annotate(f"{r['rtol']:.0e}".replace("e-0", "e-"), (r["time_s"], r["error_m"]), xytext=(4, 2),
+                        textcoords="offset points", fontsize=6, color=line.get_color())
     ax.set_xlabel("wall time of the integration (s)")
     ax.set_ylabel("max position error vs reference (m)")
-    ax.set_title("Work-precision, thesis ball (x: event sequence differs from the reference)")
+    ax.set_title("Work-precision, thesis ball: each line runs rtol 1e-3 ... 1e-10 (atol = 1e-3 rtol), its ends "
+                 "labelled;\nx: the event sequence differs from the reference's", fontsize=10)
     ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=7)
+    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0))
     return fig
 
 
@@ -258,7 +269,7 @@ def stability_map(out: Path, quick: bool) -> dict:
                       f"nfev {s['rhs_evaluations']:8d} error {error:9.2e}")
     sweeps = _impact_and_tolerance_sweeps(quick)
     data = {"cells": cells, "sweeps": sweeps, "environment": _environment()}
-    _save(out, "stability_map", data, _plot_stability(cells, stiffness, zetas, methods))
+    _save(out, "stability_map", data, plot_stability(data))
     return data
 
 
@@ -284,27 +295,44 @@ def _impact_and_tolerance_sweeps(quick: bool) -> list[dict]:
     return rows
 
 
-def _plot_stability(cells, stiffness, zetas, methods):
+#: How each method of the stability map runs (all with the compiled C right-hand side).
+LOOPS = {"dopri5": "compiled loop", "dop853": "compiled loop"}
+
+
+def plot_stability(data: dict):
+    """Per damping ratio, a method x stiffness grid: the wall time of each good run, or why it failed."""
     from matplotlib.figure import Figure
 
-    fig = Figure(figsize=(3.2 + 2.6 * len(zetas), 0.6 + 0.45 * len(methods)), layout="constrained")
+    cells = data["cells"]
+    zetas = list(dict.fromkeys(c["zeta"] for c in cells))
+    stiffness = sorted(dict.fromkeys(c["stiffness"] for c in cells))
+    methods = list(dict.fromkeys(c["method"] for c in cells))
+    fig = Figure(figsize=(3.6 + 3.4 * len(zetas), 1.0 + 0.55 * len(methods)), layout="constrained")
     axes = np.atleast_1d(fig.subplots(1, len(zetas), sharey=True))
     for ax, zeta in zip(axes, zetas):
         grid = np.full((len(methods), len(stiffness)), np.nan)
         for c in cells:
-            if c["zeta"] == zeta:
-                i, j = methods.index(c["method"]), stiffness.index(c["stiffness"])
-                grid[i, j] = np.log10(c["time_s"]) if c["verdict"] == "ok" else np.nan
-                ax.text(j, i, "" if c["verdict"] == "ok" else c["verdict"].replace("_", "\n"), ha="center",
-                        va="center", fontsize=6, color="k")
+            if c["zeta"] != zeta:
+                continue
+            i, j = methods.index(c["method"]), stiffness.index(c["stiffness"])
+            ok = c["verdict"] == "ok"
+            grid[i, j] = np.log10(c["time_s"]) if ok else np.nan
+            text = _duration(c["time_s"]) if ok else c["verdict"].replace("_", "\n")
+            ax.text(j, i, text, ha="center", va="center", fontsize=6.5,
+                    color="white" if ok and np.log10(c["time_s"]) < -0.5 else "black")
         image = ax.imshow(grid, cmap="viridis", aspect="auto", vmin=-3, vmax=2)
         ax.set_xticks(range(len(stiffness)), [f"{k:.0e}" for k in stiffness], fontsize=7)
-        ax.set_yticks(range(len(methods)), methods, fontsize=8)
+        ax.set_yticks(range(len(methods)), [f"{m} ({LOOPS.get(m, 'SciPy loop')})" for m in methods], fontsize=8)
         ax.set_xlabel("stiffness k (N/m)")
         ax.set_title(f"damping ratio {zeta:g}", fontsize=9)
     fig.colorbar(image, ax=list(axes), label="log10 wall time (s), successful runs")
-    fig.suptitle("Stability map: time, or why a method fails (rtol 1e-6, 0.5 s)", fontsize=10)
+    fig.suptitle("Stability map: wall time of each run, or why it failed (thesis ball, rtol 1e-6, 0.5 s; every "
+                 "method uses the compiled C right-hand side)", fontsize=10)
     return fig
+
+
+def _duration(seconds: float) -> str:
+    return f"{seconds * 1e3:.3g} ms" if seconds < 1 else f"{seconds:.3g} s"
 
 
 # ---------------------------------------------------------------------------- resolution
@@ -371,27 +399,38 @@ def resolution_study(out: Path, quick: bool) -> dict:
     print(f"  coarsest model within 1 % of n = {finest['perimeter_particles']} on all three observables: "
           f"{coarsest if coarsest is not None else 'none'}")
     data = {"rows": rows, "coarsest_within_1_percent": coarsest, "environment": _environment()}
-    _save(out, "resolution", data, _plot_resolution(rows, keys))
+    _save(out, "resolution", data, plot_resolution(data))
     return data
 
 
-def _plot_resolution(rows, keys):
+def plot_resolution(data: dict):
+    """Each observable and the cost against the number of perimeter particles, with the finest's 1 % band."""
     from matplotlib.figure import Figure
 
-    fig = Figure(figsize=(10, 3.2), layout="constrained")
-    axes = fig.subplots(1, len(keys) + 1)
+    rows = data["rows"]
+    panels = (("rebound_height_m", "rebound height (m)"), ("contact_duration_s", "contact duration (s)"),
+              ("peak_contact_force_N", "peak contact force (N)"))
+    fig = Figure(figsize=(12, 3.4), layout="constrained")
+    axes = fig.subplots(1, len(panels) + 1)
     n = [r["perimeter_particles"] for r in rows]
-    for ax, key in zip(axes, keys):
+    for ax, (key, label) in zip(axes, panels):
         ax.plot(n, [r.get(key, np.nan) for r in rows], "o-")
-        ax.set_title(key.replace("_", " "), fontsize=9)
+        finest = rows[-1].get(key, np.nan)
+        ax.axhspan(0.99 * finest, 1.01 * finest, color="0.85", zorder=0, label=f"within 1 % of n = {n[-1]}")
+        ax.set_ylabel(label)
+    axes[0].legend(fontsize=7)
     axes[-1].plot(n, [r["time_s"] for r in rows], "o-")
     axes[-1].set_yscale("log")
-    axes[-1].set_title("cost: wall time (s)", fontsize=9)
+    axes[-1].set_ylabel("wall time of the run (s)")
     for ax in axes:
         ax.set_xscale("log")
         ax.set_xticks(n, [str(x) for x in n], fontsize=7)
         ax.minorticks_off()
-        ax.set_xlabel("perimeter particles")
+        ax.set_xlabel("perimeter particles n")
+    coarsest = data.get("coarsest_within_1_percent")
+    verdict = (f"the coarsest within 1 % of n = {n[-1]} on all three is n = {coarsest}" if coarsest not in (None, n[-1])
+               else f"no coarser ball is within 1 % of n = {n[-1]} on all three")
+    fig.suptitle(f"Resolution: the ball with n perimeter particles (same mass and radius); {verdict}", fontsize=10)
     return fig
 
 
@@ -411,6 +450,8 @@ def mujoco_comparison(out: Path, quick: bool) -> dict | None:
     print("MuJoCo side by side: thesis ball with axial dampers, 2 s")
     rows, curves = [], {}
     reference = simulate(scene, method="dop853", rtol=1e-11, atol=1e-14)
+    curves["reference: flexbody dop853 rtol 1e-11"] = (reference.t, reference.positions[:, :, 1] @ scene.masses
+                                                       / scene.masses.sum())
     for label, options in (("flexbody dopri5 rtol 1e-6", dict(method="dopri5", rtol=1e-6, atol=1e-9)),
                            ("flexbody dop853 rtol 1e-9", dict(method="dop853", rtol=1e-9, atol=1e-12))):
         result, wall = _timed(scene, repeats, **options)
@@ -431,8 +472,10 @@ def mujoco_comparison(out: Path, quick: bool) -> dict | None:
     for r in rows:
         print(f"  {r['label']:32s} {r['time_s'] * 1e3:9.2f} {r['max_penetration_m']:14.2e} "
               f"{r['rebound_height_m']:10.4f} {r['max_height_error_m']:15.2e}")
-    data = {"rows": rows, "environment": _environment()}
-    _save(out, "mujoco", data, _plot_curves(curves))
+    grid = np.arange(0.0, scene.simulation.t_end + 1e-9, 2e-3)
+    data = {"rows": rows, "curves": {"t": grid.tolist(), "centre_height_m": {
+        label: np.interp(grid, t, y).tolist() for label, (t, y) in curves.items()}}, "environment": _environment()}
+    _save(out, "mujoco", data, plot_mujoco(data))
     return data
 
 
@@ -452,18 +495,123 @@ def _rebound(t: np.ndarray, heights: np.ndarray, masses: np.ndarray) -> dict:
     return {"rebound_height_m": float(y_cm[bottom:].max()), "lowest_centre_m": float(y_cm[bottom])}
 
 
-def _plot_curves(curves):
+def plot_mujoco(data: dict):
+    """Centre-of-mass height of each run, and its distance from the reference (which separates them all)."""
     from matplotlib.figure import Figure
 
-    fig = Figure(figsize=(8, 4), layout="constrained")
-    ax = fig.add_subplot()
-    for label, (t, y) in curves.items():
-        ax.plot(t, y, lw=1.0, label=label)
-    ax.set_xlabel("t (s)")
-    ax.set_ylabel("height of the centre of mass (m)")
-    ax.legend(fontsize=8)
-    ax.set_title("Thesis ball (axial dampers): flexbody (exact contact) and MuJoCo (soft contact)")
+    t = np.array(data["curves"]["t"])
+    curves = {label: np.array(y) for label, y in data["curves"]["centre_height_m"].items()}
+    (ref_label, reference), *runs = curves.items()
+    fig = Figure(figsize=(8, 6), layout="constrained")
+    top, bottom = fig.subplots(2, 1, sharex=True, height_ratios=(3, 2))
+    top.plot(t, reference, color="0.6", lw=3.0, label=ref_label)
+    styles = ("-", "--", "-", "-")
+    for (label, y), style in zip(runs, styles):
+        (line,) = top.plot(t, y, style, lw=1.1, label=label)
+        bottom.semilogy(t, np.abs(y - reference), style, lw=0.9, color=line.get_color())
+    top.set_ylabel("height of the centre of mass (m)")
+    top.legend(fontsize=8)
+    top.set_title("Thesis ball (axial dampers): flexbody (exact contact) and MuJoCo (soft contact)", fontsize=10)
+    bottom.set_ylabel("|height - reference| (m)")
+    bottom.set_xlabel("t (s)")
+    bottom.set_title("flexbody dopri5 and dop853 coincide above; here they separate", fontsize=9)
+    bottom.set_ylim(bottom=1e-15)  # below that the differences are round-off
+    bottom.grid(True, which="major", alpha=0.3)
     return fig
+
+
+#: The chart of each study, drawn from its saved JSON alone.
+PLOTS = {"work_precision": plot_work_precision, "stability_map": plot_stability, "resolution": plot_resolution,
+         "mujoco": plot_mujoco}
+
+
+def replot(folder: Path) -> list[Path]:
+    """Redraw each study's PNG in ``folder`` from its JSON there (no benchmark is run)."""
+    written = []
+    for name, plot in PLOTS.items():
+        source = folder / f"{name}.json"
+        data = json.loads(source.read_text()) if source.exists() else None
+        if data is None or (name == "mujoco" and "curves" not in data):
+            continue  # a mujoco.json from before the curves were saved cannot be redrawn
+        plot(data).savefig(folder / f"{name}.png", dpi=110)
+        written.append(folder / f"{name}.png")
+    return written
+
+
+# ---------------------------------------------------------------------------- the whole `run` command
+
+
+def _child(code: str, *args: str) -> tuple[float, float, str]:
+    """Run ``python -c code args`` in a fresh process: its wall time, CPU time (s) and stdout."""
+    import resource
+    import subprocess
+    import sys
+
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    start = time.perf_counter()
+    done = subprocess.run([sys.executable, "-c", code, *args], capture_output=True, text=True,
+                          env=dict(os.environ, PYTHONWARNINGS="ignore"))
+    wall = time.perf_counter() - start
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    if done.returncode:
+        raise RuntimeError(f"`python -c {code!r} {' '.join(args)}` failed:\n{done.stderr}")
+    cpu = after.ru_utime - before.ru_utime + after.ru_stime - before.ru_stime
+    return wall, cpu, done.stdout
+
+
+_CLI = "import sys; from flexbody.cli import main; sys.exit(main(sys.argv[1:]))"
+_IMPORTS = """import time
+t0 = time.perf_counter()
+import flexbody.runner
+t1 = time.perf_counter()
+import flexbody.figures
+t2 = time.perf_counter()
+print(t1 - t0, t2 - t1)"""
+
+
+def run_study(out: Path, repeats: int) -> dict:
+    """``flexbody run thesis_ball --out DIR``, whole and in parts: process, imports, each figure."""
+    import tempfile
+
+    from . import figures
+
+    print(f"run command: `flexbody run thesis_ball --out DIR --quiet` in fresh processes, median of {repeats}")
+    rows = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        _child(_CLI, "run", "thesis_ball", "--out", f"{tmp}/warm", "--quiet")  # compile the model once, outside
+        for label, extra in (("whole command", ()), ("without figures", ("--no-figures",))):
+            runs = [_child(_CLI, "run", "thesis_ball", "--out", f"{tmp}/run{k}", "--quiet", *extra)
+                    for k in range(repeats)]
+            rows[label] = {"wall_s": statistics.median(r[0] for r in runs), "cpu_s": statistics.median(r[1] for r in runs)}
+    runs = [_child("pass") for _ in range(repeats)]
+    rows["python start-up"] = {"wall_s": statistics.median(r[0] for r in runs), "cpu_s": statistics.median(r[1] for r in runs)}
+    parts = [tuple(map(float, _child(_IMPORTS)[2].split())) for _ in range(repeats)]
+    rows["import flexbody.runner (numpy, scipy, the runtime)"] = {"wall_s": statistics.median(p[0] for p in parts)}
+    rows["import flexbody.figures (matplotlib, on top)"] = {"wall_s": statistics.median(p[1] for p in parts)}
+
+    scene = load_scene("thesis_ball")
+    result = simulate(scene)
+    draws = {
+        "fig5_1_free_fall.png": lambda: figures._png(figures.figure_free_fall(result, scene.grounds)),
+        "fig5_2_impact.png": lambda: figures._png(figures.figure_impact(result, scene.grounds)),
+        "fig5_3_colliding_points.png": lambda: figures._png(figures.figure_colliding_points(result, scene.grounds)),
+        "fig5_4_energy.png": lambda: figures._png(figures.figure_energy(result)),
+        "drop.gif": lambda: figures.animation_gif(result, scene.grounds),
+    }
+    for name, draw in draws.items():
+        times = []
+        for _ in range(repeats):
+            start = time.perf_counter()
+            draw()
+            times.append(time.perf_counter() - start)
+        rows[f"draw {name} (in process, warm)"] = {"wall_s": statistics.median(times)}
+    for label, row in rows.items():
+        cpu = f"   cpu {row['cpu_s']:6.3f} s" if "cpu_s" in row else ""
+        print(f"  {label:52s} {row['wall_s']:6.3f} s{cpu}")
+    data = {"command": "flexbody run thesis_ball --out DIR --quiet", "repeats": repeats, "rows": rows,
+            "environment": _environment()}
+    _save(out, "run", data)
+    return data
 
 
 def _scale(out: Path, quick: bool) -> dict:
@@ -473,7 +621,7 @@ def _scale(out: Path, quick: bool) -> dict:
 
 
 STUDIES = {"wp": work_precision, "stability": stability_map, "resolution": resolution_study,
-           "mujoco": mujoco_comparison, "scale": _scale}
+           "mujoco": mujoco_comparison, "run": run_study, "scale": _scale}
 
 
 def bench_command(args) -> int:
@@ -483,7 +631,18 @@ def bench_command(args) -> int:
         start = time.perf_counter()
         if name == "wp":
             work_precision(out, args.repeats if not args.quick else 1, args.quick)
+        elif name == "run":
+            run_study(out, args.repeats if not args.quick else 3)
         else:
             STUDIES[name](out, args.quick)
         print(f"  ({name} took {time.perf_counter() - start:.0f} s)\n")
     return 0
+
+
+if __name__ == "__main__":  # python -m flexbody.bench [FOLDER]: redraw the charts from their JSON alone
+    import sys
+
+    from .paths import generated_root
+
+    for written in replot(Path(sys.argv[1]) if len(sys.argv) > 1 else generated_root() / "figures"):
+        print(f"redrew {written}")

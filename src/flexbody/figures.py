@@ -1,26 +1,145 @@
-"""The thesis's figures (5.1-5.4) and an animation of a run, drawn from a result.
+"""The thesis's figures (5.1-5.4) and an animation of a run, drawn from a result and its grounds.
 
-Each ``figure_*`` function returns a matplotlib ``Figure`` (object API, no pyplot, so
-no display is needed); :func:`render_all` turns them into PNG/GIF bytes.
+Each ``figure_*`` function returns a matplotlib ``Figure`` (object API, no pyplot, so no
+display is needed); :func:`render_all` turns them into PNG/GIF bytes.  Heights are gaps
+along the grounds' normals, ``min_g (x - point_g) . normal_g``, so tilted grounds and
+corners draw and measure as flat ones do; every view is framed on the body's path.
+
+The animation draws its static parts once and blits the moving ones onto a copy of them
+for every frame, then hands the canvas buffer to Pillow: no per-frame redraw, no
+temporary files.
 """
 
 from __future__ import annotations
 
 import io
-import tempfile
-from pathlib import Path
+from collections.abc import Sequence
 
 import numpy as np
-from matplotlib.animation import FuncAnimation, PillowWriter
+from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.collections import LineCollection
 from matplotlib.figure import Figure
+from matplotlib.patches import Polygon
 
 from .result import SimulationResult
 
-GROUND_COLOUR, CONTACT_COLOUR = "0.35", "tab:red"
+GROUND_COLOUR, CONTACT_COLOUR, BODY_COLOUR = "0.35", "tab:red", "tab:blue"
+#: A gap below this (m) counts as penetration (the bench's stability map uses the same bound).
+PENETRATION_TOLERANCE = 1e-6
+PNG_DPI = 100
 
 
-def _draw_body(ax, x: np.ndarray, links: np.ndarray, *, colour="tab:blue", alpha=1.0, force=None) -> None:
+# ---------------------------------------------------------------------------- grounds and views
+
+
+def ground_planes(grounds: Sequence | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """The grounds as arrays: ``points (g, 2)`` and unit ``normals (g, 2)``.
+
+    Parameters
+    ----------
+    grounds : sequence of objects with ``.point`` and ``.normal``, optional
+        A scene's ``grounds``; default one ground through the origin with normal +y.
+    """
+    if not grounds:
+        return np.zeros((1, 2)), np.array([[0.0, 1.0]])
+    points = np.array([g.point for g in grounds], dtype=float)
+    normals = np.array([g.normal for g in grounds], dtype=float)
+    return points, normals / np.linalg.norm(normals, axis=1, keepdims=True)
+
+
+def gaps(positions: np.ndarray, grounds: Sequence | None = None) -> np.ndarray:
+    """Each particle's distance to the nearest ground along its normal (< 0: inside it).
+
+    Parameters
+    ----------
+    positions : ndarray, shape (..., 2)
+    grounds : see :func:`ground_planes`
+
+    Returns
+    -------
+    ndarray, shape (...)
+        ``min_g (x - point_g) . normal_g``.
+    """
+    points, normals = ground_planes(grounds)
+    return (positions @ normals.T - np.sum(points * normals, axis=1)).min(axis=-1)
+
+
+def view_box(positions: np.ndarray, pad: float = 0.08, right: float = 0.0) -> tuple[float, float, float, float]:
+    """``(xmin, xmax, ymin, ymax)`` around every position, padded by ``pad`` of the larger side.
+
+    ``positions`` has shape (..., 2); ``right`` is extra room on the right, as a fraction
+    of the larger side (for labels).
+    """
+    x = positions.reshape(-1, 2)
+    lo, hi = x.min(axis=0), x.max(axis=0)
+    size = max(float((hi - lo).max()), 1e-3)
+    p = pad * size
+    return lo[0] - p, hi[0] + p + right * size, lo[1] - p, hi[1] + p
+
+
+def _figure(size: tuple[float, float], *, left=0.8, right=0.2, bottom=0.55, top=0.35, grid=(1, 1),
+            gap=(0.0, 0.0), dpi: int = PNG_DPI) -> Figure:
+    """A figure with fixed margins and gaps between its ``grid = (columns, rows)`` panels (inches).
+
+    Fixed margins instead of a layout engine: a layout engine measures every tick label in
+    an extra pass before the real draw, about a third of a figure's drawing time.
+    """
+    fig = Figure(figsize=size, dpi=dpi)
+    (w, h), (cols, rows) = size, grid
+    # wspace and hspace are fractions of the mean panel width and height
+    panel_w = (w - left - right - (cols - 1) * gap[0]) / cols
+    panel_h = (h - top - bottom - (rows - 1) * gap[1]) / rows
+    fig.subplots_adjust(left=left / w, right=1 - right / w, bottom=bottom / h, top=1 - top / h,
+                        wspace=gap[0] / panel_w, hspace=gap[1] / panel_h)
+    return fig
+
+
+def _figsize(box, longest: float, shortest: float = 2.2, extra=(0.95, 0.9)) -> tuple[float, float]:
+    """Inches for equal-aspect axes showing ``box``, plus room for the tick labels."""
+    w, h = box[1] - box[0], box[3] - box[2]
+    scale = longest / max(w, h)
+    return max(w * scale, shortest) + extra[0], max(h * scale, shortest) + extra[1]
+
+
+def _setup_view(ax, box, grounds) -> None:
+    ax.set_xlim(box[0], box[1])
+    ax.set_ylim(box[2], box[3])
+    ax.set_aspect("equal", adjustable="box")
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    _draw_grounds(ax, grounds, box)
+
+
+def _draw_grounds(ax, grounds, box) -> None:
+    """Each ground as its boundary line, hatched on the solid side, within a wide square around ``box``."""
+    points, normals = ground_planes(grounds)
+    centre = np.array([(box[0] + box[1]) / 2, (box[2] + box[3]) / 2])
+    half = 2.0 * max(box[1] - box[0], box[3] - box[2])
+    square = centre + half * np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]])
+    for point, normal in zip(points, normals):
+        solid = _clip(square, point, normal)
+        if len(solid) >= 3:
+            ax.add_patch(Polygon(solid, closed=True, facecolor="0.92", edgecolor="0.55", hatch="///", lw=0, zorder=0))
+        tangent = np.array([-normal[1], normal[0]])
+        s = tangent @ (centre - point)  # the boundary's point nearest the view's centre, then both ways
+        line = point + np.outer([s - 2 * half, s + 2 * half], tangent)
+        ax.plot(line[:, 0], line[:, 1], color=GROUND_COLOUR, lw=1.2, zorder=1)
+
+
+def _clip(polygon: np.ndarray, point: np.ndarray, normal: np.ndarray) -> np.ndarray:
+    """The part of a convex ``polygon (k, 2)`` on the solid side ``(x - point) . normal <= 0``."""
+    d = (polygon - point) @ normal
+    out = []
+    for i in range(len(polygon)):
+        j = (i + 1) % len(polygon)
+        if d[i] <= 0:
+            out.append(polygon[i])
+        if (d[i] < 0) != (d[j] < 0) and d[i] != d[j]:
+            out.append(polygon[i] + (polygon[j] - polygon[i]) * d[i] / (d[i] - d[j]))
+    return np.array(out).reshape(-1, 2)
+
+
+def _draw_body(ax, x: np.ndarray, links: np.ndarray, *, colour=BODY_COLOUR, alpha=1.0, force=None) -> None:
     """Particles ``x (n, 2)`` and links; particles with a contact force are red."""
     ax.add_collection(LineCollection(x[links], colors=colour, linewidths=0.8, alpha=alpha))
     touching = np.zeros(len(x), bool) if force is None else force > 0
@@ -28,99 +147,146 @@ def _draw_body(ax, x: np.ndarray, links: np.ndarray, *, colour="tab:blue", alpha
     ax.plot(x[touching, 0], x[touching, 1], "o", ms=4, color=CONTACT_COLOUR, alpha=alpha)
 
 
-def _ground(ax, xmin: float, xmax: float) -> None:
-    ax.axhline(0.0, color=GROUND_COLOUR, lw=1.2)
-    ax.fill_between([xmin, xmax], [0, 0], [-0.02, -0.02], color="0.85", zorder=0)
+def _centre(result: SimulationResult) -> np.ndarray:
+    """The centre of mass over time, shape (nt, 2)."""
+    m = result.masses
+    return np.einsum("tnd,n->td", result.positions, m / m.sum())
 
 
-def _frame(ax, result: SimulationResult, pad: float = 0.05) -> None:
-    x = result.positions
-    ax.set_xlim(x[..., 0].min() - pad, x[..., 0].max() + pad)
-    ax.set_ylim(-0.02, x[..., 1].max() + pad)
-    ax.set_aspect("equal")
-    ax.set_xlabel("x (m)")
-    ax.set_ylabel("y (m)")
-    _ground(ax, x[..., 0].min() - pad, x[..., 0].max() + pad)
-
-
-def first_impact_time(result: SimulationResult) -> float:
+def first_impact_index(result: SimulationResult) -> int | None:
+    """The output sample at (or just after) the first impact; None if nothing hit."""
     impacts = result.events_time[result.events_kind == "impact"]
-    return float(impacts[0]) if len(impacts) else float(result.t[-1])
+    if not len(impacts):
+        return None
+    return int(min(np.searchsorted(result.t, impacts[0]), len(result.t) - 1))
 
 
-def figure_free_fall(result: SimulationResult, links: np.ndarray) -> Figure:
-    """Thesis fig. 5.1: the body in free fall, snapshots until it touches the ground."""
-    fig = Figure(figsize=(4.5, 5.5), layout="constrained")
+def _snapshots(x: np.ndarray, most: int = 6) -> list[int]:
+    """Frames of ``x (m, n, 2)`` whose bounding boxes do not overlap: the first, the last, some between."""
+    lo, hi = x.min(axis=1), x.max(axis=1)
+    # room for a time label between snapshots, even for a flat body
+    margin = max(0.05 * float((hi - lo).max()), 0.06 * float((hi.max(axis=0) - lo.min(axis=0)).max()))
+
+    def apart(i: int, j: int) -> bool:
+        return bool(np.any(lo[i] > hi[j] + margin) or np.any(lo[j] > hi[i] + margin))
+
+    chosen = [0]
+    for i in range(1, len(x)):
+        if apart(chosen[-1], i):
+            chosen.append(i)
+    last = len(x) - 1
+    if chosen[-1] != last:
+        if len(chosen) > 1 and not apart(chosen[-1], last):
+            chosen.pop()  # make room for the last frame, which must be shown
+        chosen.append(last)
+    if len(chosen) > most:
+        chosen = [chosen[k] for k in np.linspace(0, len(chosen) - 1, most).round().astype(int)]
+    return chosen
+
+
+# ---------------------------------------------------------------------------- the thesis's figures
+
+
+def figure_free_fall(result: SimulationResult, grounds: Sequence | None = None) -> Figure:
+    """Thesis fig. 5.1: the body in free fall, snapshots that do not overlap, until it first touches."""
+    hit = first_impact_index(result)
+    end = len(result.t) - 1 if hit is None else hit
+    x = result.positions[: end + 1]
+    box = view_box(x, right=0.25)
+    fig = _figure(_figsize(box, 5.0, extra=(0.95, 1.15)), left=0.75, right=0.2, top=0.6)
     ax = fig.add_subplot()
-    t_hit = first_impact_time(result)
-    for k, t in enumerate(np.linspace(0.0, t_hit, 5)):
-        i = min(np.searchsorted(result.t, t), len(result.t) - 1)
-        _draw_body(ax, result.positions[i], links, alpha=0.25 + 0.75 * k / 4)
-        ax.annotate(f"{result.t[i]:.3f} s", result.positions[i].max(axis=0), fontsize=7, xytext=(4, 0),
-                    textcoords="offset points")
-    _frame(ax, result)
-    ax.set_title("Free fall (thesis fig. 5.1)")
+    _setup_view(ax, box, grounds)
+    path = _centre(result)[: end + 1]
+    ax.plot(path[:, 0], path[:, 1], ":", color="0.5", lw=1.0, label="centre of mass")
+    frames = _snapshots(x)
+    for k, i in enumerate(frames):
+        _draw_body(ax, x[i], result.links, force=result.contact_force[i],
+                   alpha=0.35 + 0.65 * k / max(len(frames) - 1, 1))
+        ax.annotate(f"{result.t[i]:.3f} s", (x[i, :, 0].max(), x[i, :, 1].mean()), xytext=(6, 0),
+                    textcoords="offset points", fontsize=8, va="center")
+    ax.legend(loc="upper right", fontsize=7)
+    what = "until the first impact" if hit is not None else "(no impact in this run)"
+    ax.set_title(f"Free fall {what}\n(thesis fig. 5.1)", fontsize=10)
     return fig
 
 
-def figure_impact(result: SimulationResult, links: np.ndarray) -> Figure:
-    """Thesis fig. 5.2: the body at its first impact and at its deepest compression."""
-    fig = Figure(figsize=(8, 3.6), layout="constrained")
-    t_hit = first_impact_time(result)
-    i_hit = min(np.searchsorted(result.t, t_hit), len(result.t) - 1)
-    i_max = int(np.argmax(result.contact_force.sum(axis=1)))
-    for ax, i, title in zip(fig.subplots(1, 2), (i_hit, i_max), ("first impact", "largest contact force")):
+def figure_impact(result: SimulationResult, grounds: Sequence | None = None) -> Figure:
+    """Thesis fig. 5.2: the body at its first impact and at its largest contact force, with velocities."""
+    hit = first_impact_index(result)
+    low = int(np.argmin(gaps(result.positions, grounds).min(axis=1)))
+    force = result.contact_force.sum(axis=1)
+    panels = [(low, "closest approach (no impact)") if hit is None else (hit, "first impact"),
+              (int(np.argmax(force)), "largest contact force") if force.max() > 0 else (low, "no contact force")]
+    v = result.velocities[[i for i, _ in panels]]
+    size = float(np.ptp(result.positions[panels[0][0]], axis=0).max()) or 0.1
+    vmax = float(np.linalg.norm(v, axis=-1).max()) or 1.0
+    scale = vmax / (0.35 * size)  # m/s per m: the fastest arrow is 35 % of the body's size
+    key = _round_down(vmax / 2)
+    fig = _figure((9, 4.4), left=0.75, right=0.15, top=0.75, grid=(2, 1), gap=(0.85, 0.0))
+    for ax, (i, title) in zip(fig.subplots(1, 2), panels):
         x = result.positions[i]
-        _draw_body(ax, x, links, force=result.contact_force[i])
-        v = result.velocities[i]
-        ax.quiver(x[:, 0], x[:, 1], v[:, 0], v[:, 1], angles="xy", scale_units="xy", scale=40, width=0.004,
-                  color="0.4")
-        centre = x.mean(axis=0)
-        size = np.ptp(x, axis=0).max() * 0.75 + 0.02
-        ax.set_xlim(centre[0] - size, centre[0] + size)
-        ax.set_ylim(-0.02, 2 * size - 0.02)
-        ax.set_aspect("equal")
-        _ground(ax, centre[0] - size, centre[0] + size)
-        ax.set_title(f"{title}, t = {result.t[i]:.4f} s")
-        ax.set_xlabel("x (m)")
-    fig.axes[0].set_ylabel("y (m)")
-    fig.suptitle("Impact phase (thesis fig. 5.2): red particles are held by the ground; arrows are velocities")
+        box = view_box(x[None], pad=0.45)
+        _setup_view(ax, box, grounds)
+        ax.locator_params(nbins=5)
+        _draw_body(ax, x, result.links, force=result.contact_force[i])
+        arrows = ax.quiver(x[:, 0], x[:, 1], result.velocities[i, :, 0], result.velocities[i, :, 1], angles="xy",
+                           scale_units="xy", scale=scale, width=0.004, color="0.3", zorder=3)
+        ax.quiverkey(arrows, 0.8, 0.93, key, f"{key:g} m/s", labelpos="W", coordinates="axes",
+                     fontproperties={"size": 8})
+        ax.set_title(f"{title}, t = {result.t[i]:.4f} s", fontsize=10)
+    fig.suptitle("Impact phase (thesis fig. 5.2): red particles are held by the ground; arrows are velocities "
+                 "(same scale in both panels)", fontsize=10)
     return fig
 
 
-def figure_colliding_points(result: SimulationResult) -> Figure:
-    """Thesis fig. 5.3: heights of the particles that touch the ground, over time."""
-    fig = Figure(figsize=(8, 5.5), layout="constrained")
+def _round_down(value: float) -> float:
+    """The largest 1, 2 or 5 times a power of ten that is <= ``value`` (for a scale key)."""
+    exponent = np.floor(np.log10(value))
+    mantissa = value / 10**exponent
+    return float(max(m for m in (1, 2, 5) if m <= mantissa) * 10**exponent)
+
+
+def penetration_text(result: SimulationResult, grounds: Sequence | None = None) -> str:
+    """One line on the lowest gap of any particle, along the grounds' normals, on the output grid."""
+    lowest = float(gaps(result.positions, grounds).min())
+    verdict = "no penetration" if lowest >= -PENETRATION_TOLERANCE else "PENETRATION"
+    return f"{verdict}: lowest gap {lowest * 1e3:.3g} mm along the ground's normal (output grid)"
+
+
+def figure_colliding_points(result: SimulationResult, grounds: Sequence | None = None) -> Figure:
+    """Thesis fig. 5.3: heights above the ground (along its normal) of the particles that touch it."""
+    fig = _figure((8, 5.5), top=0.3, grid=(1, 2), gap=(0.0, 0.35))
     top, bottom = fig.subplots(2, 1, sharex=True)
+    h = gaps(result.positions, grounds)
     touched = np.unique(result.events_particle)
-    y = result.positions[:, :, 1]
-    for i in touched:
-        top.plot(result.t, y[:, i], lw=0.9, label=f"particle {i}")
-        bottom.plot(result.t, y[:, i] * 1e3, lw=0.9)
-    top.axhline(0, color=GROUND_COLOUR)
-    bottom.axhline(0, color=GROUND_COLOUR)
-    top.set_ylabel("height (m)")
-    top.set_title("Colliding points (thesis fig. 5.3)")
-    if len(touched) <= 12:
+    shown = touched if len(touched) else np.argsort(h.min(axis=0))[:3]
+    for i in shown:
+        top.plot(result.t, h[:, i], lw=0.9, label=f"particle {i}")
+        bottom.plot(result.t, h[:, i] * 1e3, lw=0.9)
+    for ax in (top, bottom):
+        ax.axhline(0, color=GROUND_COLOUR)
+    top.set_ylabel("height above the ground (m)")
+    what = "the particles that touch the ground" if len(touched) else "no particle touched the ground; the 3 lowest"
+    top.set_title(f"Colliding points (thesis fig. 5.3): {what}", fontsize=10)
+    if len(shown) <= 12:
         top.legend(fontsize=7, ncol=3)
-    bottom.set_ylim(-1.0, 15.0)
+    bottom.set_ylim(min(-1.0, 1.1e3 * float(h.min())), 15.0)
     bottom.set_ylabel("height (mm), near the ground")
     bottom.set_xlabel("t (s)")
-    depth = max(0.0, -float(y[:, touched].min())) if len(touched) else 0.0
-    bottom.set_title(f"no penetration: lowest point {-depth * 1e3:.2g} mm on the output grid", fontsize=9)
+    bottom.set_title(penetration_text(result, grounds), fontsize=9)
     return fig
 
 
 def figure_energy(result: SimulationResult) -> Figure:
     """Thesis fig. 5.4: the energies over time, and the drift of their sum."""
-    fig = Figure(figsize=(8, 6), layout="constrained")
+    fig = _figure((8.8, 6), right=1.4, top=0.3, grid=(1, 2), gap=(0.0, 0.3))
     top, bottom = fig.subplots(2, 1, sharex=True, height_ratios=(3, 1))
     for name in ("kinetic", "spring", "gravity", "damping_work", "impact_loss"):
         top.plot(result.t, getattr(result, name), lw=1.1, label=name.replace("_", " "))
     total = result.total_energy
     top.plot(result.t, total, "k--", lw=1.2, label="sum")
     top.set_ylabel("energy (J)")
-    top.legend(fontsize=8, ncol=3)
+    top.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0))
     top.set_title("Energy of the system (thesis fig. 5.4): the sum is conserved")
     bottom.plot(result.t, total - total[0], "k", lw=0.8)
     bottom.set_ylabel("sum - initial (J)")
@@ -129,46 +295,138 @@ def figure_energy(result: SimulationResult) -> Figure:
     return fig
 
 
-def animation_gif(result: SimulationResult, links: np.ndarray, *, frames: int = 100, fps: int = 25) -> bytes:
-    """An animated GIF of the run, ``frames`` frames evenly spaced in time."""
-    fig = Figure(figsize=(4.5, 4.5), dpi=80, layout="constrained")
-    ax = fig.add_subplot()
-    _frame(ax, result)
-    index = np.unique(np.linspace(0, len(result.t) - 1, frames).round().astype(int))
-    lines = LineCollection([], colors="tab:blue", linewidths=0.8)
-    ax.add_collection(lines)
-    (free,) = ax.plot([], [], "o", ms=3, color="tab:blue")
-    (held,) = ax.plot([], [], "o", ms=4, color=CONTACT_COLOUR)
-    label = ax.text(0.02, 0.96, "", transform=ax.transAxes, va="top", fontsize=9)
+# ---------------------------------------------------------------------------- the animation
 
-    def draw(i):
-        x = result.positions[i]
-        touching = result.contact_force[i] > 0
-        lines.set_segments(x[links])
-        free.set_data(x[~touching, 0], x[~touching, 1])
-        held.set_data(x[touching, 0], x[touching, 1])
-        label.set_text(f"t = {result.t[i]:.3f} s")
-        return lines, free, held, label
 
-    movie = FuncAnimation(fig, draw, frames=index, blit=False)
-    with tempfile.TemporaryDirectory() as tmp:
-        path = Path(tmp) / "drop.gif"
-        movie.save(path, writer=PillowWriter(fps=fps))
-        return path.read_bytes()
+class Animation:
+    """The run as a GIF: a view of the whole path, frames ``speed / fps`` seconds of the run apart.
+
+    Parameters
+    ----------
+    result : SimulationResult
+    grounds : see :func:`ground_planes`
+    fps : int
+        Frames per second of playback; ``1000 / fps`` should be a whole number of 10 ms
+        (GIF delays are in hundredths of a second).
+    speed : float
+        Seconds of the run per second of playback (1: real time); raised if the run would
+        need more than ``max_frames`` frames.
+    dpi : int
+    max_frames : int
+
+    Attributes
+    ----------
+    fig, ax : the figure and its axes (limits contain every position of every frame)
+    index : ndarray of int, shape (frames,)
+        The output sample shown by each frame.
+    frame_ms : int
+        How long each frame shows (ms).
+    """
+
+    def __init__(self, result: SimulationResult, grounds: Sequence | None = None, *, fps: int = 25,
+                 speed: float = 1.0, dpi: int = 80, max_frames: int = 200) -> None:
+        t = result.t
+        span = float(t[-1] - t[0])
+        speed = max(speed, span * fps / (max_frames - 1))
+        count = int(np.floor(span * fps / speed + 1e-9)) + 1
+        wanted = t[0] + np.arange(count) * speed / fps
+        self.result, self.speed, self.frame_ms = result, speed, round(1000 / fps)
+        self.index = np.minimum(np.searchsorted(t, wanted - 1e-12), len(t) - 1)
+        box = view_box(result.positions)
+        self.fig = _figure(_figsize(box, 4.2, shortest=2.6), left=0.75, right=0.15, bottom=0.5, top=0.3, dpi=dpi)
+        self.canvas = FigureCanvasAgg(self.fig)
+        self.ax = ax = self.fig.add_subplot()
+        _setup_view(ax, box, grounds)
+        pace = "real time" if abs(speed - 1.0) < 1e-9 else f"{speed:.3g}x real time"
+        ax.set_title(f"{result.stats.get('scene', 'run')}: played at {pace}", fontsize=9)
+        self.links = LineCollection([], colors=BODY_COLOUR, linewidths=0.8, animated=True)
+        ax.add_collection(self.links)
+        (self.free,) = ax.plot([], [], "o", ms=3, color=BODY_COLOUR, animated=True)
+        (self.held,) = ax.plot([], [], "o", ms=4, color=CONTACT_COLOUR, animated=True)
+        self.label = ax.text(0.03, 0.97, "", transform=ax.transAxes, va="top", fontsize=9, animated=True,
+                             bbox={"facecolor": "white", "edgecolor": "none", "alpha": 0.8, "pad": 1.5})
+        self.canvas.draw()  # lays out and draws the static parts once
+        self.background = self.canvas.copy_from_bbox(self.fig.bbox)
+
+    def frame(self, k: int):
+        """Frame ``k`` as an RGB ``PIL.Image``."""
+        i = self.index[k]
+        r = self.result
+        x, touching = r.positions[i], r.contact_force[i] > 0
+        self.canvas.restore_region(self.background)
+        self.links.set_segments(x[r.links])
+        self.free.set_data(x[~touching, 0], x[~touching, 1])
+        self.held.set_data(x[touching, 0], x[touching, 1])
+        self.label.set_text(f"t = {r.t[i]:.3f} s")
+        for artist in (self.links, self.free, self.held, self.label):
+            self.ax.draw_artist(artist)
+        return _image(self.canvas)
+
+    def gif(self) -> bytes:
+        """The animated GIF: every frame shows ``frame_ms`` ms; it loops."""
+        from PIL import Image
+
+        frames = [self.frame(k) for k in range(len(self.index))]
+        # One palette for every frame, from the first and last frames and the two body colours
+        # (red particles may appear only later): no colour flicker, one quantisation method.
+        swatch = np.concatenate([np.asarray(frames[0]), np.asarray(frames[-1]), _swatch(frames[0].width)])
+        palette = Image.fromarray(swatch).quantize(colors=64, method=Image.Quantize.MEDIANCUT)
+        colours = np.array(palette.getpalette()[: 3 * 64]).reshape(-1, 3)
+        # median cut averages white with its neighbours, and Pillow's palette lookup is coarse:
+        # make the near-whites white so the background stays white
+        colours[colours.min(axis=1) >= 246] = 255
+        palette.putpalette(colours.ravel().tolist())
+        indexed = [f.quantize(palette=palette, dither=Image.Dither.NONE) for f in frames]
+        buffer = io.BytesIO()
+        indexed[0].save(buffer, format="GIF", save_all=True, append_images=indexed[1:], duration=self.frame_ms,
+                        loop=0, optimize=False)
+        return buffer.getvalue()
+
+
+def _swatch(width: int) -> np.ndarray:
+    """Rows of the body and contact colours blended into white (their antialiased edges), uint8."""
+    from matplotlib.colors import to_rgb
+
+    blend = np.linspace(0.0, 1.0, width)[:, None]
+    rows = [255 * (1 - blend * (1 - np.array(to_rgb(c)))) for c in (BODY_COLOUR, CONTACT_COLOUR)]
+    return np.repeat(np.array(rows), 4, axis=0).round().astype(np.uint8)
+
+
+def animation_gif(result: SimulationResult, grounds: Sequence | None = None, **options) -> bytes:
+    """An animated GIF of the run in real time (see :class:`Animation` for the options)."""
+    return Animation(result, grounds, **options).gif()
+
+
+def _image(canvas: FigureCanvasAgg):
+    """The canvas's pixels as an RGB ``PIL.Image`` (one copy, done by Pillow)."""
+    from PIL import Image
+
+    return Image.frombuffer("RGBA", canvas.get_width_height(), canvas.buffer_rgba(), "raw", "RGBA", 0, 1).convert("RGB")
 
 
 def _png(fig: Figure) -> bytes:
+    """PNG bytes of ``fig`` after one draw (``savefig`` draws a second time for nothing)."""
+    canvas = FigureCanvasAgg(fig)
+    canvas.draw()
     buffer = io.BytesIO()
-    fig.savefig(buffer, format="png", dpi=120)
+    _image(canvas).save(buffer, format="png", compress_level=3, dpi=(fig.dpi, fig.dpi))
     return buffer.getvalue()
 
 
-def render_all(result: SimulationResult, links: np.ndarray) -> dict[str, bytes]:
-    """File name -> bytes of every figure and the animation."""
+def render_all(result: SimulationResult, grounds: Sequence | None = None) -> dict[str, bytes]:
+    """File name -> bytes of every figure and the animation.
+
+    Parameters
+    ----------
+    result : SimulationResult
+        A run, complete or partial (a failed run's samples up to where it stopped).
+    grounds : sequence of objects with ``.point`` and ``.normal``, optional
+        The scene's grounds (``scene.grounds``); default the ground y = 0.
+    """
     return {
-        "fig5_1_free_fall.png": _png(figure_free_fall(result, links)),
-        "fig5_2_impact.png": _png(figure_impact(result, links)),
-        "fig5_3_colliding_points.png": _png(figure_colliding_points(result)),
+        "fig5_1_free_fall.png": _png(figure_free_fall(result, grounds)),
+        "fig5_2_impact.png": _png(figure_impact(result, grounds)),
+        "fig5_3_colliding_points.png": _png(figure_colliding_points(result, grounds)),
         "fig5_4_energy.png": _png(figure_energy(result)),
-        "drop.gif": animation_gif(result, links),
+        "drop.gif": animation_gif(result, grounds),
     }

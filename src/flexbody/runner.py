@@ -57,7 +57,7 @@ def run_command(args: argparse.Namespace) -> int:
     if not args.no_figures:
         from .figures import render_all
 
-        extra = render_all(result, result.links)
+        extra = render_all(result, scene.grounds)
     try:
         result.save(out, extra_files=extra)
     except OSError as exc:  # the folder was checked before the run; something changed since
