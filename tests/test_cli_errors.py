@@ -240,14 +240,16 @@ def _alive(pid: int) -> bool:
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc; PR_SET_DEATHSIG is Linux's")
 def test_killing_run_while_it_derives_ends_the_derivation(tmp_path):
-    """A never-seen topology (a fresh, empty cache) is derived in a child; SIGKILL the parent
-    (no finally runs) and the child must go at once, not when its derivation (~a minute for
-    this 30-particle ring) would have ended."""
+    """A never-seen topology in the floating formulation (the only one derived per scene; a
+    fresh, empty cache) is derived in a child; SIGKILL the parent (no finally runs) and the
+    child must go at once, not when its derivation (minutes for this 30-particle ring)
+    would have ended."""
     scene = tmp_path / "ring.toml"
     scene.write_text('[[bodies]]\nshape = "ring"\ncount = 30\nradius = 0.1\nmass = 0.05\nstiffness = 2000.0\n'
                      'damping = 0.5\nposition = [0.0, 0.5]\n[simulation]\nt_end = 0.1\n')
     env = dict(os.environ, FLEXBODY_CACHE=str(tmp_path / "cache"))
-    parent = subprocess.Popen([sys.executable, "-m", "flexbody.cli", "run", str(scene), "--out", str(tmp_path / "o")],
+    parent = subprocess.Popen([sys.executable, "-m", "flexbody.cli", "run", str(scene), "--out", str(tmp_path / "o"),
+                               "--formulation", "floating"],
                               env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     children: list[int] = []
     try:
@@ -264,7 +266,7 @@ def test_killing_run_while_it_derives_ends_the_derivation(tmp_path):
             time.sleep(0.05)
         assert not any(map(_alive, children)), "the derivation outlived flexbody run"
         said = parent.stderr.read()
-        assert "deriving the equations of ring (30 particles, formulation particles) with SymPy" in said, said
+        assert "deriving the equations of ring (30 particles, formulation floating) with SymPy" in said, said
     finally:
         parent.kill()
         for pid in filter(_alive, children):  # an orphan is no longer our child: kill it by its id

@@ -504,6 +504,7 @@ void fb_asm_system(Assembly *A, FbSystem *s)
     s->nc = A->n * A->n_grounds;
     s->ny = 2 * s->nq + 2;
     s->data = A;
+    s->project = 0; /* gaps are linear in the particles' positions: held contacts do not drift */
     if (A->dim == 2) {
         s->rhs = rhs_2d;
         s->gaps = gaps_2d;

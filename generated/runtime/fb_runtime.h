@@ -45,6 +45,10 @@ struct FbSystem {
     /* Particle positions x and velocities v (n_particles, dim) and energies (4): kinetic,
      * spring, gravity, damping power. */
     void (*outputs)(const FbSystem *s, const double *y, double *x, double *v, double *energies);
+    /* Optional (may be NULL): move y onto the held contacts' constraints, gap 0 and normal
+     * velocity 0 (the least correction in the mass metric), against integration drift
+     * where the gaps are nonlinear in q.  0, or -1 if a matrix is not positive definite. */
+    int (*project)(const FbSystem *s, double *y, const int *held);
 };
 
 /* Work buffers of one run, sized once (integrator.c). */

@@ -432,6 +432,9 @@ int fb_integrate(FbWork *w, const FbSystem *s, int method, double t0, const doub
     double h1 = (d1 <= 1e-15 && d2 <= 1e-15) ? fmax(1e-6, h0 * 1e-3) : pow(0.01 / fmax(d1, d2), 1.0 / (S.order + 1));
     double h_abs = fmin(fmin(100.0 * h0, h1), interval);
     const double exponent = -1.0 / (S.order + 1);
+    /* Step ends, output samples and the event state are moved onto the held constraints
+     * (where the model can: its gaps are nonlinear in q); the interpolant between is not. */
+    const int project = P.any_held && s->project;
     if (P.failed) { status = FB_SINGULAR; goto done; }
     /* SciPy's floor, 10 ulp of t, vanishes near t = 0 (a step of 1e-154 s "progresses"
      * forever): below 10 ulp of the segment's end a step cannot matter either. */
@@ -469,6 +472,10 @@ int fb_integrate(FbWork *w, const FbSystem *s, int method, double t0, const doub
         ++steps;
         S.t_old = t;
         if (!finite_state(S.y, w->zero, ny)) { status = FB_NON_FINITE; t = t_new; goto done; }
+        if (project) { /* coordinate projection: held gaps do not drift */
+            if (s->project(s, S.y, P.held)) { status = FB_SINGULAR; goto done; }
+            rhs(&P, t_new, S.y, S.K[S.stages], lam); /* first same as last, at the projected state */
+        }
         S.dense_ready = 0;
         events_from(&P, S.y, lam, g_new, gaps);
         double t_hit;
@@ -477,11 +484,13 @@ int fb_integrate(FbWork *w, const FbSystem *s, int method, double t0, const doub
         double t_end_step = hit ? t_hit : t_new;
         while (next < n_grid && grid[next] <= t_end_step) {
             dense(&P, &S, grid[next], samples + (long)next * ny, ny);
+            if (project && s->project(s, samples + (long)next * ny, P.held)) { status = FB_SINGULAR; goto done; }
             ++next;
         }
         if (hit) { /* the step is cut at the event: its end beyond it is not part of the solution */
             t = t_hit;
             dense(&P, &S, t_hit, y_stop, ny);
+            if (project && s->project(s, y_stop, P.held)) { status = FB_SINGULAR; goto done; }
             s->gaps(s, y_stop, gaps);
             for (int c = 0; c < nc; ++c)
                 if (gaps[c] < *min_gap) *min_gap = gaps[c];

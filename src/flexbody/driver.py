@@ -17,8 +17,6 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-import scipy
-from scipy.integrate import BDF, DOP853, LSODA, RK23, RK45, Radau
 
 from . import __version__
 from .compiled import IMPACT, CompiledPath
@@ -38,7 +36,9 @@ from .scene import (
 )
 from .state import initial_coordinates
 
-SOLVERS = {"RK45": RK45, "RK23": RK23, "DOP853": DOP853, "Radau": Radau, "BDF": BDF, "LSODA": LSODA}
+#: SciPy's stepper classes by method name (scipy.integrate is imported only when one is used:
+#: it takes ~0.6 s, and the default compiled path does not need it).
+SCIPY_METHODS = ("RK45", "RK23", "DOP853", "Radau", "BDF", "LSODA")
 IMPLICIT = ("Radau", "BDF", "LSODA")
 
 #: Above these a run is flagged in ``stats["warnings"]``: relative energy drift, and rtol
@@ -60,6 +60,12 @@ class SimulationFailed(Exception):
 
 def _non_finite(t: float) -> tuple[str, str]:
     return "blow_up", f"the state became non-finite at t = {t:.9g} s; tighten --rtol/--atol or use an implicit method."
+
+
+def _scipy_version() -> str:
+    from importlib.metadata import version
+
+    return version("scipy")
 
 
 def _lowest_gap(positions: np.ndarray, grounds) -> float:
@@ -232,7 +238,9 @@ class _Run:
             options["jac"] = jacobian = model.jacobian_function(self.p, phases.held)
             if s.method == "LSODA":  # Radau and BDF take the sparse Jacobian; LSODA only a dense one
                 options["jac"] = lambda t, y: _dense(jacobian(t, y))
-        solver = SOLVERS[s.method](model.rhs_function(self.p, phases.held, phases.push), t0, self.y.copy(),
+        import scipy.integrate
+
+        solver = getattr(scipy.integrate, s.method)(model.rhs_function(self.p, phases.held, phases.push), t0, self.y.copy(),
                                    t_bound, **options)
         events = EventFunctions(model, self.p, phases, self.force_tolerance)
         g_old = events(self.y)
@@ -440,7 +448,7 @@ class _Run:
             "min_held_contact_force_N": min_force,
             "warnings": warnings,
             "model_digest": model.digest,
-            "versions": {"flexbody": __version__, "numpy": np.__version__, "scipy": scipy.__version__},
+            "versions": {"flexbody": __version__, "numpy": np.__version__, "scipy": _scipy_version()},
         }
         return result
 

@@ -20,7 +20,6 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import brentq
 
 from .constants import FREE, GROUP_TIME, HELD
 from .contact import Phases
@@ -107,6 +106,8 @@ def _root(events: EventFunctions, dense: Callable[[float], np.ndarray], c: int, 
     if fb > 0.0:  # the interpolant stays positive: the crossing is at the step's end
         return tb
     xtol = 1e-15
+    from scipy.optimize import brentq  # imported on first use: the compiled path never needs it
+
     t = brentq(g, ta, tb, xtol=xtol, rtol=4 * np.finfo(float).eps)
     if g(t) <= 0.0:
         return t
