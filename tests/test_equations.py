@@ -255,3 +255,39 @@ def test_show_prints_readable_or_raw_equations(raw, capsys):
         assert "Raw equations" in out and "k0*xi1*(L0 - Abs(xi1))/Abs(xi1)" in vX0
     else:
         assert "k0" not in vX0 and "fs0 = k0*(L0 - ell0)" in out and "ell0 = Abs(xi1)" in out
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_floating_one_link_matches_hand_derivation(backend, rng):
+    """Two particles, one link, floating frame: q = [X, Y, theta, xi1].  Particle 0 (the anchor)
+    sits at T's origin r0 = (X, Y); particle 1 on T's x-axis, r1 = r0 + xi1 (cos theta, sin theta).
+    Written out by hand: v_i = J_i u, M = sum_i m_i J_i^T J_i, and
+    F = sum_i J_i^T (f_i + m_i g - m_i dJ_i/dt u) (d'Alembert / Kane, q' = u)."""
+    m0, m1, k, c, L = 0.05, 0.08, 2000.0, 0.5, 0.25
+    scene = make_scene(body(masses=[m0, m1], mass=None, stiffness=k, damping=c, rest_lengths=L), gravity=[0.7, -9.81])
+    model = load_model(scene, backend=backend, formulation="floating")
+    assert model.q_names == ("X0", "Y0", "theta0", "xi1")
+    p = model.parameters(scene)
+    g = np.array([0.7, -9.81])
+    for _ in range(5):
+        X, Y, th, xi = rng.uniform(-1, 1, 4) + [0, 0, 0, 0.3]
+        vX, vY, w, vxi = rng.uniform(-2, 2, 4)
+        cs, sn = np.cos(th), np.sin(th)
+        J0 = np.array([[1.0, 0, 0, 0], [0, 1.0, 0, 0]])
+        J1 = np.array([[1.0, 0, -xi * sn, cs], [0, 1.0, xi * cs, sn]])
+        u = np.array([vX, vY, w, vxi])
+        v0, v1 = J0 @ u, J1 @ u
+        # acceleration of particle 1 at u' = 0: d/dt(J1) u
+        a1 = np.array([-2 * vxi * w * sn - xi * w**2 * cs, 2 * vxi * w * cs - xi * w**2 * sn])
+        d = -xi * np.array([cs, sn])  # P_01 = r0 - r1
+        r = np.linalg.norm(d)
+        f0 = k * (L - r) * d / r + c * (v1 - v0)  # thesis eq. 3.7 + 3.8 on particle 0; -f0 on 1
+        M = m0 * J0.T @ J0 + m1 * J1.T @ J1
+        F = J0.T @ (f0 + m0 * g) + J1.T @ (-f0 + m1 * g - m1 * a1)
+        q = np.array([X, Y, th, xi])
+        np.testing.assert_allclose(model.mass_matrix(q, p), M, rtol=1e-12, atol=1e-12 * np.abs(M).max())
+        np.testing.assert_allclose(model.forcing(q, u, p), F, rtol=1e-12, atol=1e-12 * np.abs(F).max())
+        T, V, G, P = model.energies(q, u, p)
+        assert T == pytest.approx(0.5 * (m0 * v0 @ v0 + m1 * v1 @ v1), rel=1e-12)
+        assert V == pytest.approx(0.5 * k * (r - L) ** 2, rel=1e-12)
+        assert G == pytest.approx(-(m0 * g @ q[:2] + m1 * g @ (q[:2] - d)), rel=1e-12)
