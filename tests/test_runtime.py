@@ -10,7 +10,7 @@ from flexbody.contact import Event
 from flexbody.driver import SimulationFailed, _Run, _settings
 from flexbody.model import load_model
 
-from .conftest import BACKENDS, body, make_scene
+from .conftest import BACKENDS, body, make_scene, needs_cc
 
 TIGHT = dict(method="DOP853", rtol=1e-11, atol=1e-13)
 
@@ -33,6 +33,7 @@ def test_free_fall_impact_time_and_resting_contact_force(backend):
     assert r.impact_loss[-1] == pytest.approx(m * g * h, rel=1e-10)  # all kinetic energy lost: plastic impact
 
 
+@needs_cc
 def test_vertical_dumbbell_lifts_off_at_the_closed_form_time():
     """contact.md §4.3: m1 = 1 below m2 = 2, k = 400, L0 = 0.5, released at H = 1."""
     scene = make_scene(body(particles=[[0.0, 0.0], [0.0, 0.5]], masses=[1.0, 2.0], mass=None, stiffness=400.0,
@@ -51,6 +52,7 @@ def test_vertical_dumbbell_lifts_off_at_the_closed_form_time():
 
 @pytest.mark.parametrize("n, restitution, contact_time", [(2, 0.5, np.pi), (3, 0.649210, 5.268542),
                                                           (4, 0.728018, 7.288611)])
+@needs_cc
 def test_falling_chain_restitution_matches_reference(n, restitution, contact_time):
     """contact.md §4.5: a vertical chain of N equal particles, g = 0, lands at v0 plastically.
 
@@ -69,6 +71,7 @@ def test_falling_chain_restitution_matches_reference(n, restitution, contact_tim
     assert (t_liftoff - t_impact) * np.sqrt(k / m) == pytest.approx(contact_time, abs=2e-6)
 
 
+@needs_cc
 def test_two_particle_link_oscillates_at_the_damped_frequency():
     """Thesis eq. 3.10 with the reduced mass mu: mu x'' + c x' + k x = 0 along the link."""
     m1, m2, k, c, L = 0.05, 0.08, 2000.0, 0.5, 0.2
@@ -99,6 +102,7 @@ def level_ring(angle_offset=0.0, order=None):
     return make_scene(table, simulation={"t_end": 0.45, "output_dt": 1e-3})
 
 
+@needs_cc
 def test_flat_landing_hits_several_particles_at_once_symmetrically():
     r = flexbody.simulate(level_ring(), **TIGHT)
     assert r.success, r.message
@@ -114,6 +118,7 @@ def test_flat_landing_hits_several_particles_at_once_symmetrically():
     assert r.stats["energy_drift_J"] < 1e-8 * r.stats["energy_initial_J"]
 
 
+@needs_cc
 def test_result_does_not_depend_on_particle_order():
     order = np.r_[0, np.arange(22, 0, -1)]  # perimeter listed clockwise instead
     a = flexbody.simulate(level_ring(), **TIGHT)
@@ -122,6 +127,7 @@ def test_result_does_not_depend_on_particle_order():
     np.testing.assert_allclose(b.events_time, a.events_time, atol=1e-12)
 
 
+@needs_cc
 def test_near_simultaneous_impacts_are_continuous_with_simultaneous():
     exact = flexbody.simulate(level_ring(), **TIGHT)
     for offset in (1e-13, 1e-10, 1e-8):
@@ -131,6 +137,7 @@ def test_near_simultaneous_impacts_are_continuous_with_simultaneous():
         assert near.stats["max_penetration_m"] < 1e-11
 
 
+@needs_cc
 def test_thesis_impact_mode_converges_to_instant():
     scene = flexbody.load_scene("thesis_ball")
     reference = flexbody.simulate(scene, t_end=0.4, **TIGHT)
@@ -156,6 +163,7 @@ def test_particles_and_floating_formulations_agree(ball, backend):
     np.testing.assert_allclose(a.contact_force, b.contact_force, atol=1e-5 * a.contact_force.max())
 
 
+@needs_cc
 @pytest.mark.parametrize("rtol", [1e-6, 1e-9])
 def test_energy_balance_on_the_thesis_ball(ball, rtol):
     r = flexbody.simulate(ball, method="DOP853", rtol=rtol, atol=rtol * 1e-3)
@@ -169,6 +177,7 @@ def test_energy_balance_on_the_thesis_ball(ball, rtol):
     assert (r.contact_force >= 0).all()
 
 
+@needs_cc
 def test_every_scipy_method_gives_the_same_events(ball):
     reference = flexbody.simulate(ball, t_end=0.7, **TIGHT)
     for method in ("RK45", "RK23", "Radau", "BDF", "LSODA"):
@@ -178,6 +187,7 @@ def test_every_scipy_method_gives_the_same_events(ball):
         assert np.abs(r.positions - reference.positions).max() < 1e-5, method
 
 
+@needs_cc
 def test_max_events_stops_with_status_and_message(ball):
     r = flexbody.simulate(ball, max_events=5)
     assert r.status == "max_events" and not r.success
@@ -196,6 +206,7 @@ def test_chattering_is_reported_not_spun_on(ball):
     assert "particle 3 impacted 26 times" in info.value.message and "rtol" in info.value.message
 
 
+@needs_cc
 def test_result_contract(ball, tmp_path):
     r = flexbody.simulate(ball, t_end=0.5)
     out = r.save(tmp_path / "run")
@@ -249,6 +260,7 @@ def test_stiff_lift_off_is_located_on_the_released_side(method):
     assert "liftoff" in r.events_kind.tolist()
 
 
+@needs_cc
 def test_particle_slides_down_a_frictionless_incline():
     """Inclined ground (normal at angle th): the contact force is m g cos th and the slide
     along the slope is s = g sin th t^2 / 2, from rest, whatever the impact did."""
@@ -266,6 +278,7 @@ def test_particle_slides_down_a_frictionless_incline():
     np.testing.assert_allclose(r.positions[:, 0] @ s_dir, -0.5 * g * np.sin(th) * r.t**2, atol=1e-10)
 
 
+@needs_cc
 def test_particle_lands_in_a_corner_of_two_grounds():
     scene = make_scene(body(particles=[[0.0, 0.0]], links=[], stiffness=[], damping=[], mass=0.2,
                             position=[0.1, 0.1], velocity=[-1.0, 0.0]),
@@ -278,6 +291,7 @@ def test_particle_lands_in_a_corner_of_two_grounds():
     assert r.contact_force[-1, 0] == pytest.approx(0.2 * 9.81, rel=1e-12)  # the floor's; the wall's is 0
 
 
+@needs_cc
 @pytest.mark.parametrize("formulation", ["particles", "floating"])
 def test_two_bodies_move_independently(formulation):
     a, b = body(name="a"), body(name="b", position=[1.0, 0.5], angle=0.2)
