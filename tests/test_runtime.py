@@ -207,6 +207,18 @@ def test_thesis_ball_events_match_the_reference(ball, method, formulation):
 
 
 @needs_cc
+def test_every_scipy_method_gives_the_same_events(ball):
+    reference = flexbody.simulate(ball, t_end=0.7, **TIGHT)
+    for method in ("RK45", "RK23", "Radau", "BDF", "LSODA"):
+        r = flexbody.simulate(ball, t_end=0.7, method=method, rtol=1e-7, atol=1e-10)
+        assert r.success, (method, r.message)
+        assert list(zip(r.events_particle, r.events_kind)) == list(zip(reference.events_particle,
+                                                                       reference.events_kind)), method
+        np.testing.assert_allclose(r.events_time, reference.events_time, atol=1e-6, err_msg=method)
+        assert np.abs(r.positions - reference.positions).max() < 1e-5, method
+
+
+@needs_cc
 def test_max_events_stops_with_status_and_message(ball):
     r = flexbody.simulate(ball, max_events=5)
     assert r.status == "max_events" and not r.success
