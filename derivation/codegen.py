@@ -256,20 +256,29 @@ def runge_kutta_tables() -> dict:
     }
 
 
-def _equations(model: SymbolicModel) -> list[dict[str, str]]:
-    """Readable equations of motion, row by row: sum_j M_rj u_j' = F_r."""
+def _equations(model: SymbolicModel) -> dict:
+    """The equations of motion to read: readable rows with their named terms, and Kane's raw rows.
+
+    Returns
+    -------
+    dict
+        ``rows``: [{speed, text, latex}] per row of the readable form
+        (:mod:`derivation.readable`); ``terms``: [{text, latex}] the named terms'
+        definitions; ``raw``: [{speed, text, latex}] ``sum_j M_rj u_j' = F_r`` as derived,
+        unsimplified (for debugging).
+    """
+    from .readable import readable
+
+    eqs = readable(model)
+    rows = [{"speed": u.name, "text": text, "latex": latex}
+            for u, text, latex in zip(model.u, eqs.rows_text(), eqs.rows_latex())]
+    terms = [{"text": text, "latex": latex} for text, latex in zip(eqs.terms_text(), eqs.terms_latex())]
     M, F = model.outputs["mass_matrix"], model.outputs["forcing"]
-    rows = []
+    raw = []
     for r, speed in enumerate(model.u):
         lhs = sum((M[r, j] * sp.Symbol(f"{model.u[j].name}'") for j in range(M.cols) if M[r, j] != 0), sp.S.Zero)
-        rows.append(
-            {
-                "speed": speed.name,
-                "text": f"{lhs} = {F[r]}",
-                "latex": f"{sp.latex(lhs)} = {sp.latex(F[r])}",
-            }
-        )
-    return rows
+        raw.append({"speed": speed.name, "text": f"{lhs} = {F[r]}", "latex": f"{sp.latex(lhs)} = {sp.latex(F[r])}"})
+    return {"rows": rows, "terms": terms, "raw": raw}
 
 
 def render(model: SymbolicModel, *, source: str, command: str) -> dict[str, str]:

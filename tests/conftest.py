@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import shutil
 
 import numpy as np
@@ -10,8 +11,10 @@ import pytest
 import flexbody
 from flexbody.model import load_derived_model as load_model  # the whole-scene derivation
 
-HAS_CC = shutil.which("cc") is not None
+HAS_CC = shutil.which(os.environ.get("CC", "cc")) is not None
 BACKENDS = ["numpy", "c"] if HAS_CC else ["numpy"]
+#: For tests that run the default backend (c) or a compiled method: skipped cleanly without a compiler.
+needs_cc = pytest.mark.skipif(not HAS_CC, reason="no C compiler: the default backend is compiled C")
 
 
 def body(**overrides):

@@ -11,11 +11,14 @@ import pytest
 
 from flexbody.cli import main
 
+from .conftest import needs_cc
+
 
 def run_cli(*args):
     return subprocess.run([sys.executable, "-m", "flexbody.cli", *args], capture_output=True, text=True)
 
 
+@needs_cc
 @pytest.mark.slow
 def test_main_job_writes_result_summary_figures_and_animation(tmp_path):
     out = tmp_path / "ball"
@@ -66,6 +69,7 @@ def test_bad_scene_file_lists_every_problem(tmp_path):
     assert not (tmp_path / "never").exists()
 
 
+@needs_cc
 def test_failed_simulation_exits_nonzero_says_why_and_writes_nothing(tmp_path, monkeypatch):
     import flexbody.runner as runner
 

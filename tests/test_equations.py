@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from flexbody.model import load_derived_model as load_model  # the whole-scene derivation
+from flexbody.scene import load_scene
 from flexbody.state import initial_coordinates
 
 from .conftest import BACKENDS, body, make_scene
@@ -197,3 +198,96 @@ def test_forcing_jacobians_match_finite_differences(ball, ball_models, rng):
     fd_u = np.column_stack([(residual(q, u + h * e) - residual(q, u - h * e)) / (2 * h) for e in np.eye(model.nu)])
     np.testing.assert_allclose(Jq, fd_q, atol=1e-5 * np.abs(fd_q).max())
     np.testing.assert_allclose(Ju, fd_u, atol=1e-5 * np.abs(fd_u).max())
+
+
+# ---------------------------------------------------------------- the readable equations (eom.md, show)
+@pytest.mark.parametrize("formulation", ["particles", "floating"])
+@pytest.mark.parametrize("damper", ["relative", "axial"])
+def test_readable_equations_equal_kanes_symbolically(formulation, damper):
+    """Named terms substituted back, every entry of M and F equals Kane's: simplify(a - b) == 0."""
+    from derivation.mechanics import derive
+    from derivation.readable import check_identity, readable
+
+    scene = make_scene(body(particles=[[-0.1, 0.0], [0.1, 0.0], [0.0, 0.1]], links=[[0, 1], [1, 2], [2, 0]],
+                            damper=damper))
+    model = derive(scene.topology(), formulation)
+    assert check_identity(model, readable(model)) == 0.0
+
+
+def test_readable_equations_of_a_ring_equal_kanes_at_random_states():
+    """A 7-particle ring in the floating frame: simplify over its 14 rows takes minutes, so compare
+    numerically at random states (the expressions are rational in q, u, p, sin and cos: an error would
+    show as an O(1) relative difference, not 1e-12)."""
+    from derivation.mechanics import derive
+    from derivation.readable import check_identity, readable
+
+    scene = make_scene(body(particles=None, links=None, shape="ring", count=6, radius=0.1, center=True))
+    model = derive(scene.topology(), "floating")
+    assert check_identity(model, readable(model), points=5) < 1e-12
+
+
+def test_readable_rigid_body_rows_have_no_internal_forces():
+    from derivation.mechanics import derive
+    from derivation.readable import readable
+
+    model = derive(load_scene("dumbbell").topology(), "floating")
+    eqs = readable(model)
+    rows = dict(zip([u.name for u in model.u], eqs.rows_text()))
+    raw_F = dict(zip([u.name for u in model.u], model.outputs["forcing"]))
+    for rigid in ("vX0", "vY0"):
+        assert "k0" in str(raw_F[rigid])  # Kane prints the link's force twice, with opposite signs
+        assert not ({"k0", "c0", "fs0", "fd0_xi", "fd0_eta"} & set(rows[rigid].replace("*", " ").split()))
+    # the spring is central: no spring moment in the rotation row, only the relative damper's
+    assert "fs0" not in rows["omega0"] and "fd0_eta" in rows["omega0"]
+    assert rows["vxi1"].startswith("m1*cos(theta0)*vX0' + m1*sin(theta0)*vY0' + m1*vxi1' = ")
+    latex = eqs.rows_latex()
+    assert "\\ddot{\\theta}_{0}" in latex[2] and "\\dot{\\theta}_{0}" in latex[2] and "omega0" not in latex[2]
+
+
+@pytest.mark.parametrize("raw", [False, True])
+def test_show_prints_readable_or_raw_equations(raw, capsys):
+    from flexbody.cli import main
+
+    assert main(["show", "dumbbell", "--formulation", "floating"] + (["--raw"] if raw else [])) == 0
+    out = capsys.readouterr().out
+    vX0 = next(line for line in out.splitlines() if line.startswith("[vX0]"))
+    if raw:
+        assert "Raw equations" in out and "k0*xi1*(L0 - Abs(xi1))/Abs(xi1)" in vX0
+    else:
+        assert "k0" not in vX0 and "fs0 = k0*(L0 - ell0)" in out and "ell0 = Abs(xi1)" in out
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_floating_one_link_matches_hand_derivation(backend, rng):
+    """Two particles, one link, floating frame: q = [X, Y, theta, xi1].  Particle 0 (the anchor)
+    sits at T's origin r0 = (X, Y); particle 1 on T's x-axis, r1 = r0 + xi1 (cos theta, sin theta).
+    Written out by hand: v_i = J_i u, M = sum_i m_i J_i^T J_i, and
+    F = sum_i J_i^T (f_i + m_i g - m_i dJ_i/dt u) (d'Alembert / Kane, q' = u)."""
+    m0, m1, k, c, L = 0.05, 0.08, 2000.0, 0.5, 0.25
+    scene = make_scene(body(masses=[m0, m1], mass=None, stiffness=k, damping=c, rest_lengths=L), gravity=[0.7, -9.81])
+    model = load_model(scene, backend=backend, formulation="floating")
+    assert model.q_names == ("X0", "Y0", "theta0", "xi1")
+    p = model.parameters(scene)
+    g = np.array([0.7, -9.81])
+    for _ in range(5):
+        X, Y, th, xi = rng.uniform(-1, 1, 4) + [0, 0, 0, 0.3]
+        vX, vY, w, vxi = rng.uniform(-2, 2, 4)
+        cs, sn = np.cos(th), np.sin(th)
+        J0 = np.array([[1.0, 0, 0, 0], [0, 1.0, 0, 0]])
+        J1 = np.array([[1.0, 0, -xi * sn, cs], [0, 1.0, xi * cs, sn]])
+        u = np.array([vX, vY, w, vxi])
+        v0, v1 = J0 @ u, J1 @ u
+        # acceleration of particle 1 at u' = 0: d/dt(J1) u
+        a1 = np.array([-2 * vxi * w * sn - xi * w**2 * cs, 2 * vxi * w * cs - xi * w**2 * sn])
+        d = -xi * np.array([cs, sn])  # P_01 = r0 - r1
+        r = np.linalg.norm(d)
+        f0 = k * (L - r) * d / r + c * (v1 - v0)  # thesis eq. 3.7 + 3.8 on particle 0; -f0 on 1
+        M = m0 * J0.T @ J0 + m1 * J1.T @ J1
+        F = J0.T @ (f0 + m0 * g) + J1.T @ (-f0 + m1 * g - m1 * a1)
+        q = np.array([X, Y, th, xi])
+        np.testing.assert_allclose(model.mass_matrix(q, p), M, rtol=1e-12, atol=1e-12 * np.abs(M).max())
+        np.testing.assert_allclose(model.forcing(q, u, p), F, rtol=1e-12, atol=1e-12 * np.abs(F).max())
+        T, V, G, P = model.energies(q, u, p)
+        assert T == pytest.approx(0.5 * (m0 * v0 @ v0 + m1 * v1 @ v1), rel=1e-12)
+        assert V == pytest.approx(0.5 * k * (r - L) ** 2, rel=1e-12)
+        assert G == pytest.approx(-(m0 * g @ q[:2] + m1 * g @ (q[:2] - d)), rel=1e-12)

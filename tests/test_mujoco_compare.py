@@ -7,7 +7,10 @@ import pytest
 
 import flexbody
 
+from .conftest import needs_cc
+
 mujoco = pytest.importorskip("mujoco")
+pytestmark = needs_cc  # flexbody's side runs the default (compiled) backend
 
 
 def test_mujoco_free_flight_converges_to_flexbody_at_first_order():
@@ -34,7 +37,8 @@ def test_mujoco_contact_is_soft_and_flexbody_contact_is_not():
     scene = flexbody.load_scene({**_table(), "simulation": {"t_end": 0.4, "output_dt": 1e-3}})
     m = run(scene, 1e-3, repeats=1)
     ours = flexbody.simulate(scene)
-    assert m["max_penetration_m"] > 1e-4 > 1e-11 > ours.stats["max_penetration_m"]
+    assert m["max_penetration_m"] > 1e-4  # MuJoCo's soft contact lets the ball sink in
+    assert ours.stats["max_penetration_m"] < 1e-11  # flexbody's constraint does not
 
 
 def _table():

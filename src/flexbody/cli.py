@@ -87,6 +87,7 @@ def _parser() -> argparse.ArgumentParser:
     show.add_argument("--formulation", choices=FORMULATIONS, default=None, help="default: the scene's")
     show.add_argument("--force", action="store_true",
                       help="derive a large scene's equations even when that takes minutes")
+    show.add_argument("--raw", action="store_true", help="the equations as derived, unsimplified (for debugging)")
 
     bench = sub.add_parser("bench", help="speed and accuracy benchmarks (prints and saves numbers)",
                            description="Benchmarks, not tests: work-precision diagram (wp), stability map "
@@ -194,13 +195,15 @@ def _show(args: argparse.Namespace) -> int:
         return EXIT_USAGE
     model = load_derived_model(scene, backend="numpy", formulation=formulation)
     text = (model.directory / "eom.md").read_text()
-    if args.latex:
-        body = text.split("## Equations (LaTeX)", 1)[1].strip()
-    else:
-        body = text.split("```text", 1)[1].split("```", 1)[0].strip()
+    sections = dict(part.split("\n", 1) for part in text.split("\n## ")[1:])  # title -> body
+    title = f"{'Raw equations' if args.raw else 'Equations'} ({'LaTeX' if args.latex else 'plain text'})"
+    if title not in sections:
+        print(f"error: {model.directory / 'eom.md'} has no '{title}' section; regenerate it with "
+              f"`flexbody derive {args.scene}`", file=sys.stderr)
+        return EXIT_FAILED
+    body = "\n".join(line for line in sections[title].strip().splitlines() if not line.startswith("```"))
     header = text.split("## Symbols", 1)[0].split("-->", 1)[1].strip()
-    symbols = text.split("## Symbols", 1)[1].split("## Equations", 1)[0].strip()
-    print(f"{header}\n\n{symbols}\n\n{body}")
+    print(f"{header}\n\n## Symbols\n{sections['Symbols'].strip()}\n\n## {title}\n\n{body}")
     return 0
 
 
