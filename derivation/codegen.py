@@ -317,6 +317,7 @@ def render(model: SymbolicModel, *, source: str, command: str) -> dict[str, str]
         "np_": len(model.p),
         "nc": len(contacts),
         "n_particles": top.n_particles,
+        "dim": top.dim,
         "n_links": top.n_links,
         "n_grounds": top.n_grounds,
         "energy_names": ENERGY_NAMES,

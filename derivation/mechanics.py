@@ -64,12 +64,12 @@ def _parameters(top: Topology) -> tuple[list[sp.Symbol], dict[str, str]]:
         for l_ in range(nl):
             p.append(sp.Symbol(f"{prefix}{l_}", real=True))
             text[f"{prefix}{l_}"] = f"{meaning} of link {l_}"
-    for axis in "xy"[: top.dim]:
+    for axis in "xyz"[: top.dim]:
         p.append(sp.Symbol(f"g_{axis}", real=True))
         text[f"g_{axis}"] = f"gravity, {axis} component (m/s^2)"
     for j in range(top.n_grounds):
         for prefix, meaning in (("P", "a point of"), ("n", "unit normal of")):
-            for axis in "xy":
+            for axis in "xyz"[: top.dim]:
                 p.append(sp.Symbol(f"{prefix}{j}_{axis}", real=True))
                 text[f"{prefix}{j}_{axis}"] = f"{meaning} ground {j}, {axis} component"
     return p, text
@@ -97,10 +97,12 @@ class _Builder:
     def particles_in_n(self, top: Topology) -> list[Point]:
         N, points = self.N, []
         for i in range(top.n_particles):
-            x, vx = self.coordinate(f"x{i}", f"vx{i}", f"x of particle {i} in N (m)")
-            y, vy = self.coordinate(f"y{i}", f"vy{i}", f"y of particle {i} in N (m)")
-            P = self.origin.locatenew(f"P{i}", x * N.x + y * N.y)
-            P.set_vel(N, vx * N.x + vy * N.y)
+            position = velocity = 0 * N.x
+            for axis, unit in zip("xyz"[: top.dim], (N.x, N.y, N.z)):
+                c, v = self.coordinate(f"{axis}{i}", f"v{axis}{i}", f"{axis} of particle {i} in N (m)")
+                position, velocity = position + c * unit, velocity + v * unit
+            P = self.origin.locatenew(f"P{i}", position)
+            P.set_vel(N, velocity)
             points.append(P)
         return points
 
@@ -181,13 +183,16 @@ def derive(top: Topology, formulation: str) -> SymbolicModel:
     """
     if formulation not in ("particles", "floating"):
         raise ValueError(f"`formulation` = {formulation!r}: must be 'particles' or 'floating'")
+    if formulation == "floating" and top.dim != 2:
+        raise ValueError("the floating formulation is derived for planar scenes only (frames N and T about N3)")
     p, text = _parameters(top)
     sym = {s.name: s for s in p}
     build = _Builder()
     N = build.N
     points = build.particles_in_n(top) if formulation == "particles" else build.particles_floating(top)
     masses = [sym[f"m{i}"] for i in range(top.n_particles)]
-    gravity = sym["g_x"] * N.x + sym["g_y"] * N.y
+    axes = list(zip("xyz"[: top.dim], (N.x, N.y, N.z)))
+    gravity = sum((sym[f"g_{a}"] * unit for a, unit in axes), 0 * N.x)
 
     loads = [(P, m * gravity) for P, m in zip(points, masses)]
     spring_energy = damping_power = sp.S.Zero
@@ -224,8 +229,8 @@ def derive(top: Topology, formulation: str) -> SymbolicModel:
     gaps = []
     for r in positions:  # contact c = particle * n_grounds + ground
         for g in range(top.n_grounds):
-            point = sym[f"P{g}_x"] * N.x + sym[f"P{g}_y"] * N.y
-            normal = sym[f"n{g}_x"] * N.x + sym[f"n{g}_y"] * N.y
+            point = sum((sym[f"P{g}_{a}"] * unit for a, unit in axes), 0 * N.x)
+            normal = sum((sym[f"n{g}_{a}"] * unit for a, unit in axes), 0 * N.x)
             gaps.append((r - point).dot(normal))
 
     # Replace functions of time by plain symbols: q(t) -> q, u(t) -> u.
@@ -248,8 +253,8 @@ def derive(top: Topology, formulation: str) -> SymbolicModel:
         "forcing": F,
         "energies": sp.Matrix([to_plain(e) for e in (kinetic, spring_energy, gravity_energy, damping_power)]),
         "damping_power": sp.Matrix([to_plain(damping_power)]),
-        "positions": sp.Matrix([[to_plain(r.dot(N.x)), to_plain(r.dot(N.y))] for r in positions]),
-        "velocities": sp.Matrix([[to_plain(v.dot(N.x)), to_plain(v.dot(N.y))] for v in velocities]),
+        "positions": sp.Matrix([[to_plain(r.dot(unit)) for _, unit in axes] for r in positions]),
+        "velocities": sp.Matrix([[to_plain(v.dot(unit)) for _, unit in axes] for v in velocities]),
         "gaps": gap_vec,
         "gap_jacobian": Jg,
         "gap_bias": bias,

@@ -12,7 +12,7 @@ ingredients, ``F_r = sum_i (F_i - m_i a_i) . dv_i/du_r``, grouped by cause:
   (axial) or the vector ``fd_l = c_l (v_j - v_i)`` (relative; components in the body's
   frame).  A link whose particles move together in a row (the rigid-body rows of the
   floating frame) contributes nothing there: the internal force cancels.
-* **gravity**, collected by ``g_x``, ``g_y``;
+* **gravity**, collected by ``g_x``, ``g_y`` (and ``g_z`` in 3D);
 * **velocity terms** (centripetal, Coriolis) ``-m_i (dv_i/dq) u . dv_i/du_r``, collected
   by products of speeds.
 
@@ -183,7 +183,8 @@ def readable(model: SymbolicModel) -> ReadableEquations:
     V_b = [in_body(V[i, :].T, body_of[i]) for i in range(n)]
     Ju_b = [in_body(Ju[i], body_of[i]) for i in range(n)]
     mass = [sym[f"m{i}"] for i in range(n)]
-    gravity = sp.Matrix([sym["g_x"], sym["g_y"]])
+    g_axes = [sym[f"g_{a}"] for a in "xyz"[: top.dim]]
+    gravity = sp.Matrix(g_axes)
     rhs = [{"links": sp.S.Zero} for _ in range(nu)]
     terms: dict[sp.Symbol, sp.Expr] = {}
 
@@ -200,7 +201,7 @@ def readable(model: SymbolicModel) -> ReadableEquations:
             terms[ell] = sp.sqrt(sum((sp.factor(x) ** 2 for x in P), sp.S.Zero))
             terms[fs] = k * (rest - ell)
             names[ell], names[fs] = rf"\ell_{{{link}}}", rf"f^{{s}}_{{{link}}}"
-            axes = ("xi", "eta") if angle[b] is not None else ("x", "y")
+            axes = ("xi", "eta") if angle[b] is not None else tuple("xyz"[: top.dim])
             if body.damper == "axial":
                 fd = sp.Symbol(f"fd{link}", real=True)
                 terms[fd] = sp.expand(c * P.dot(dv)) / ell
@@ -231,7 +232,7 @@ def readable(model: SymbolicModel) -> ReadableEquations:
         for b, th in enumerate(angle):
             if th is not None:
                 inertia = _pythagoras(inertia, th)
-        rhs[r]["gravity"] = _polynomial_in(g_r, [sym["g_x"], sym["g_y"]])
+        rhs[r]["gravity"] = _polynomial_in(g_r, g_axes)
         rhs[r]["velocity"] = _polynomial_in(inertia, list(u))
 
     lhs = model.outputs["mass_matrix"].applyfunc(lambda e: sp.factor_terms(sp.expand(e)))

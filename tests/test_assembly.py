@@ -23,27 +23,33 @@ from .conftest import BACKENDS, HAS_CC, body, make_scene
 RTOL = 1e-12
 
 
-def random_scene(seed: int) -> flexbody.Scene:
-    """A random topology: 1-2 bodies of 2-6 particles, random links and damper laws, 1-2 grounds."""
-    rng = np.random.default_rng(seed)
+def random_scene(seed: int, dim: int = 2) -> flexbody.Scene:
+    """A random topology: 1-2 bodies of 2-6 particles (2-5 in 3D), random links and damper
+    laws, 1-2 grounds (the second tilted), gravity off the axes."""
+    rng = np.random.default_rng(seed + 1000 * dim)
     bodies = []
     for b in range(rng.integers(1, 3)):
-        n = int(rng.integers(2, 7))
-        points = rng.uniform(-0.2, 0.2, (n, 2))
+        n = int(rng.integers(2, 7 if dim == 2 else 6))
+        points = rng.uniform(-0.2, 0.2, (n, dim))
         links = {(int(rng.integers(0, i)), i) for i in range(1, n)}  # a spanning tree: no lone particle
         links |= {tuple(sorted(map(int, rng.choice(n, 2, replace=False)))) for _ in range(rng.integers(0, n))}
+        position = [float(b), 1.0] + [0.5] * (dim - 2)
         bodies.append(body(name=f"b{b}", particles=points.tolist(), links=sorted(map(list, links)),
                            masses=rng.uniform(0.02, 0.2, n).tolist(), mass=None,
                            stiffness=rng.uniform(100, 3000, len(links)).tolist(),
                            damping=rng.uniform(0.0, 0.3, len(links)).tolist(),
-                           damper=str(rng.choice(["relative", "axial"])), position=[float(b), 1.0]))
-    grounds = [{"point": [0.0, 0.0], "normal": [0.0, 1.0]}]
+                           damper=str(rng.choice(["relative", "axial"])), position=position))
+    up = [0.0] * dim
+    up[1 if dim == 2 else 2] = 1.0
+    grounds = [{"point": [0.0] * dim, "normal": up}]
     if rng.random() < 0.6:
-        angle = rng.uniform(0.2, 1.2)
-        grounds.append({"point": [2.0, 0.0], "normal": [-np.sin(angle), np.cos(angle)]})
-    return make_scene(*bodies, grounds=grounds, gravity=[float(rng.normal()), -9.81])
-
-
+        tilted = rng.normal(size=dim) * 0.4
+        tilted[1 if dim == 2 else 2] = 1.0
+        below = [0.0] * dim
+        below[1 if dim == 2 else 2] = -2.0  # under every body, whatever the tilt
+        grounds.append({"point": below, "normal": tilted.tolist()})
+    gravity = [float(rng.normal()), -9.81] if dim == 2 else [float(rng.normal()), float(rng.normal()), -9.81]
+    return make_scene(*bodies, grounds=grounds, gravity=gravity)
 def derived_oracle(scene, tmp_path) -> NumpyModel:
     """The whole-scene particles model of ``scene``, derived and rendered here (SymPy)."""
     from derivation.codegen import render
@@ -56,8 +62,8 @@ def derived_oracle(scene, tmp_path) -> NumpyModel:
 
 
 def random_state(model, rng, scene):
-    x = scene.initial_positions() + rng.normal(0, 0.01, (scene.n_particles, 2))
-    v = rng.normal(0, 1.0, (scene.n_particles, 2))
+    x = scene.initial_positions() + rng.normal(0, 0.01, (scene.n_particles, scene.dim))
+    v = rng.normal(0, 1.0, (scene.n_particles, scene.dim))
     return np.concatenate([x.ravel(), v.ravel(), [0.3, 0.1]])
 
 
@@ -101,9 +107,11 @@ def test_assembled_equals_derived_for_bundled_scenes(name, backend, rng):
     assert_same_equations(assembled_model(scene, backend), load_derived_model(scene, "numpy", "particles"), scene, rng)
 
 
+@pytest.mark.parametrize("dim", [2, 3])
 @pytest.mark.parametrize("seed", range(5))
-def test_assembled_equals_derived_for_random_topologies(seed, tmp_path, rng):
-    scene = random_scene(seed)
+def test_assembled_equals_derived_for_random_topologies(seed, dim, tmp_path, rng):
+    scene = random_scene(seed, dim)
+    assert scene.dim == dim
     oracle = derived_oracle(scene, tmp_path)
     for backend in BACKENDS:
         assert_same_equations(assembled_model(scene, backend), oracle, scene, rng, states=3)

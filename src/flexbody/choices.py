@@ -6,7 +6,9 @@ and argument errors answer without importing NumPy, SciPy or matplotlib.
 
 from __future__ import annotations
 
-SHAPES = ("ring", "ellipse", "polygon", "chain")
+SHAPES = ("ring", "ellipse", "polygon", "chain", "disc", "sphere", "box", "mesh")
+#: Presets that are bodies in space only (the others lie in T's x-y plane, in 2D or 3D).
+SPATIAL_SHAPES = ("sphere", "box", "mesh")
 DAMPERS = ("relative", "axial")
 #: Compiled in C (generated integrator.c, needs backend "c"), then SciPy's solve_ivp methods.
 COMPILED_METHODS = ("dopri5", "dop853")

@@ -153,7 +153,7 @@ class _Run:
         self.gap_tolerance = 1e-12 * max(size, 1.0)
         # For point masses on flat grounds a contact's effective mass 1 / (J M^-1 J^T) is its particle's.
         self.contact_masses = scene.masses[model.contacts[:, 0]]
-        self.force_tolerance = 1e-10 * self.contact_masses * max(float(np.hypot(*scene.gravity)), 1.0)
+        self.force_tolerance = 1e-10 * self.contact_masses * max(float(np.linalg.norm(scene.gravity)), 1.0)
         self.grid = np.linspace(0.0, settings.t_end, int(round(settings.t_end / settings.output_dt)) + 1)
         n = len(self.grid)
         self.Y = np.empty((n, model.ny))  # samples at the grid times, the first n_samples of them taken

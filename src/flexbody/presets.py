@@ -131,3 +131,139 @@ def disc(count: int, radius: float) -> tuple[np.ndarray, Links]:
             if key in index:
                 links.append((i, index[key]))
     return np.array(points), links
+
+
+# ----------------------------------------------------------------------------- 3D presets
+# Points are (n, 3) in frame T; a body's ``rotation`` (a rotation vector) turns T in N.
+
+
+def _edges(cells: np.ndarray) -> Links:
+    """The unique edges of polygon or tetrahedron cells ``(m, k)``, as sorted index pairs."""
+    k = cells.shape[1]
+    pairs = np.concatenate([cells[:, [a, b]] for a in range(k) for b in range(a + 1, k)]) if len(cells) else \
+        np.zeros((0, 2), int)
+    pairs = np.unique(np.sort(pairs, axis=1), axis=0)
+    return [(int(i), int(j)) for i, j in pairs]
+
+
+def sphere(count: int, radius: float, center: bool) -> tuple[np.ndarray, Links]:
+    """``count`` particles spread quasi-uniformly over a sphere (a Fibonacci lattice),
+    linked along the edges of their convex hull's triangles (a closed triangulated shell,
+    which is rigid); with ``center`` a centre particle (index 0) and a spoke to each.
+    The surface particles go from the south pole (-z) to the north pole (+z)."""
+    from scipy.spatial import ConvexHull
+
+    k = np.arange(count) + 0.5
+    z = -1.0 + 2.0 * k / count
+    phi = np.pi * (1.0 + 5.0**0.5) * k
+    rho = np.sqrt(1.0 - z * z)
+    surface = radius * np.column_stack([rho * np.cos(phi), rho * np.sin(phi), z])
+    links = _edges(ConvexHull(surface).simplices) if count >= 4 else _edges(np.arange(count)[None, :])
+    if not center:
+        return surface, links
+    points = np.vstack([np.zeros((1, 3)), surface])
+    return points, [(0, i) for i in range(1, count + 1)] + [(i + 1, j + 1) for i, j in links]
+
+
+def box(count: tuple[int, int, int], size: tuple[float, float, float]) -> tuple[np.ndarray, Links]:
+    """A lattice of ``nx x ny x nz`` particles spanning ``size = [a, b, c]``, centred on T's
+    origin, ordered x fastest, then y, then z.  Each lattice cell is braced by its 12
+    edges, both diagonals of its 6 faces and its 4 body diagonals, so the box is not a
+    mechanism; a count of 1 along an axis makes a plate or a line of cells."""
+    counts = [int(c) for c in count]
+    axes = [np.linspace(-s / 2, s / 2, c) if c > 1 else np.zeros(1) for c, s in zip(counts, size)]
+    zz, yy, xx = np.meshgrid(axes[2], axes[1], axes[0], indexing="ij")
+    points = np.column_stack([xx.ravel(), yy.ravel(), zz.ravel()])
+    index = np.arange(len(points)).reshape(counts[2], counts[1], counts[0])
+    cells = []
+    steps = [(dx, dy, dz) for dz in (0, 1) for dy in (0, 1) for dx in (0, 1)]
+    for z0 in range(max(counts[2] - 1, 1)):
+        for y0 in range(max(counts[1] - 1, 1)):
+            for x0 in range(max(counts[0] - 1, 1)):
+                corners = {index[min(z0 + dz, counts[2] - 1), min(y0 + dy, counts[1] - 1), min(x0 + dx, counts[0] - 1)]
+                           for dx, dy, dz in steps}
+                cells.append(sorted(corners))
+    links = set()
+    for corners in cells:  # every pair of a cell's corners: edges, face and body diagonals
+        for a in range(len(corners)):
+            for b in range(a + 1, len(corners)):
+                links.add((int(corners[a]), int(corners[b])))
+    return points, sorted(links)
+
+
+class MeshError(ValueError):
+    """A mesh file that cannot be a body: unreadable, no edges, duplicate vertices."""
+
+
+def mesh(path, center: bool) -> tuple[np.ndarray, Links, np.ndarray]:
+    """Particles at a mesh file's vertices, linked along its cells' edges.
+
+    Surface meshes (OBJ, STL, PLY: triangles, quads) give vertex particles and edge links;
+    volume meshes (Gmsh ``.msh``, VTK: tetrahedra) give vertices and tetrahedron edges.
+    With ``center`` (surface meshes) a centre particle at the vertices' mean (index 0)
+    gets a spoke to each vertex.  Vertices in no cell are dropped.  Read with meshio.
+
+    Returns
+    -------
+    points : ndarray, shape (n, 3)
+    links : list of (int, int)
+    shares : ndarray, shape (n,)
+        Each particle's share of the total mass: a third of the area of its triangles
+        (a quarter of the volume of its tetrahedra for volume meshes), normalised; the
+        centre particle, if any, an equal share with the vertices.
+    """
+    import contextlib
+    import io
+    import warnings
+
+    import meshio
+
+    try:
+        with warnings.catch_warnings(), contextlib.redirect_stdout(io.StringIO()):
+            warnings.simplefilter("ignore")
+            data = meshio.read(str(path))
+    except Exception as exc:  # noqa: BLE001 - meshio raises many types for a bad file
+        raise MeshError(f"cannot be read as a mesh: {exc}") from None
+    points = np.asarray(data.points, dtype=float)
+    if points.size == 0:
+        raise MeshError("has no vertices (is it a mesh file?)")
+    if points.ndim != 2 or points.shape[1] not in (2, 3) or not np.all(np.isfinite(points)):
+        raise MeshError("its vertices are not finite 3D points")
+    points = np.column_stack([points, np.zeros(len(points))]) if points.shape[1] == 2 else points
+    volume = [c.data for c in data.cells if c.type == "tetra"]
+    surface = [c.data for c in data.cells if c.type in ("triangle", "quad")]
+    cells = volume or surface
+    if not cells:
+        kinds = sorted({c.type for c in data.cells}) or ["none"]
+        raise MeshError(f"has no triangles, quads or tetrahedra (cells: {', '.join(kinds)}), so no edges to link")
+    used = np.unique(np.concatenate([c.ravel() for c in cells]))
+    renumber = np.full(len(points), -1)
+    renumber[used] = np.arange(len(used))
+    points = points[used]
+    cells = [renumber[c] for c in cells]
+    _, first, counts = np.unique(points, axis=0, return_index=True, return_counts=True)
+    if np.any(counts > 1):
+        raise MeshError(f"has {int(np.sum(counts[counts > 1] - 1))} duplicate vertices (the same point twice); "
+                        "merge them in the mesh")
+    links = sorted(set().union(*(_edges(c) for c in cells)))
+    shares = np.zeros(len(points))
+    for c in cells:
+        corners = points[c]
+        if volume:
+            measure = np.abs(np.einsum("ij,ij->i", np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]),
+                                       corners[:, 3] - corners[:, 0])) / 6.0
+        else:  # a quad as two triangles
+            measure = 0.5 * np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1)
+            if c.shape[1] == 4:
+                measure += 0.5 * np.linalg.norm(np.cross(corners[:, 2] - corners[:, 0], corners[:, 3] - corners[:, 0]),
+                                                axis=1)
+        np.add.at(shares, c, (measure / c.shape[1])[:, None] * np.ones(c.shape[1]))
+    if not shares.sum() > 0:
+        raise MeshError("its cells have no area or volume (all vertices on a line or a plane)")
+    shares /= shares.sum()
+    if center and not volume:
+        n = len(points)
+        points = np.vstack([points.mean(axis=0), points])
+        links = [(0, i + 1) for i in range(n)] + [(i + 1, j + 1) for i, j in links]
+        shares = np.concatenate([[1.0], shares * n]) / (n + 1)
+    return points, links, shares

@@ -34,15 +34,16 @@ from .choices import (  # noqa: F401  (re-exported: the choices are part of the 
     MAX_SAMPLES,
     METHODS,
     SHAPES,
+    SPATIAL_SHAPES,
 )
 from .errors import InputError
 from .topology import BodyTopology, Topology, gauge_particles
 
 DEFAULT_GRAVITY = (0.0, -9.81)
 BODY_KEYS = (
-    "name", "shape", "count", "radius", "radii", "center", "vertices", "spacing", "particles", "links",
-    "mass", "masses", "stiffness", "damping", "damper", "rest_lengths", "position", "angle", "velocity",
-    "angular_velocity", "particle_velocities",
+    "name", "shape", "count", "radius", "radii", "center", "vertices", "spacing", "size", "file", "scale",
+    "particles", "links", "mass", "masses", "mass_total", "stiffness", "damping", "damper", "rest_lengths",
+    "position", "angle", "rotation", "velocity", "angular_velocity", "particle_velocities",
 )  # fmt: skip
 SIMULATION_KEYS = (
     "t_end", "output_dt", "method", "rtol", "atol", "impact", "impact_dt", "formulation", "backend",
@@ -54,9 +55,14 @@ SHAPE_KEYS = {
     "ellipse": ("count", "radii", "center"),
     "polygon": ("vertices", "center"),
     "chain": ("count", "spacing"),
+    "disc": ("count", "radius"),
+    "sphere": ("count", "radius", "center"),
+    "box": ("count", "size"),
+    "mesh": ("file", "scale", "center"),
     None: ("particles", "links"),
 }
-GEOMETRY_KEYS = ("count", "radius", "radii", "center", "vertices", "spacing", "particles", "links")
+GEOMETRY_KEYS = ("count", "radius", "radii", "center", "vertices", "spacing", "size", "file", "scale", "particles",
+                 "links")
 #: Scene names name folders (``generated/<name>_<formulation>/``): keep them portable.
 NAME_PATTERN = re.compile(r"[A-Za-z0-9_.-]{1,64}")
 NAME_RULE = "must be 1 to 64 characters from A-Z a-z 0-9 _ . - (it names output folders)"
@@ -106,12 +112,19 @@ class Body:
         ``relative``: f = c (V_j - V_i) (thesis eq. 3.8); ``axial``: only the component of
         the relative velocity along the link (a central force, conserves angular momentum).
     position : tuple, (dim,)
-        Origin of T in N (q1, q2): the centre of a ring or ellipse, the midpoint of a chain,
-        the origin of the coordinates of a polygon's ``vertices`` or of explicit
-        ``particles`` (see :mod:`flexbody.presets`).
+        Origin of T in N (q1, q2[, q3]): the centre of a ring, ellipse, disc, sphere or box,
+        the midpoint of a chain, the origin of the coordinates of a polygon's ``vertices``,
+        of a mesh file's vertices (after ``scale``) or of explicit ``particles`` (see
+        :mod:`flexbody.presets`).
     angle : float
-        Rotation of T about N3 (q3), rad.
-    velocity, angular_velocity : rigid-body initial velocity of T's origin and spin.
+        2D: rotation of T about N3 (q3), rad.  0 in 3D.
+    rotation : tuple, (3,)
+        3D: T's orientation in N as a rotation vector (axis times angle, rad); the zero
+        vector (the default) leaves T aligned with N.  ``(0, 0, 0)`` in 2D.
+    velocity : tuple, (dim,)
+        Initial velocity of T's origin.
+    angular_velocity : float or tuple (3,)
+        Initial spin of T about its origin: a scalar (about N3) in 2D, a vector in 3D.
     particle_velocities : ndarray, shape (n, dim)
         Added to the rigid-body velocity of each particle.
     """
@@ -127,27 +140,49 @@ class Body:
     position: tuple[float, ...]
     angle: float
     velocity: tuple[float, ...]
-    angular_velocity: float
+    angular_velocity: float | tuple[float, ...]
     particle_velocities: np.ndarray
+    rotation_vector: tuple[float, ...] = (0.0, 0.0, 0.0)
 
     @property
     def n_particles(self) -> int:
         return len(self.points)
 
+    @property
+    def dim(self) -> int:
+        return len(self.position)
+
     def rotation(self) -> np.ndarray:
-        """Rotation matrix from T to N, shape (2, 2)."""
+        """Rotation matrix from T to N, shape (dim, dim)."""
+        if self.dim == 3:
+            return rotation_matrix(self.rotation_vector)
         c, s = math.cos(self.angle), math.sin(self.angle)
         return np.array([[c, -s], [s, c]])
 
     def initial_positions(self) -> np.ndarray:
-        """Particle positions in N, shape (n, 2)."""
+        """Particle positions in N, shape (n, dim)."""
         return np.asarray(self.position) + self.points @ self.rotation().T
 
     def initial_velocities(self) -> np.ndarray:
-        """Particle velocities in N, shape (n, 2): rigid motion plus the per-particle extra."""
+        """Particle velocities in N, shape (n, dim): rigid motion plus the per-particle extra."""
         r = self.points @ self.rotation().T
-        spin = self.angular_velocity * np.column_stack([-r[:, 1], r[:, 0]])
+        if self.dim == 3:
+            spin = np.cross(np.asarray(self.angular_velocity, float), r)
+        else:
+            spin = self.angular_velocity * np.column_stack([-r[:, 1], r[:, 0]])
         return np.asarray(self.velocity) + spin + self.particle_velocities
+
+
+def rotation_matrix(rotation_vector) -> np.ndarray:
+    """The rotation by the rotation vector ``axis * angle`` (Rodrigues), shape (3, 3); the
+    zero vector gives the identity."""
+    w = np.asarray(rotation_vector, dtype=float)
+    angle = float(np.linalg.norm(w))
+    if angle == 0.0:
+        return np.eye(3)
+    k = w / angle
+    K = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
+    return np.eye(3) + math.sin(angle) * K + (1.0 - math.cos(angle)) * (K @ K)
 
 
 @dataclass(frozen=True)
@@ -296,26 +331,26 @@ def load_scene(source: str | Path | Mapping[str, Any]) -> Scene:
         raise SceneError(str(path), [f"cannot be read: {exc.strerror or exc}"]) from None
     # A file name need not be a valid scene name: its stem is made one.
     stem = re.sub(r"[^A-Za-z0-9_.-]", "_", path.stem)[:64] or "scene"
-    return _build(data, str(path), default_name=stem)
+    return _build(data, str(path), default_name=stem, folder=path.parent)
 
 
-def _build(data: dict[str, Any], source: str, default_name: str) -> Scene:
+def _build(data: dict[str, Any], source: str, default_name: str, folder: Path | None = None) -> Scene:
+    """Validate a parsed scene; ``folder`` is where relative paths in it (mesh files) start."""
+    folder = folder or Path.cwd()
     problems = Problems()
     top = TableReader(data, "", problems, ("name", "gravity", "grounds", "bodies", "simulation"))
     name = top.string("name", default_name)
     if name is not None and not NAME_PATTERN.fullmatch(name):
         top.fail("name", name, NAME_RULE)
-    # Planar only for now (as the thesis); the schema keeps `dim` general for 3D later.
-    gravity = top.vector("gravity", 2, DEFAULT_GRAVITY)
-    dim = 2
-    grounds = _grounds(top.raw("grounds", None), dim, problems)
+    gravity, dim = _gravity(top)
+    grounds = _grounds(top.raw("grounds", None), dim, gravity, problems)
     raw_bodies = top.raw("bodies", None)
     bodies: list[Body] = []
     if not isinstance(raw_bodies, list) or not raw_bodies:
         top.fail("bodies", raw_bodies, "is required: a non-empty array of [[bodies]] tables")
     else:
         for b, table in enumerate(raw_bodies):
-            body = _body(TableReader(table, f"bodies[{b}]", problems, BODY_KEYS), dim)
+            body = _body(TableReader(table, f"bodies[{b}]", problems, BODY_KEYS), dim, folder)
             if body is not None:
                 bodies.append(body)
     simulation = _simulation(TableReader(top.raw("simulation", None), "simulation", problems, SIMULATION_KEYS))
@@ -335,7 +370,7 @@ def _build(data: dict[str, Any], source: str, default_name: str) -> Scene:
         warnings.warn(note, OverdampedLinkWarning, stacklevel=3)
     return Scene(
         name=name or default_name,
-        gravity=tuple(gravity or DEFAULT_GRAVITY),
+        gravity=tuple(gravity),
         grounds=tuple(grounds),
         bodies=tuple(bodies),
         simulation=simulation,
@@ -344,9 +379,26 @@ def _build(data: dict[str, Any], source: str, default_name: str) -> Scene:
     )
 
 
-def _grounds(raw: Any, dim: int, problems: Problems) -> list[Ground]:
+def _gravity(top: TableReader) -> tuple[tuple[float, ...], int]:
+    """Gravity and the scene's dimension, which its length fixes (2: planar, 3: spatial)."""
+    raw = top.raw("gravity", None)
     if raw is None:
-        return [Ground(point=(0.0,) * dim, normal=(0.0, 1.0))]
+        return DEFAULT_GRAVITY, 2
+    if not (isinstance(raw, (list, tuple)) and len(raw) in (2, 3)):
+        top.fail("gravity", raw, "must be a list of 2 (planar) or 3 (spatial) finite numbers: its length fixes "
+                 "the dimension")
+        return DEFAULT_GRAVITY, 2
+    gravity = top.vector("gravity", len(raw))
+    return (gravity or (0.0,) * len(raw)), len(raw)
+
+
+def _grounds(raw: Any, dim: int, gravity: tuple[float, ...], problems: Problems) -> list[Ground]:
+    if raw is None:  # through the origin, against gravity (y >= 0 for the default gravity)
+        down = _unit(gravity)
+        up = tuple(0.0 - g for g in down) if down is not None else (0.0,) * (dim - 1) + (1.0,)
+        if down is None and dim == 2:
+            up = (0.0, 1.0)
+        return [Ground(point=(0.0,) * dim, normal=up)]
     if not isinstance(raw, list):
         problems.add("grounds", raw, "must be an array of [[grounds]] tables")
         return []
@@ -401,7 +453,7 @@ def _redundant(a: Ground, b: Ground, b_name: str) -> str:
     no room between them.
     """
     na, nb = np.asarray(a.normal), np.asarray(b.normal)
-    if abs(float(na[0] * nb[1] - na[1] * nb[0])) > 1e-9:
+    if float(np.linalg.norm(na - (na @ nb) * nb)) > 1e-9:  # not parallel
         return ""
     offset = float((np.asarray(a.point) - np.asarray(b.point)) @ na)
     coincide = abs(offset) <= 1e-12 * max(1.0, *map(abs, a.point), *map(abs, b.point))
@@ -415,8 +467,12 @@ def _redundant(a: Ground, b: Ground, b_name: str) -> str:
 _PARTICLE_LIMIT = " (a scene has at most 1 million particles)"
 
 
-def _geometry(r: TableReader) -> tuple[np.ndarray, list[tuple[int, int]]] | None:
-    """A body's points in T and links, from a preset ``shape`` or explicit ``particles``."""
+Geometry = tuple[np.ndarray, list[tuple[int, int]], "np.ndarray | None"]
+
+
+def _geometry(r: TableReader, dim: int, folder: Path) -> Geometry | None:
+    """A body's points in T (n, dim), links and mass shares (None: equal), from a preset
+    ``shape`` or explicit ``particles``.  Planar presets lie in T's x-y plane (z = 0 in 3D)."""
     shape = r.string("shape", None, choices=SHAPES)
     if r.has("shape") and shape is None:
         return None
@@ -425,8 +481,12 @@ def _geometry(r: TableReader) -> tuple[np.ndarray, list[tuple[int, int]]] | None
         if r.has(key) and key not in takes:
             what = f'shape = "{shape}"' if shape else "explicit `particles` and `links` (no `shape`)"
             r.fail(key, r.raw(key), f"is not used with {what}, which takes {', '.join(takes)}: remove it")
+    if shape in SPATIAL_SHAPES and dim != 3:
+        r.fail("shape", shape, f"is a body in space: it needs a 3D scene (gravity with 3 components); planar shapes "
+               f"are {', '.join(x for x in SHAPES if x not in SPATIAL_SHAPES)}")
+        return None
     if shape is None:
-        points = r.vectors("particles", 2)
+        points = r.vectors("particles", dim)
         links = r.raw("links")
         if points is not None and len(points) == 0:
             r.fail("particles", points, "a body needs at least one particle")
@@ -442,7 +502,19 @@ def _geometry(r: TableReader) -> tuple[np.ndarray, list[tuple[int, int]]] | None
         ):
             r.fail("links", links, "must be a list of [i, j] particle index pairs (integers)")
             return None
-        return np.array(points, dtype=float).reshape(-1, 2), [tuple(p) for p in links]
+        return np.array(points, dtype=float).reshape(-1, dim), [tuple(p) for p in links], None
+    if shape in SPATIAL_SHAPES:
+        return _spatial_geometry(r, shape, folder)
+    planar = _planar_geometry(r, shape)
+    if planar is None:
+        return None
+    points, links = planar
+    if dim == 3:
+        points = np.column_stack([points, np.zeros(len(points))])
+    return points, links, None
+
+
+def _planar_geometry(r: TableReader, shape: str) -> tuple[np.ndarray, list[tuple[int, int]]] | None:
     if shape in ("ring", "ellipse"):
         count = r.integer("count", minimum=2, maximum=MAX_PARTICLES, why=_PARTICLE_LIMIT)
         center = r.boolean("center", False)
@@ -466,6 +538,12 @@ def _geometry(r: TableReader) -> tuple[np.ndarray, list[tuple[int, int]]] | None
         if vertices is None or center is None:
             return None
         return presets.polygon(vertices, center)
+    if shape == "disc":
+        count = r.integer("count", minimum=1, maximum=MAX_PARTICLES, why=_PARTICLE_LIMIT)
+        radius = r.number("radius", check=lambda v: v > 0, rule="must be > 0 (m)")
+        if count is None or radius is None:
+            return None
+        return presets.disc(count, radius)
     count = r.integer("count", minimum=1, maximum=MAX_PARTICLES, why=_PARTICLE_LIMIT)
     spacing = r.number("spacing", check=lambda v: v > 0, rule="must be > 0 (m)")
     if count is None or spacing is None:
@@ -473,20 +551,79 @@ def _geometry(r: TableReader) -> tuple[np.ndarray, list[tuple[int, int]]] | None
     return presets.chain(count, spacing)
 
 
-def _body(r: TableReader, dim: int) -> Body | None:
+def _spatial_geometry(r: TableReader, shape: str, folder: Path) -> Geometry | None:
+    if shape == "sphere":
+        count = r.integer("count", minimum=4, maximum=MAX_PARTICLES, why=_PARTICLE_LIMIT)
+        radius = r.number("radius", check=lambda v: v > 0, rule="must be > 0 (m)")
+        center = r.boolean("center", False)
+        if count is None or radius is None or center is None:
+            return None
+        return (*presets.sphere(count, radius, center), None)
+    if shape == "box":
+        raw = r.raw("count", None)
+        ok = isinstance(raw, list) and len(raw) == 3 and all(
+            isinstance(c, int) and not isinstance(c, bool) and c >= 1 for c in raw)
+        if not ok:
+            r.fail("count", raw, "must be [nx, ny, nz]: three integers >= 1 (particles along each edge)")
+        elif raw[0] * raw[1] * raw[2] > MAX_PARTICLES:
+            r.fail("count", raw, f"gives {raw[0] * raw[1] * raw[2]} particles{_PARTICLE_LIMIT}")
+            ok = False
+        elif raw[0] * raw[1] * raw[2] < 2:
+            r.fail("count", raw, "a box needs at least 2 particles")
+            ok = False
+        size = r.vector("size", 3)
+        if size is not None and min(size) <= 0:
+            r.fail("size", list(size), "every edge length must be > 0 (m)")
+            size = None
+        if not ok or size is None:
+            return None
+        return (*presets.box(tuple(raw), size), None)
+    file = r.string("file", None)
+    scale = r.number("scale", 1.0, check=lambda v: v > 0, rule="must be > 0 (a factor on the file's coordinates)")
+    center = r.boolean("center", False)
+    if file is None:
+        if not r.has("file"):
+            r.fail("file", None, 'is required with shape = "mesh": a mesh file (OBJ, STL, PLY, Gmsh .msh, VTK), '
+                   "relative to the scene file")
+        return None
+    path = (folder / file) if not Path(file).is_absolute() else Path(file)
+    if not path.is_file():
+        r.fail("file", file, f"no such file ({path})")
+        return None
+    if scale is None or center is None:
+        return None
+    try:
+        points, links, shares = presets.mesh(path, center)
+    except presets.MeshError as exc:
+        r.fail("file", file, str(exc))
+        return None
+    if len(points) > MAX_PARTICLES:
+        r.fail("file", file, f"has {len(points)} vertices{_PARTICLE_LIMIT}")
+        return None
+    return points * scale, links, shares
+
+
+def _body(r: TableReader, dim: int, folder: Path) -> Body | None:
     name = r.string("name", r.path.replace("bodies", "body").replace("[", "").replace("]", ""))
-    geometry = _geometry(r)
+    geometry = _geometry(r, dim, folder)
     points = None if geometry is None else geometry[0]
+    shares = None if geometry is None else geometry[2]
     links: list[tuple[int, int]] = [] if geometry is None else geometry[1]
     n = None if points is None else len(points)
     nl = None if geometry is None else len(links)
     links_ok = geometry is not None and _check_links(r, points, links)
-    if r.has("mass") == r.has("masses"):
-        r.fail("mass", r.raw("mass", None), "give exactly one of `mass` (each particle) or `masses` (a list)")
+    if sum(map(r.has, ("mass", "masses", "mass_total"))) != 1:
+        r.fail("mass", r.raw("mass", None), "give exactly one of `mass` (each particle), `masses` (a list) or "
+               "`mass_total` (the body's, spread by each particle's share)")
         masses = None
     elif r.has("mass"):
         m = r.number("mass", check=lambda v: v > 0, rule="must be > 0 (kg)")
         masses = None if m is None else [m] * (n or 1)
+    elif r.has("mass_total"):
+        total = r.number("mass_total", check=lambda v: v > 0, rule="must be > 0 (kg)")
+        # A mesh's share is its vertex's part of the area (volume); any other body: equal shares.
+        share = shares if shares is not None else np.full(n or 1, 1.0 / (n or 1))
+        masses = None if total is None else (total * share).tolist()
     else:
         masses = r.scalar_or_list("masses", n, minimum=0.0, strict=True, item="particle")
     stiffness = r.scalar_or_list("stiffness", nl, minimum=0.0, strict=False, item="link")
@@ -496,16 +633,27 @@ def _body(r: TableReader, dim: int) -> Body | None:
     if r.has("rest_lengths"):
         rest = r.scalar_or_list("rest_lengths", nl, minimum=0.0, strict=True, item="link")
     position = r.vector("position", dim)
-    angle = r.number("angle", 0.0)
     velocity = r.vector("velocity", dim, (0.0,) * dim)
-    spin = r.number("angular_velocity", 0.0)
+    if dim == 3:  # orientation as a rotation vector, spin as a vector
+        if r.has("angle"):
+            r.fail("angle", r.raw("angle"), "is planar (a turn about N3): in 3D give `rotation = [rx, ry, rz]`, a "
+                   "rotation vector (axis times angle, rad)")
+        angle = 0.0
+        rotation = r.vector("rotation", 3, (0.0, 0.0, 0.0))
+        spin = r.vector("angular_velocity", 3, (0.0, 0.0, 0.0))
+    else:
+        if r.has("rotation"):
+            r.fail("rotation", r.raw("rotation"), "is for 3D scenes: in 2D give `angle` (rad, about N3)")
+        angle = r.number("angle", 0.0)
+        rotation = (0.0, 0.0, 0.0)
+        spin = r.number("angular_velocity", 0.0)
     extra = np.zeros((n or 0, dim))
     if r.has("particle_velocities"):
         given = r.vectors("particle_velocities", dim, count=n)
         if given is not None:
             extra = np.array(given, dtype=float).reshape(-1, dim)
     r.finish()
-    if not links_ok or None in (masses, stiffness, damping, damper, position, angle, velocity, spin):
+    if not links_ok or None in (masses, stiffness, damping, damper, position, angle, rotation, velocity, spin):
         return None
     if rest is None:
         rest = [float(np.linalg.norm(points[i] - points[j])) for i, j in links]
@@ -523,6 +671,7 @@ def _body(r: TableReader, dim: int) -> Body | None:
         velocity=velocity,
         angular_velocity=spin,
         particle_velocities=_frozen(extra),
+        rotation_vector=rotation,
     )
 
 
