@@ -281,7 +281,10 @@ def test_compiled_integrator_reproduces_the_scipy_path(ball, compiled, scipy_met
     np.testing.assert_allclose(a.events_time, b.events_time, atol=1e-10)
     np.testing.assert_allclose(a.positions, b.positions, atol=1e-9)
     assert abs(a.stats["steps"] - b.stats["steps"]) <= 0.01 * b.stats["steps"]
-    assert abs(a.stats["rhs_evaluations"] - b.stats["rhs_evaluations"]) <= 0.02 * b.stats["rhs_evaluations"]
+    # The compiled floating path projects held contacts onto the ground after each step and
+    # evaluates the right-hand side again there: at most one more evaluation per step.
+    extra = a.stats["steps"] if formulation == "floating" else 0
+    assert abs(a.stats["rhs_evaluations"] - b.stats["rhs_evaluations"]) <= 0.02 * b.stats["rhs_evaluations"] + extra
 
 
 def test_compiled_methods_need_the_c_backend(ball):
