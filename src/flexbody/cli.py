@@ -1,4 +1,4 @@
-"""The ``flexbody`` command: run, derive, show, bench.
+"""The ``flexbody`` command: run, derive, show, sweep, bench.
 
 Every command is a thin wrapper over library functions.  A user mistake (bad scene,
 bad option) prints one clear error and exits 2, without a traceback and without writing
@@ -60,6 +60,8 @@ def _parser() -> argparse.ArgumentParser:
     show.add_argument("--latex", action="store_true", help="print LaTeX instead of plain text")
     show.add_argument("--formulation", choices=FORMULATIONS, default=None, help="default: the scene's")
 
+    _add_sweep(sub)
+
     bench = sub.add_parser("bench", help="speed and accuracy benchmarks (prints and saves numbers)",
                            description="Benchmarks, not tests: work-precision diagram (wp), stability map "
                                        "(stability) and resolution study (resolution); JSON and PNG in --out.")
@@ -69,6 +71,32 @@ def _parser() -> argparse.ArgumentParser:
     bench.add_argument("--repeats", type=int, default=5, help="timing repeats (median is reported)")
     bench.add_argument("--quick", action="store_true", help="fewer cases and repeats (about a minute)")
     return parser
+
+
+def _add_sweep(sub) -> None:
+    sweep = sub.add_parser("sweep", help="a parameter study on Dask: one row per varied scene",
+                           description="Vary scene fields over a grid or a quasi-random design, run every scene "
+                                       "on a Dask cluster, write DIR/sweep.parquet, sweep.csv, sweep.json and "
+                                       "figures. Needs flexbody[sweep].")
+    _add_scene(sweep)
+    sweep.add_argument("--vary", action="append", required=True, metavar="FIELD=SPEC",
+                       help="a dotted scene field and its values: a list 1e3,1e4,1e5; a range lo:hi:n or "
+                            "lo:hi:n:log; with --samples, lo:hi or lo:hi:log (repeatable)")
+    sweep.add_argument("--out", type=Path, required=True, metavar="DIR", help="output folder")
+    sweep.add_argument("--samples", type=int, metavar="N", help="number of runs of an lhs or sobol design")
+    sweep.add_argument("--design", choices=("grid", "lhs", "sobol"), default="grid",
+                       help="grid (every combination, default), lhs or sobol (needs --samples)")
+    sweep.add_argument("--seed", type=int, default=0, help="seed of the lhs or sobol design")
+    sweep.add_argument("--scheduler", metavar="ADDRESS", help="a running Dask scheduler, e.g. tcp://host:8786 "
+                                                              "(default: a local cluster)")
+    sweep.add_argument("--workers", type=int, metavar="N", help="local cluster size (default: one per core)")
+    sweep.add_argument("--batch", type=int, default=1, metavar="N", help="runs per Dask task (default 1)")
+    sweep.add_argument("--keep-results", action="store_true", help="save every run's result in DIR/runs/")
+    sweep.add_argument("--resume", action="store_true", help="finish an interrupted sweep in DIR")
+    sweep.add_argument("--max-wall-time", type=float, default=600.0, metavar="S",
+                       help="a run taking longer stops as too_slow (default 600 s)")
+    sweep.add_argument("--no-figures", action="store_true", help="skip the figures")
+    sweep.add_argument("--quiet", action="store_true", help="no progress line")
 
 
 def _derive(args: argparse.Namespace) -> int:
@@ -111,6 +139,10 @@ def main(argv: list[str] | None = None) -> int:
                 from .runner import run_command
 
                 return run_command(args)
+            if args.command == "sweep":
+                from .sweep import sweep_command
+
+                return sweep_command(args)
             if args.command == "bench":
                 from .bench import bench_command
 
