@@ -14,6 +14,8 @@ Three studies, each printed as a table and saved as JSON and PNG in ``--out``:
   each costs, and the coarsest model within 1 %.
 * ``mujoco`` — the same ball in MuJoCo (optional extra ``flexbody[mujoco]``): time,
   penetration, rebound height and height error against the tight flexbody reference.
+* ``sweep`` — a 200-run stiffness x damping sweep of the ball on a 2-worker Dask cluster
+  against a serial loop (optional extra ``flexbody[sweep]``): speed-up, per-run overhead.
 
 Timings are medians over ``--repeats`` runs (the machine is shared and noisy).
 """
@@ -466,8 +468,20 @@ def _plot_curves(curves):
     return fig
 
 
+def sweep_benchmark(out: Path, quick: bool) -> dict | None:
+    """200 thesis-ball runs on a 2-worker Dask LocalCluster against a serial loop (flexbody[sweep])."""
+    try:
+        from .sweep import _require_extra, benchmark
+
+        _require_extra()
+    except (ImportError, ValueError):
+        print("sweep benchmark skipped: Dask is not installed (pip install 'flexbody[sweep]')")
+        return None
+    return benchmark(out, quick)
+
+
 STUDIES = {"wp": work_precision, "stability": stability_map, "resolution": resolution_study,
-           "mujoco": mujoco_comparison}
+           "mujoco": mujoco_comparison, "sweep": sweep_benchmark}
 
 
 def bench_command(args) -> int:

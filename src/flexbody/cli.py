@@ -65,7 +65,7 @@ def _parser() -> argparse.ArgumentParser:
     bench = sub.add_parser("bench", help="speed and accuracy benchmarks (prints and saves numbers)",
                            description="Benchmarks, not tests: work-precision diagram (wp), stability map "
                                        "(stability) and resolution study (resolution); JSON and PNG in --out.")
-    bench.add_argument("--study", choices=("wp", "stability", "resolution", "mujoco"), action="append",
+    bench.add_argument("--study", choices=("wp", "stability", "resolution", "mujoco", "sweep"), action="append",
                        help="which study (repeatable; default: all; mujoco needs flexbody[mujoco])")
     bench.add_argument("--out", type=Path, default=Path("bench"), metavar="DIR", help="output folder")
     bench.add_argument("--repeats", type=int, default=5, help="timing repeats (median is reported)")
@@ -90,7 +90,8 @@ def _add_sweep(sub) -> None:
     sweep.add_argument("--scheduler", metavar="ADDRESS", help="a running Dask scheduler, e.g. tcp://host:8786 "
                                                               "(default: a local cluster)")
     sweep.add_argument("--workers", type=int, metavar="N", help="local cluster size (default: one per core)")
-    sweep.add_argument("--batch", type=int, default=1, metavar="N", help="runs per Dask task (default 1)")
+    sweep.add_argument("--batch", type=int, metavar="N",
+                       help="runs per Dask task (default: about 20 tasks per worker, at most 50 runs each)")
     sweep.add_argument("--keep-results", action="store_true", help="save every run's result in DIR/runs/")
     sweep.add_argument("--resume", action="store_true", help="finish an interrupted sweep in DIR")
     sweep.add_argument("--max-wall-time", type=float, default=600.0, metavar="S",

@@ -243,20 +243,20 @@ def varied_table(base: dict, fields: Sequence[str], values: Sequence[Any]) -> di
     return table
 
 
-def validate(base: dict, fields: Sequence[str], points: Sequence[tuple]) -> tuple[int, list[Scene]]:
+def validate(base: dict, fields: Sequence[str], points: Sequence[tuple]) -> tuple[list[Scene], int]:
     """Load every varied scene; raise one :class:`SweepError` listing the invalid ones.
 
-    Returns the number of scenes with overdamped links (a warning, not an error) and one
-    scene of each model (topology, formulation and backend) the sweep needs.
+    Returns the scenes, shape (runs,), and how many have overdamped links (a warning,
+    not an error).
     """
-    bad, overdamped, models = [], 0, {}
+    bad, overdamped, scenes = [], 0, []
     for run, values in enumerate(points):
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", OverdampedLinkWarning)
             try:
                 scene = load_scene(varied_table(base, fields, values))
                 _settings(scene, {})
-                models.setdefault(_model_key(scene), scene)
+                scenes.append(scene)
             except SceneError as exc:
                 bad.append((run, values, exc.problems))
             except ValueError as exc:  # a combination of simulation settings (e.g. dopri5 with numpy)
@@ -270,17 +270,17 @@ def validate(base: dict, fields: Sequence[str], points: Sequence[tuple]) -> tupl
         more = f"\n  ... and {len(bad) - 8} more invalid run(s)" if len(bad) > 8 else ""
         raise SweepError(f"{len(bad)} of {len(points)} varied scenes are invalid; nothing was run:\n"
                          + "\n".join(lines) + more)
-    return overdamped, list(models.values())
+    return scenes, overdamped
 
 
 # ------------------------------------------------------------------------- one run (on a worker)
 
-#: Models loaded in this process, by (topology digest, backend): a worker loads each once.
-_MODELS: dict[tuple[str, str], Model] = {}
+#: Models loaded in this process, by (topology, formulation, backend): a worker loads each once.
+_MODELS: dict[tuple, Model] = {}
 
 
-def _model_key(scene: Scene) -> tuple[str, str]:
-    return scene.topology().digest(scene.simulation.formulation), scene.simulation.backend
+def _model_key(scene: Scene) -> tuple:
+    return scene.topology(), scene.simulation.formulation, scene.simulation.backend
 
 
 def _model_for(scene: Scene) -> tuple[Model, float]:
@@ -349,21 +349,27 @@ def _first_contact(result: SimulationResult) -> tuple[float, float]:
     return float(times[first]), math.nan
 
 
-def run_one(run: int, table: dict, max_wall_time: float = math.inf, keep: str | None = None) -> dict:
-    """Run one varied scene and return its row (never raises: an exception becomes the row's status)."""
+def run_one(run: int, scene: Scene | Mapping, max_wall_time: float = math.inf, keep: str | None = None,
+            table: Mapping | None = None) -> dict:
+    """Run one varied scene and return its row (never raises: an exception becomes the row's status).
+
+    ``scene`` is a validated Scene or a scene table; ``keep`` a folder for the run's result
+    (with ``table`` saved beside it as ``scene.json``).
+    """
     start = time.perf_counter()
     row: dict[str, Any] = {"run": run, **{key: math.nan for key in OBSERVABLES}, "status": "error",
                            "worker": f"{socket.gethostname()}:{os.getpid()}", "model_load_s": 0.0}
     try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", OverdampedLinkWarning)  # counted once, before the sweep
-            scene = load_scene(table)
+        if not isinstance(scene, Scene):
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", OverdampedLinkWarning)  # counted once, before the sweep
+                table, scene = scene, load_scene(scene)
         model, row["model_load_s"] = _model_for(scene)
         result = simulate(scene, model=model, max_wall_time=max_wall_time)
         row.update(observables(result, scene.gravity))
         if keep is not None:
             folder = Path(keep) / f"run_{run:05d}"
-            result.save(folder, extra_files={"scene.json": json.dumps(table, indent=1).encode()})
+            result.save(folder, extra_files={"scene.json": json.dumps(table or {}, indent=1).encode()})
             row["result_path"] = str(folder)
     except Exception as exc:  # noqa: BLE001 - any failure of one run is that run's row
         row["message"] = f"{type(exc).__name__}: {exc}"
@@ -371,9 +377,9 @@ def run_one(run: int, table: dict, max_wall_time: float = math.inf, keep: str | 
     return row
 
 
-def run_batch(batch: list[tuple[int, dict]], max_wall_time: float, keep: str | None) -> list[dict]:
-    """Rows of several runs (one Dask task)."""
-    return [run_one(run, table, max_wall_time, keep) for run, table in batch]
+def run_batch(batch: list[tuple], max_wall_time: float = math.inf, keep: str | None = None) -> list[dict]:
+    """Rows of several runs (one Dask task); ``batch`` holds ``(run, scene[, table])``."""
+    return [run_one(*item[:2], max_wall_time, keep, *item[2:]) for item in batch]
 
 
 # ------------------------------------------------------------------------- rows on disk
@@ -394,9 +400,7 @@ def _frame(rows: list[dict], columns: list[str]):
     frame["run"] = frame["run"].astype("int64")
     for key in COUNTS:
         frame[key] = pd.to_numeric(frame[key]).astype("Int64")
-    for key in ("status", "message", "worker") + (("result_path",) if "result_path" in columns else ()):
-        frame[key] = frame[key].astype(object).where(frame[key].notna(), None)
-    return frame
+    return frame  # text columns: pandas' default string type, as Parquet reads them back
 
 
 def _atomic_write(path: Path, write) -> None:
@@ -531,6 +535,7 @@ class _Engine:
         self.owned = True
 
     def __enter__(self):
+        import dask
         from distributed import Client, LocalCluster
 
         if self.scheduler is not None and not isinstance(self.scheduler, str):
@@ -543,8 +548,10 @@ class _Engine:
         else:
             try:
                 # One single-threaded process per worker: the runs hold the GIL (Python event loop).
-                self.cluster = LocalCluster(n_workers=self.workers, threads_per_worker=1, processes=True,
-                                            dashboard_address=None)
+                # No dashboard, so no worker profiles either: nobody would see them (~2 % of a core each).
+                with dask.config.set({"distributed.worker.profile.enabled": False}):
+                    self.cluster = LocalCluster(n_workers=self.workers, threads_per_worker=1, processes=True,
+                                                dashboard_address=None)
                 self.client = Client(self.cluster)
             except BaseException:
                 self.__exit__()
@@ -594,7 +601,7 @@ def sweep(
     seed: int = 0,
     scheduler: Any = None,
     workers: int | None = None,
-    batch: int = 1,
+    batch: int | None = None,
     keep_results: bool = False,
     resume: bool = False,
     figures: bool = True,
@@ -620,8 +627,10 @@ def sweep(
     scheduler : str or distributed.Client, optional
         ``"tcp://host:8786"`` of a running cluster, or a client; default: a new
         ``LocalCluster`` of ``workers`` processes (default one per core), closed at the end.
-    batch : int
-        Runs per Dask task (1: every run its own task).
+    batch : int, optional
+        Runs per Dask task.  Each run stays independent (its own row, its own failure);
+        grouping a few per task spreads Dask's per-task cost (a few ms, see the README).
+        Default: about 20 tasks per worker, at most 50 runs per task.
     keep_results : bool
         Save each run's ``result.npz``, ``summary.json`` and ``scene.json`` in ``out/runs/``.
     resume : bool
@@ -649,11 +658,11 @@ def sweep(
     base, source = _base_table(scene)
     for field in fields:
         _locate(base, field)
-    overdamped, models = validate(base, fields, points)
+    scenes, overdamped = validate(base, fields, points)
     if workers is not None and (scheduler is not None or workers < 1):
         raise SweepError(f"`--workers` = {workers}: " + ("must be >= 1" if workers < 1 else
                          "applies to the local cluster only (the scheduler's cluster has its own workers)"))
-    if batch < 1:
+    if batch is not None and batch < 1:
         raise SweepError(f"`--batch` = {batch}: must be >= 1")
     columns = ["run", *fields, *OBSERVABLES, *TAIL] + (["result_path"] if keep_results else [])
     record = {"fields": fields, "design": design, "samples": samples, "seed": seed,
@@ -665,11 +674,12 @@ def sweep(
     if overdamped and progress:
         print(f"warning: {overdamped} of {len(points)} varied scenes have links that are not underdamped "
               "(thesis eq. 3.12)", file=sys.stderr)
-    tables = [varied_table(base, fields, p) for p in points]
     done = {int(row["run"]) for row in previous}
-    todo = [(run, tables[run]) for run in range(len(points)) if run not in done]
+    # Workers get the validated scenes (not their tables: no second validation); tables only to keep them.
+    todo = [(run, scenes[run]) + ((varied_table(base, fields, points[run]),) if keep_results else ())
+            for run in range(len(points)) if run not in done]
     if scheduler is None:  # derive and compile each topology's model once, here, before workers race for it
-        for one in models:
+        for one in {_model_key(scene): scene for scene in scenes}.values():
             _model_for(one)
     if scheduler is None:
         workers = workers or os.cpu_count() or 1
@@ -735,13 +745,16 @@ def _check_out(out: Path | None, resume: bool, base: dict, record: dict, columns
     return _previous_rows(out, columns)
 
 
-def _collect(client, todo: list[tuple[int, dict]], varied: list[dict], batch: int, max_wall_time: float,
+def _collect(client, todo: list[tuple], varied: list[dict], batch: int | None, max_wall_time: float,
              keep: str | None, log: _RowLog, bar: _Progress) -> None:
     """Submit the runs, record rows (with their ``varied`` values) as they arrive; cancel what is left if interrupted."""
     from distributed import as_completed
 
+    if batch is None:
+        workers = max(1, len(client.scheduler_info().get("workers", {})))
+        batch = min(50, max(1, len(todo) // (20 * workers)))
     batches = [todo[i:i + batch] for i in range(0, len(todo), batch)]
-    futures = {client.submit(run_batch, b, max_wall_time, keep, pure=False): b for b in batches}
+    futures = dict(zip(client.map(run_batch, batches, max_wall_time=max_wall_time, keep=keep, pure=False), batches))
     try:
         for future in as_completed(futures):
             try:
@@ -749,7 +762,7 @@ def _collect(client, todo: list[tuple[int, dict]], varied: list[dict], batch: in
             except Exception as exc:  # noqa: BLE001 - the task itself failed (worker lost, ...): rows, not a crash
                 rows = [{"run": run, **{key: math.nan for key in OBSERVABLES}, "status": "error",
                          "message": f"{type(exc).__name__}: {exc}", "worker": None, "model_load_s": math.nan,
-                         "task_s": math.nan} for run, _ in futures[future]]
+                         "task_s": math.nan} for run, *_ in futures[future]]
             future.release()
             for row in rows:
                 row.update(varied[row["run"]])
@@ -785,67 +798,81 @@ def _same(a: list, b: list) -> bool:
     return len(a) == len(b) and all(x == y or (x != x and y != y) for x, y in zip(a, b))
 
 
+def _cpu_seconds(processes) -> float:
+    """User + system CPU time of this process and of ``processes`` (psutil.Process objects)."""
+    own = time.process_time()
+    return own + sum(sum(p.cpu_times()[:2]) for p in processes)
+
+
 def benchmark(out: Path, quick: bool) -> dict:
     """Thesis ball, stiffness x damping (200 runs): a 2-worker LocalCluster against a serial loop.
 
     The serial loop calls the same per-run function in this process (scene loading, the
     run, the observables), with the model loaded once.  The sweep's time counts from its
     call to its return (validation, submission, rows written), not the cluster's start.
-    Per-run overhead = (workers x sweep time - serial time) / runs: the time a worker
-    spends on a run beyond the run itself.
+
+    Per-run overhead is measured two ways.  Wall: (workers x sweep time - serial time) /
+    runs, what a worker spends on a run beyond the run itself -- inflated when other
+    programs share the cores.  CPU: (CPU seconds of this process, which hosts client and
+    scheduler, plus the workers' - the serial loop's) / runs, the work Dask adds per run,
+    which other programs do not change.
     """
     import shutil
     import tempfile
 
-    from distributed import Client, LocalCluster
+    import psutil
 
     n_k, n_c, workers = (10, 4, 2) if quick else (20, 10, 2)
     vary = {"bodies.ball.stiffness": f"1e3:1e4:{n_k}:log", "bodies.ball.damping": f"0.1:1:{n_c}"}
     base, _ = _base_table("thesis_ball")
-    axes = _axes(vary, "grid")
-    points = design_points(axes)
+    points = design_points(_axes(vary, "grid"))
     tables = [varied_table(base, list(vary), p) for p in points]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", OverdampedLinkWarning)
         _model_for(load_scene(tables[0]))
     print(f"sweep benchmark: thesis ball, {len(points)} runs (stiffness {n_k} x damping {n_c}), "
-          f"{workers}-worker LocalCluster against a serial loop; {os.cpu_count()} cores")
-    start = time.perf_counter()
-    serial_rows = run_batch(list(enumerate(tables)), 600.0, None)
-    serial = time.perf_counter() - start
+          f"{workers}-worker LocalCluster against a serial loop; {os.cpu_count()} cores, "
+          f"load average {os.getloadavg()[0]:.1f}")
+    start, cpu = time.perf_counter(), time.process_time()
+    serial_rows = run_batch(list(enumerate(tables)), 600.0)
+    serial, serial_cpu = time.perf_counter() - start, time.process_time() - cpu
     per_run = serial / len(points)
-    print(f"  serial loop: {serial:.2f} s, {per_run * 1e3:.1f} ms per run "
+    print(f"  serial loop: {serial:.2f} s wall, {serial_cpu:.2f} s CPU; {per_run * 1e3:.1f} ms per run "
           f"(integration {np.mean([r['wall_time_s'] for r in serial_rows]) * 1e3:.1f} ms of it)")
     start = time.perf_counter()
-    cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None)
-    client = Client(cluster)
+    engine = _Engine(None, workers)
+    client = engine.__enter__()
     startup = time.perf_counter() - start
+    procs = psutil.Process().children(recursive=True)
     print(f"  LocalCluster start: {startup:.2f} s")
     cases = []
     scratch = Path(tempfile.mkdtemp(prefix="flexbody-sweep-bench-"))
     try:
         for label, batch in (("cold workers, 1 run per task", 1), ("warm workers, 1 run per task", 1),
-                             ("warm workers, 10 runs per task", 10)):
-            start = time.perf_counter()
+                             ("warm workers, 5 runs per task (default)", None)):
+            load = os.getloadavg()[0]
+            start, cpu = time.perf_counter(), _cpu_seconds(procs)
             frame = sweep("thesis_ball", vary, scratch / f"{len(cases)}", scheduler=client, batch=batch,
                           figures=False, progress=False)
-            elapsed = time.perf_counter() - start
+            elapsed, used = time.perf_counter() - start, _cpu_seconds(procs) - cpu
             same = all(_same(frame[key].tolist(), [r[key] for r in serial_rows])
                        for key in OBSERVABLES if key != "wall_time_s")
             overhead = (workers * elapsed - serial) / len(points)
-            case = {"label": label, "batch": batch, "time_s": elapsed, "speedup": serial / elapsed,
+            cpu_overhead = (used - serial_cpu) / len(points)
+            case = {"label": label, "batch": batch, "time_s": elapsed, "cpu_s": used, "speedup": serial / elapsed,
                     "overhead_per_run_s": overhead, "overhead_relative": overhead / per_run,
+                    "cpu_overhead_per_run_s": cpu_overhead, "cpu_overhead_relative": cpu_overhead / serial_cpu
+                    * len(points), "load_average": load,
                     "failed": int((frame["status"] != "success").sum()), "identical_to_serial": bool(same)}
             cases.append(case)
-            print(f"  {label:32s} {elapsed:6.2f} s  speed-up {case['speedup']:.2f}  overhead per run "
-                  f"{overhead * 1e3:6.2f} ms ({100 * case['overhead_relative']:.1f} % of a run)  "
-                  f"observables identical to serial: {same}")
+            print(f"  {label:31s} {elapsed:6.2f} s  speed-up {case['speedup']:.2f}  overhead per run: wall "
+                  f"{overhead * 1e3:6.2f} ms ({100 * case['overhead_relative']:.0f} %), CPU {cpu_overhead * 1e3:5.2f} ms "
+                  f"({100 * case['cpu_overhead_relative']:.0f} %); load {load:.1f}; identical to serial: {same}")
     finally:
-        client.close()
-        cluster.close()
+        engine.__exit__()
         shutil.rmtree(scratch, ignore_errors=True)
-    data = {"runs": len(points), "workers": workers, "serial_s": serial, "serial_per_run_s": per_run,
-            "cluster_start_s": startup, "cases": cases, "vary": vary,
+    data = {"runs": len(points), "workers": workers, "serial_s": serial, "serial_cpu_s": serial_cpu,
+            "serial_per_run_s": per_run, "cluster_start_s": startup, "cases": cases, "vary": vary,
             "environment": {"cpus": os.cpu_count(), **_versions()}}
     out.mkdir(parents=True, exist_ok=True)
     (out / "sweep.json").write_text(json.dumps(data, indent=1) + "\n")
