@@ -66,7 +66,7 @@ OBSERVABLES = {
 }
 COUNTS = ("impacts", "liftoffs", "rhs_evaluations")
 #: Per-run columns after the observables: outcome, where and how it ran.
-TAIL = ("status", "message", "worker", "model_load_s", "task_s")
+TAIL = ("status", "message", "worker", "model_load_s", "task_s", "task_cpu_s")
 #: Parquet is rewritten at most this often (s) while rows arrive; the CSV gets every row at once.
 PARQUET_EVERY = 5.0
 
@@ -356,7 +356,7 @@ def run_one(run: int, scene: Scene | Mapping, max_wall_time: float = math.inf, k
     ``scene`` is a validated Scene or a scene table; ``keep`` a folder for the run's result
     (with ``table`` saved beside it as ``scene.json``).
     """
-    start = time.perf_counter()
+    start, cpu = time.perf_counter(), time.process_time()
     row: dict[str, Any] = {"run": run, **{key: math.nan for key in OBSERVABLES}, "status": "error",
                            "worker": f"{socket.gethostname()}:{os.getpid()}", "model_load_s": 0.0}
     try:
@@ -373,7 +373,7 @@ def run_one(run: int, scene: Scene | Mapping, max_wall_time: float = math.inf, k
             row["result_path"] = str(folder)
     except Exception as exc:  # noqa: BLE001 - any failure of one run is that run's row
         row["message"] = f"{type(exc).__name__}: {exc}"
-    row["task_s"] = time.perf_counter() - start
+    row["task_s"], row["task_cpu_s"] = time.perf_counter() - start, time.process_time() - cpu
     return row
 
 
@@ -526,6 +526,30 @@ def _require_extra() -> None:
                          "pip install 'flexbody[sweep]'") from None
 
 
+#: Our LocalCluster has no dashboard, so nothing shows its profiles and monitors: sampling them less
+#: cut the cluster's idle cost from ~0.12 to ~0.02 cores on the 2-core test machine (README).
+QUIET_CLUSTER = {
+    "distributed.worker.profile.enabled": False,
+    "distributed.admin.system-monitor.interval": "2s",
+    "distributed.worker.memory.monitor-interval": "1s",
+    "distributed.admin.tick.interval": "1s",
+}
+
+
+def dask_setup(worker) -> None:
+    """Dask preload hook, run in each local worker: ignore SIGINT.
+
+    A terminal's Ctrl-C reaches every process of the sweep; the client answers it by
+    cancelling the runs and closing the cluster, so the workers must not die on it first
+    (each would print a KeyboardInterrupt traceback).
+    """
+    import signal
+    import threading
+
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
 class _Engine:
     """A Dask client: on a new LocalCluster (closed on exit, whatever happens) or an existing scheduler."""
 
@@ -548,10 +572,10 @@ class _Engine:
         else:
             try:
                 # One single-threaded process per worker: the runs hold the GIL (Python event loop).
-                # No dashboard, so no worker profiles either: nobody would see them (~2 % of a core each).
-                with dask.config.set({"distributed.worker.profile.enabled": False}):
+                # The preload (dask_setup below) lets only this process handle Ctrl-C.
+                with dask.config.set(QUIET_CLUSTER):
                     self.cluster = LocalCluster(n_workers=self.workers, threads_per_worker=1, processes=True,
-                                                dashboard_address=None)
+                                                dashboard_address=None, preload=["flexbody.sweep"])
                 self.client = Client(self.cluster)
             except BaseException:
                 self.__exit__()
@@ -644,7 +668,9 @@ def sweep(
     -------
     pandas.DataFrame
         One row per run, sorted by ``run``: the varied fields, :data:`OBSERVABLES`,
-        ``status``, ``message``, ``worker``, ``model_load_s``, ``task_s`` (and ``result_path``).
+        ``status``, ``message``, ``worker`` (host:pid), ``model_load_s``, ``task_s`` and
+        ``task_cpu_s`` (wall and CPU seconds of the whole run on its worker), and
+        ``result_path`` with ``keep_results``.
 
     Raises
     ------
@@ -745,24 +771,29 @@ def _check_out(out: Path | None, resume: bool, base: dict, record: dict, columns
     return _previous_rows(out, columns)
 
 
+def auto_batch(runs: int, workers: int) -> int:
+    """Runs per task by default: about 20 tasks per worker (load balance), at most 50 runs each."""
+    return min(50, max(1, runs // (20 * max(workers, 1))))
+
+
 def _collect(client, todo: list[tuple], varied: list[dict], batch: int | None, max_wall_time: float,
              keep: str | None, log: _RowLog, bar: _Progress) -> None:
     """Submit the runs, record rows (with their ``varied`` values) as they arrive; cancel what is left if interrupted."""
     from distributed import as_completed
 
     if batch is None:
-        workers = max(1, len(client.scheduler_info().get("workers", {})))
-        batch = min(50, max(1, len(todo) // (20 * workers)))
+        batch = auto_batch(len(todo), len(client.scheduler_info().get("workers", {})))
     batches = [todo[i:i + batch] for i in range(0, len(todo), batch)]
     futures = dict(zip(client.map(run_batch, batches, max_wall_time=max_wall_time, keep=keep, pure=False), batches))
     try:
-        for future in as_completed(futures):
-            try:
-                rows = future.result()
-            except Exception as exc:  # noqa: BLE001 - the task itself failed (worker lost, ...): rows, not a crash
+        # Results are fetched by the client's event loop as tasks finish, not one round trip at a time here.
+        for future, result in as_completed(futures, with_results=True, raise_errors=False):
+            rows = result
+            if future.status != "finished":  # the task itself failed (worker lost, ...): rows, not a crash
+                exc = result[1] if isinstance(result, tuple) else result
                 rows = [{"run": run, **{key: math.nan for key in OBSERVABLES}, "status": "error",
                          "message": f"{type(exc).__name__}: {exc}", "worker": None, "model_load_s": math.nan,
-                         "task_s": math.nan} for run, *_ in futures[future]]
+                         "task_s": math.nan, "task_cpu_s": math.nan} for run, *_ in futures[future]]
             future.release()
             for row in rows:
                 row.update(varied[row["run"]])
@@ -811,11 +842,12 @@ def benchmark(out: Path, quick: bool) -> dict:
     run, the observables), with the model loaded once.  The sweep's time counts from its
     call to its return (validation, submission, rows written), not the cluster's start.
 
-    Per-run overhead is measured two ways.  Wall: (workers x sweep time - serial time) /
-    runs, what a worker spends on a run beyond the run itself -- inflated when other
-    programs share the cores.  CPU: (CPU seconds of this process, which hosts client and
-    scheduler, plus the workers' - the serial loop's) / runs, the work Dask adds per run,
-    which other programs do not change.
+    Per-run overhead, wall: (workers x sweep time - serial time) / runs, what a worker
+    spends on a run beyond the run itself; other programs on the same cores inflate it.
+    Per-run overhead, CPU: the CPU seconds of this process (client and scheduler) and of
+    the workers, minus those of the runs themselves (measured inside each task) and of
+    validating the scenes (the serial loop loads each scene too), per run: what Dask and
+    the row writing add, which other programs do not change.
     """
     import shutil
     import tempfile
@@ -845,11 +877,17 @@ def benchmark(out: Path, quick: bool) -> dict:
     startup = time.perf_counter() - start
     procs = psutil.Process().children(recursive=True)
     print(f"  LocalCluster start: {startup:.2f} s")
+    cpu = time.process_time()
+    validate(base, list(vary), points)
+    validation_cpu = time.process_time() - cpu
+    print(f"  validating the {len(points)} scenes: {validation_cpu:.2f} s CPU (also paid by the serial loop, "
+          "which loads each scene; not counted as overhead)")
     cases = []
     scratch = Path(tempfile.mkdtemp(prefix="flexbody-sweep-bench-"))
     try:
+        default = auto_batch(len(points), workers)
         for label, batch in (("cold workers, 1 run per task", 1), ("warm workers, 1 run per task", 1),
-                             ("warm workers, 5 runs per task (default)", None)):
+                             (f"warm workers, {default} runs per task (default)", None)):
             load = os.getloadavg()[0]
             start, cpu = time.perf_counter(), _cpu_seconds(procs)
             frame = sweep("thesis_ball", vary, scratch / f"{len(cases)}", scheduler=client, batch=batch,
@@ -858,20 +896,22 @@ def benchmark(out: Path, quick: bool) -> dict:
             same = all(_same(frame[key].tolist(), [r[key] for r in serial_rows])
                        for key in OBSERVABLES if key != "wall_time_s")
             overhead = (workers * elapsed - serial) / len(points)
-            cpu_overhead = (used - serial_cpu) / len(points)
-            case = {"label": label, "batch": batch, "time_s": elapsed, "cpu_s": used, "speedup": serial / elapsed,
-                    "overhead_per_run_s": overhead, "overhead_relative": overhead / per_run,
-                    "cpu_overhead_per_run_s": cpu_overhead, "cpu_overhead_relative": cpu_overhead / serial_cpu
-                    * len(points), "load_average": load,
+            runs_cpu = float(frame["task_cpu_s"].sum())
+            cpu_overhead = (used - runs_cpu - validation_cpu) / len(points)
+            case = {"label": label, "batch": batch, "time_s": elapsed, "cpu_s": used, "runs_cpu_s": runs_cpu,
+                    "speedup": serial / elapsed, "overhead_per_run_s": overhead, "overhead_relative": overhead / per_run,
+                    "cpu_overhead_per_run_s": cpu_overhead, "cpu_overhead_relative": cpu_overhead * len(points)
+                    / runs_cpu, "load_average": load,
                     "failed": int((frame["status"] != "success").sum()), "identical_to_serial": bool(same)}
             cases.append(case)
-            print(f"  {label:31s} {elapsed:6.2f} s  speed-up {case['speedup']:.2f}  overhead per run: wall "
+            print(f"  {label:42s} {elapsed:6.2f} s  speed-up {case['speedup']:.2f}  overhead per run: wall "
                   f"{overhead * 1e3:6.2f} ms ({100 * case['overhead_relative']:.0f} %), CPU {cpu_overhead * 1e3:5.2f} ms "
                   f"({100 * case['cpu_overhead_relative']:.0f} %); load {load:.1f}; identical to serial: {same}")
     finally:
         engine.__exit__()
         shutil.rmtree(scratch, ignore_errors=True)
     data = {"runs": len(points), "workers": workers, "serial_s": serial, "serial_cpu_s": serial_cpu,
+            "validation_cpu_s": validation_cpu,
             "serial_per_run_s": per_run, "cluster_start_s": startup, "cases": cases, "vary": vary,
             "environment": {"cpus": os.cpu_count(), **_versions()}}
     out.mkdir(parents=True, exist_ok=True)
