@@ -69,10 +69,21 @@ def same(a, b) -> bool:
     return a == b or (isinstance(a, float) and isinstance(b, float) and math.isnan(a) and math.isnan(b))
 
 
-def our_children() -> set[int]:
+def our_children() -> dict[int, psutil.Process]:
     """This process's descendants, without multiprocessing's resource tracker (it lives as long as we do)."""
-    return {p.pid for p in psutil.Process().children(recursive=True)
-            if "resource_tracker" not in " ".join(p.cmdline())}
+    children = {}
+    for p in psutil.Process().children(recursive=True):
+        with contextlib.suppress(psutil.Error):
+            if "resource_tracker" not in " ".join(p.cmdline()):
+                children[p.pid] = p
+    return children
+
+
+def assert_no_new_children(before: dict[int, psutil.Process]) -> None:
+    """Every process started since ``before`` has ended (allowing a moment for it to be reaped)."""
+    new = [p for pid, p in our_children().items() if pid not in before]
+    _, alive = psutil.wait_procs(new, timeout=10)
+    assert not alive, [(p.pid, p.cmdline()) for p in alive]
 
 
 # ------------------------------------------------------------------------- designs and fields
@@ -215,7 +226,7 @@ def test_rows_equal_single_runs_failed_runs_are_rows_and_the_cluster_is_shut_dow
     stiffness, damping = [1e3, 1e5, 1e10], [0.0, 0.5]
     frame = sweep(tiny(tmp_path), {"bodies.b.stiffness": stiffness, "bodies.b.damping": damping}, out,
                   workers=2, batch=1, progress=False)
-    assert our_children() - before == set()
+    assert_no_new_children(before)
     assert list(frame["run"]) == list(range(6))
     assert list(zip(frame["bodies.b.stiffness"], frame["bodies.b.damping"])) == \
         [(k, c) for k in stiffness for c in damping]
@@ -262,7 +273,7 @@ def test_the_cluster_is_shut_down_when_the_sweep_fails(tmp_path, monkeypatch):
     before = our_children()
     with pytest.raises(OSError, match="disk full"):
         sweep(tiny(tmp_path), {"bodies.b.stiffness": [1e3, 2e3, 3e3]}, tmp_path / "out", workers=1, progress=False)
-    assert our_children() - before == set()
+    assert_no_new_children(before)
 
 
 def test_ctrl_c_stops_the_workers_keeps_finished_rows_and_resume_runs_only_the_rest(tmp_path):

@@ -49,7 +49,13 @@ from . import __version__
 from .driver import _settings, simulate
 from .model import Model, load_model
 from .result import SimulationResult
-from .scene import OverdampedLinkWarning, Scene, SceneError, load_scene, resolve_scene_path
+from .scene import (
+    OverdampedLinkWarning,
+    Scene,
+    SceneError,
+    load_scene,
+    resolve_scene_path,
+)
 
 DESIGNS = ("grid", "lhs", "sobol")
 #: Observables of each run, in column order, with their meaning (DIR/sweep.json repeats it).
@@ -167,8 +173,9 @@ def design_points(axes: list[Axis], design: str = "grid", samples: int | None = 
         return list(itertools.product(*(a.values for a in axes)))
     if samples is None or samples < 1:
         raise SweepError(f"`--samples` = {samples!r}: a {design} design needs a number of samples >= 1")
-    from scipy.stats import qmc
     import inspect
+
+    from scipy.stats import qmc
 
     engine = qmc.LatinHypercube if design == "lhs" else qmc.Sobol
     # SciPy >= 1.15 calls the seed `rng`; older releases `seed`.
@@ -778,7 +785,7 @@ def auto_batch(runs: int, workers: int) -> int:
 
 def _collect(client, todo: list[tuple], varied: list[dict], batch: int | None, max_wall_time: float,
              keep: str | None, log: _RowLog, bar: _Progress) -> None:
-    """Submit the runs, record rows (with their ``varied`` values) as they arrive; cancel what is left if interrupted."""
+    """Submit the runs; record rows (with their ``varied`` values) as they arrive; cancel the rest if interrupted."""
     from distributed import as_completed
 
     if batch is None:
@@ -899,14 +906,16 @@ def benchmark(out: Path, quick: bool) -> dict:
             runs_cpu = float(frame["task_cpu_s"].sum())
             cpu_overhead = (used - runs_cpu - validation_cpu) / len(points)
             case = {"label": label, "batch": batch, "time_s": elapsed, "cpu_s": used, "runs_cpu_s": runs_cpu,
-                    "speedup": serial / elapsed, "overhead_per_run_s": overhead, "overhead_relative": overhead / per_run,
+                    "speedup": serial / elapsed, "overhead_per_run_s": overhead,
+                    "overhead_relative": overhead / per_run,
                     "cpu_overhead_per_run_s": cpu_overhead, "cpu_overhead_relative": cpu_overhead * len(points)
                     / runs_cpu, "load_average": load,
                     "failed": int((frame["status"] != "success").sum()), "identical_to_serial": bool(same)}
             cases.append(case)
             print(f"  {label:42s} {elapsed:6.2f} s  speed-up {case['speedup']:.2f}  overhead per run: wall "
-                  f"{overhead * 1e3:6.2f} ms ({100 * case['overhead_relative']:.0f} %), CPU {cpu_overhead * 1e3:5.2f} ms "
-                  f"({100 * case['cpu_overhead_relative']:.0f} %); load {load:.1f}; identical to serial: {same}")
+                  f"{overhead * 1e3:6.2f} ms ({100 * case['overhead_relative']:.0f} %), "
+                  f"CPU {cpu_overhead * 1e3:5.2f} ms ({100 * case['cpu_overhead_relative']:.0f} %); "
+                  f"load {load:.1f}; identical to serial: {same}")
     finally:
         engine.__exit__()
         shutil.rmtree(scratch, ignore_errors=True)
