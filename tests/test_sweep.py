@@ -135,6 +135,8 @@ def test_dotted_paths_by_name_index_and_vector_component():
     (["bodies.ball.stiffness=0:1e5:4:log"], "log range needs bounds > 0"),
     (["bodies.ball.stiffness"], "write FIELD=SPEC"),
     (["bodies.ball.stiffness=1,2", "--samples", "8"], "needs `--design lhs`"),
+    (["bodies.ball.stiffness=1,2", "--max-wall-time", "0"], "`--max-wall-time` = 0.0"),
+    (["bodies.ball.stiffness=1,2", "--workers", "0"], "`--workers` = 0: must be >= 1"),
 ])
 def test_bad_field_or_value_is_one_clear_error_and_writes_nothing(tmp_path, capsys, vary, says):
     out = tmp_path / "never"

@@ -456,13 +456,26 @@ class _RowLog:
 
 
 def _previous_rows(out: Path, columns: list[str]) -> list[dict]:
-    """Complete rows of an earlier, interrupted run of the same sweep (``task_s`` is written last)."""
+    """The finished rows of an earlier, interrupted run of the same sweep.
+
+    A last line without its newline (the sweep was killed while writing it) is dropped,
+    and so are the rows of tasks that failed as a whole (a lost worker: no ``task_s``),
+    so that resuming runs them again.
+    """
+    import io
+
     import pandas as pd
 
     path = out / "sweep.csv"
     if not path.exists():
         return []
-    frame = pd.read_csv(path, keep_default_na=False, na_values=[""])
+    text = path.read_text()
+    if not text.endswith("\n"):
+        text = text[: text.rfind("\n") + 1]
+    try:
+        frame = pd.read_csv(io.StringIO(text), keep_default_na=False, na_values=[""])
+    except (ValueError, pd.errors.ParserError) as exc:
+        raise SweepError(f"`--resume`: cannot read {path} ({exc}); move it away to start the sweep again") from None
     if list(frame.columns) != columns:
         raise SweepError(f"`--resume`: {path} has columns {list(frame.columns)}, this sweep writes {columns}; "
                          "resume with the same options, or choose another --out")
@@ -697,6 +710,8 @@ def sweep(
                          "applies to the local cluster only (the scheduler's cluster has its own workers)"))
     if batch is not None and batch < 1:
         raise SweepError(f"`--batch` = {batch}: must be >= 1")
+    if not max_wall_time > 0:
+        raise SweepError(f"`--max-wall-time` = {max_wall_time}: must be > 0 (s)")
     columns = ["run", *fields, *OBSERVABLES, *TAIL] + (["result_path"] if keep_results else [])
     record = {"fields": fields, "design": design, "samples": samples, "seed": seed,
               "specs": {a.field: {"values": list(a.values) if design == "grid" else None, "low": a.low,
