@@ -91,7 +91,7 @@ def _add_sweep(sub) -> None:
                                                               "(default: a local cluster)")
     sweep.add_argument("--workers", type=int, metavar="N", help="local cluster size (default: one per core)")
     sweep.add_argument("--batch", type=int, metavar="N",
-                       help="runs per Dask task (default: about 20 tasks per worker, at most 50 runs each)")
+                       help="runs per Dask task (default: adaptive, tasks of about 0.25 s)")
     sweep.add_argument("--keep-results", action="store_true", help="save every run's result in DIR/runs/")
     sweep.add_argument("--resume", action="store_true", help="finish an interrupted sweep in DIR")
     sweep.add_argument("--max-wall-time", type=float, default=600.0, metavar="S",

@@ -75,6 +75,8 @@ COUNTS = ("impacts", "liftoffs", "rhs_evaluations")
 TAIL = ("status", "message", "worker", "model_load_s", "task_s", "task_cpu_s")
 #: Parquet is rewritten at most this often (s) while rows arrive; the CSV gets every row at once.
 PARQUET_EVERY = 5.0
+#: An adaptive task holds about this many seconds of runs (see _Batcher).
+TASK_SECONDS = 0.25
 
 
 class SweepError(ValueError):
@@ -673,8 +675,8 @@ def sweep(
         ``LocalCluster`` of ``workers`` processes (default one per core), closed at the end.
     batch : int, optional
         Runs per Dask task.  Each run stays independent (its own row, its own failure);
-        grouping a few per task spreads Dask's per-task cost (a few ms, see the README).
-        Default: about 20 tasks per worker, at most 50 runs per task.
+        grouping runs spreads Dask's cost per task (see the README).  Default: adaptive,
+        tasks of about ``TASK_SECONDS`` from the runs finished so far.
     keep_results : bool
         Save each run's ``result.npz``, ``summary.json`` and ``scene.json`` in ``out/runs/``.
     resume : bool
@@ -793,36 +795,75 @@ def _check_out(out: Path | None, resume: bool, base: dict, record: dict, columns
     return _previous_rows(out, columns)
 
 
-def auto_batch(runs: int, workers: int) -> int:
-    """Runs per task by default: about 20 tasks per worker (load balance), at most 50 runs each."""
-    return min(50, max(1, runs // (20 * max(workers, 1))))
+class _Batcher:
+    """How many runs the next task gets.
+
+    A fixed ``batch``, or adaptive: single runs until some have finished, then as many as
+    take about TASK_SECONDS by the median run so far, so Dask's cost per task (a few ms
+    on a loaded 2-core machine, see the README) stays a small part of each task's time;
+    near the end never more than an even share of what is left, so no worker idles while
+    another finishes a long last task.
+    """
+
+    def __init__(self, batch: int | None, workers: int) -> None:
+        self.batch, self.workers = batch, workers
+        self.times: list[float] = []
+
+    def observe(self, rows: list[dict]) -> None:
+        self.times += [row["task_s"] for row in rows if row.get("task_s") == row.get("task_s")]  # not NaN
+        del self.times[:-200]
+
+    def size(self, remaining: int) -> int:
+        if self.batch is not None:
+            return self.batch
+        if not self.times:
+            return 1
+        per_run = max(float(np.median(self.times)), 1e-6)
+        return max(1, min(int(TASK_SECONDS / per_run), remaining // (2 * self.workers), 500))
 
 
 def _collect(client, todo: list[tuple], varied: list[dict], batch: int | None, max_wall_time: float,
              keep: str | None, log: _RowLog, bar: _Progress) -> None:
-    """Submit the runs; record rows (with their ``varied`` values) as they arrive; cancel the rest if interrupted."""
+    """Submit the runs; record rows (with their ``varied`` values) as they arrive; cancel the rest if interrupted.
+
+    At most two tasks per worker are out at a time (one running, one waiting), so each
+    new task can be sized from the runs finished so far.
+    """
     from distributed import as_completed
 
-    if batch is None:
-        batch = auto_batch(len(todo), len(client.scheduler_info().get("workers", {})))
-    batches = [todo[i:i + batch] for i in range(0, len(todo), batch)]
-    futures = dict(zip(client.map(run_batch, batches, max_wall_time=max_wall_time, keep=keep, pure=False), batches))
+    workers = max(1, len(client.scheduler_info().get("workers", {})))
+    batcher = _Batcher(batch, workers)
+    pending = list(reversed(todo))  # popped from the end: run order
+    out: dict[Any, list[tuple]] = {}
+    # Results are fetched by the client's event loop as tasks finish, not one round trip at a time here.
+    finished = as_completed([], with_results=True, raise_errors=False)
+
+    def submit() -> None:
+        while pending and len(out) < 2 * workers:
+            items = [pending.pop() for _ in range(min(batcher.size(len(pending)), len(pending)))]
+            future = client.submit(run_batch, items, max_wall_time, keep, pure=False)
+            out[future] = items
+            finished.add(future)
+
     try:
-        # Results are fetched by the client's event loop as tasks finish, not one round trip at a time here.
-        for future, result in as_completed(futures, with_results=True, raise_errors=False):
+        submit()
+        for future, result in finished:
+            items = out.pop(future)
             rows = result
             if future.status != "finished":  # the task itself failed (worker lost, ...): rows, not a crash
                 exc = result[1] if isinstance(result, tuple) else result
                 rows = [{"run": run, **{key: math.nan for key in OBSERVABLES}, "status": "error",
                          "message": f"{type(exc).__name__}: {exc}", "worker": None, "model_load_s": math.nan,
-                         "task_s": math.nan, "task_cpu_s": math.nan} for run, *_ in futures[future]]
+                         "task_s": math.nan, "task_cpu_s": math.nan} for run, *_ in items]
             future.release()
+            batcher.observe(rows)
+            submit()
             for row in rows:
                 row.update(varied[row["run"]])
             log.add(rows)
             bar.update(rows)
     finally:
-        client.cancel(list(futures))
+        client.cancel(list(out))
 
 
 # ------------------------------------------------------------------------- command line and benchmark
@@ -907,9 +948,8 @@ def benchmark(out: Path, quick: bool) -> dict:
     cases = []
     scratch = Path(tempfile.mkdtemp(prefix="flexbody-sweep-bench-"))
     try:
-        default = auto_batch(len(points), workers)
         for label, batch in (("cold workers, 1 run per task", 1), ("warm workers, 1 run per task", 1),
-                             (f"warm workers, {default} runs per task (default)", None)):
+                             ("warm workers, 5 runs per task", 5), ("warm workers, adaptive tasks (default)", None)):
             load = os.getloadavg()[0]
             start, cpu = time.perf_counter(), _cpu_seconds(procs)
             frame = sweep("thesis_ball", vary, scratch / f"{len(cases)}", scheduler=client, batch=batch,
