@@ -19,6 +19,8 @@ Three studies, each printed as a table and saved as JSON and PNG in ``--out``:
 
 Each chart is drawn from its study's JSON alone (:data:`PLOTS`): ``python -m
 flexbody.bench [FOLDER]`` redraws the PNGs beside the JSON files without running anything.
+* ``sweep`` — a 200-run stiffness x damping sweep of the ball on a 2-worker Dask cluster
+  against a serial loop (optional extra ``flexbody[sweep]``): speed-up, per-run overhead.
 
 Timings are medians over ``--repeats`` runs (the machine is shared and noisy).
 """
@@ -614,6 +616,18 @@ def run_study(out: Path, repeats: int) -> dict:
     return data
 
 
+def sweep_benchmark(out: Path, quick: bool) -> dict | None:
+    """200 thesis-ball runs on a 2-worker Dask LocalCluster against a serial loop (flexbody[sweep])."""
+    try:
+        from .sweep import _require_extra, benchmark
+
+        _require_extra()
+    except (ImportError, ValueError):
+        print("sweep benchmark skipped: Dask is not installed (pip install 'flexbody[sweep]')")
+        return None
+    return benchmark(out, quick)
+
+
 def _scale(out: Path, quick: bool) -> dict:
     from .bench_scale import scale_study
 
@@ -621,7 +635,8 @@ def _scale(out: Path, quick: bool) -> dict:
 
 
 STUDIES = {"wp": work_precision, "stability": stability_map, "resolution": resolution_study,
-           "mujoco": mujoco_comparison, "run": run_study, "scale": _scale}
+           "mujoco": mujoco_comparison, "run": run_study, "scale": _scale,
+           "sweep": sweep_benchmark}
 
 
 def bench_command(args) -> int:

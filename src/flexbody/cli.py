@@ -1,4 +1,4 @@
-"""The ``flexbody`` command: run, derive, show, bench.
+"""The ``flexbody`` command: run, derive, show, sweep, bench.
 
 Every command is a thin wrapper over library functions.  Exit codes:
 
@@ -89,11 +89,13 @@ def _parser() -> argparse.ArgumentParser:
                       help="derive a large scene's equations even when that takes minutes")
     show.add_argument("--raw", action="store_true", help="the equations as derived, unsimplified (for debugging)")
 
+    _add_sweep(sub)
+
     bench = sub.add_parser("bench", help="speed and accuracy benchmarks (prints and saves numbers)",
                            description="Benchmarks, not tests: work-precision diagram (wp), stability map "
-                                       "(stability), resolution study (resolution), the whole run command (run), cost vs size (scale); "
+                                       "(stability), resolution study (resolution), the whole run command (run), cost vs size (scale), Dask sweeps (sweep); "
                                        "JSON and PNG in --out.")
-    bench.add_argument("--study", choices=("wp", "stability", "resolution", "mujoco", "run", "scale"), action="append",
+    bench.add_argument("--study", choices=("wp", "stability", "resolution", "mujoco", "run", "scale", "sweep"), action="append",
                        help="which study (repeatable; default: all; mujoco needs flexbody[mujoco])")
     bench.add_argument("--out", default="bench", metavar="DIR", help="output folder")
     bench.add_argument("--repeats", type=int, default=5, help="timing repeats (median is reported)")
@@ -127,6 +129,33 @@ def _attach_negative_numbers(argv: list[str]) -> list[str]:
             out.append(argv[k])
             k += 1
     return out
+
+
+def _add_sweep(sub) -> None:
+    sweep = sub.add_parser("sweep", help="a parameter study on Dask: one row per varied scene",
+                           description="Vary scene fields over a grid or a quasi-random design, run every scene "
+                                       "on a Dask cluster, write DIR/sweep.parquet, sweep.csv, sweep.json and "
+                                       "figures. Needs flexbody[sweep].")
+    _add_scene(sweep)
+    sweep.add_argument("--vary", action="append", required=True, metavar="FIELD=SPEC",
+                       help="a dotted scene field and its values: a list 1e3,1e4,1e5; a range lo:hi:n or "
+                            "lo:hi:n:log; with --samples, lo:hi or lo:hi:log (repeatable)")
+    sweep.add_argument("--out", required=True, metavar="DIR", help="output folder")
+    sweep.add_argument("--samples", type=int, metavar="N", help="number of runs of an lhs or sobol design")
+    sweep.add_argument("--design", choices=("grid", "lhs", "sobol"), default="grid",
+                       help="grid (every combination, default), lhs or sobol (needs --samples)")
+    sweep.add_argument("--seed", type=int, default=0, help="seed of the lhs or sobol design")
+    sweep.add_argument("--scheduler", metavar="ADDRESS", help="a running Dask scheduler, e.g. tcp://host:8786 "
+                                                              "(default: a local cluster)")
+    sweep.add_argument("--workers", type=int, metavar="N", help="local cluster size (default: one per core)")
+    sweep.add_argument("--batch", type=int, metavar="N",
+                       help="runs per Dask task (default: adaptive, tasks of about 0.25 s)")
+    sweep.add_argument("--keep-results", action="store_true", help="save every run's result in DIR/runs/")
+    sweep.add_argument("--resume", action="store_true", help="finish an interrupted sweep in DIR")
+    sweep.add_argument("--max-wall-time", type=float, default=600.0, metavar="S",
+                       help="a run taking longer stops as too_slow (default 600 s)")
+    sweep.add_argument("--no-figures", action="store_true", help="skip the figures")
+    sweep.add_argument("--quiet", action="store_true", help="no progress line")
 
 
 def _derive(args: argparse.Namespace) -> int:
@@ -222,7 +251,13 @@ def _bench(args: argparse.Namespace) -> int:
     return bench_command(args)
 
 
-COMMANDS = {"run": _run, "derive": _derive, "show": _show, "bench": _bench}
+def _sweep(args: argparse.Namespace) -> int:
+    from .sweep import sweep_command
+
+    return sweep_command(args)
+
+
+COMMANDS = {"run": _run, "derive": _derive, "show": _show, "bench": _bench, "sweep": _sweep}
 
 
 def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
