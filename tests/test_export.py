@@ -37,7 +37,7 @@ def _check_frames(result, folder: Path, every: int = 1) -> None:
     expected = list(range(0, nt, every)) + ([nt - 1] if (nt - 1) % every else [])
     assert [t for t, _ in rows] == [float(result.t[i]) for i in expected]  # exact: every time, in order
     assert len({f for _, f in rows}) == len(rows)
-    for (t, name), i in zip(rows, expected):
+    for (_, name), i in zip(rows, expected, strict=True):
         mesh = meshio.read(folder / name)
         x = np.zeros((n, 3))
         x[:, :dim] = result.positions[i]
@@ -81,6 +81,15 @@ def test_a_3d_run_reads_back_equal_at_the_right_times(every, tmp_path):
     n = np.array(grounds[0].normal) / np.linalg.norm(grounds[0].normal)
     np.testing.assert_allclose((ground.points - grounds[0].point) @ n, 0.0, atol=1e-12)
     assert ground.cells_dict["quad"].shape == (1, 4)
+
+
+def test_a_body_without_links_has_only_vertex_cells(tmp_path):
+    result, _ = falling_cube(t_end=0.1)
+    result.links = np.zeros((0, 2), int)
+    export_vtk(result, tmp_path)
+    mesh = meshio.read(tmp_path / "frames" / "frame_00000.vtu")
+    assert set(mesh.cells_dict) == {"vertex"}
+    np.testing.assert_array_equal(mesh.points, result.positions[0])
 
 
 def test_every_must_be_a_whole_number_at_least_1(tmp_path):

@@ -217,3 +217,18 @@ def test_snapshots_show_the_first_and_last_sample_and_never_stack_a_resting_body
     assert sum(resting[i] for i in chosen) == 1  # 1.7 s at rest, drawn once
     bottom = result.positions[chosen, 0, 2]
     assert np.all(np.diff(-bottom) >= SIDE)  # a cube's height apart: they do not overlap
+
+
+def test_every_3d_figure_draws_a_run_without_contact_and_a_body_without_links():
+    result, grounds = falling_cube(t_end=0.1)  # still falling: no force; drop the events it would have later
+    assert not result.contact_force.any()
+    result.events_time, result.events_particle = result.events_time[:0], result.events_particle[:0]
+    result.events_kind, result.events_held = result.events_kind[:0], result.events_held[:0]
+    single = SimulationResult(**{**result.arrays(), "positions": result.positions[:, :1],
+                                 "velocities": result.velocities[:, :1], "contact_force": result.contact_force[:, :1],
+                                 "masses": result.masses[:1], "links": np.zeros((0, 2), int)})
+    for r in (result, single):
+        files = figures.render_all(r, grounds)
+        assert Image.open(io.BytesIO(files["drop.gif"])).n_frames == 3  # 0, 0.04, 0.08 s
+    title = figures3d.figure_contact_force(result).axes[0].get_title()
+    assert "no particle touched the ground" in title

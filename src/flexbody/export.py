@@ -69,7 +69,7 @@ def frame_mesh(result: SimulationResult, i: int):
 def collection_xml(times: Sequence[float], files: Sequence[str]) -> str:
     """The ``.pvd`` text listing ``files`` at ``times`` (written with ``repr``: read back exactly)."""
     rows = "".join(f'    <DataSet timestep="{float(t)!r}" group="" part="0" file={quoteattr(f)}/>\n'
-                   for t, f in zip(times, files))
+                   for t, f in zip(times, files, strict=True))
     return ('<?xml version="1.0"?>\n<VTKFile type="Collection" version="0.1" byte_order="LittleEndian">\n'
             f"  <Collection>\n{rows}  </Collection>\n</VTKFile>\n")
 
@@ -107,7 +107,7 @@ def export_vtk(result: SimulationResult, folder: str | Path, grounds: Sequence |
         meshio.write(folder / name, frame_mesh(result, int(i)), file_format="vtu", binary=True, compression=None)
         files.append(name)
     if grounds:
-        meshio.write(folder / GROUNDS, ground_mesh(result, grounds), file_format="vtu", binary=False)
+        meshio.write(folder / GROUNDS, ground_mesh(result, grounds), file_format="vtu", binary=True, compression=None)
     (folder / COLLECTION).write_text(collection_xml(result.t[index], files))
     return folder / COLLECTION
 

@@ -127,8 +127,8 @@ def _view_axes(fig: Figure, lo: np.ndarray, hi: np.ndarray, grounds, rect=None):
     ax = fig.add_subplot(projection="3d") if rect is None else fig.add_axes(rect, projection="3d")
     ax.set_proj_type("persp", focal_length=FOCAL_LENGTH)
     ax.view_init(elev=ELEVATION, azim=AZIMUTH)
-    for axis, (a, b) in zip((ax.set_xlim, ax.set_ylim, ax.set_zlim), zip(lo, hi)):
-        axis(a, b, view_margin=0)
+    for set_lim, (a, b) in zip((ax.set_xlim, ax.set_ylim, ax.set_zlim), zip(lo, hi, strict=True), strict=True):
+        set_lim(a, b, view_margin=0)
     ax.set_box_aspect(hi - lo, zoom=0.8)
     ax.set_xlabel("x (m)", labelpad=2)
     ax.set_ylabel("y (m)", labelpad=2)
