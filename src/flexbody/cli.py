@@ -1,4 +1,4 @@
-"""The ``flexbody`` command: run, derive, show, sweep, bench.
+"""The ``flexbody`` command: run, export, derive, show, sweep, bench.
 
 Every command is a thin wrapper over library functions.  Exit codes:
 
@@ -25,7 +25,8 @@ from .errors import InputError
 EXIT_FAILED, EXIT_USAGE, EXIT_INTERRUPTED = 1, 2, 130
 BUG = "this is a bug in flexbody: please report it with the command and scene"
 #: Options that take a number, which may be negative (``--rtol -1e-6`` must reach the range check).
-NUMERIC_OPTIONS = ("--rtol", "--atol", "--impact-dt", "--t-end", "--output-dt", "--max-wall-time", "--repeats")
+NUMERIC_OPTIONS = ("--rtol", "--atol", "--impact-dt", "--t-end", "--output-dt", "--max-wall-time", "--repeats",
+                   "--every")
 
 
 def _add_scene(parser: argparse.ArgumentParser) -> None:
@@ -66,6 +67,20 @@ def _parser() -> argparse.ArgumentParser:
                      help=f"stop a run that takes longer than this (s; default {DEFAULT_MAX_WALL_TIME:g}; 'inf' for "
                           "no limit) with status too_slow and exit 1")
     run.add_argument("--quiet", action="store_true", help="no progress bar")
+    run.add_argument("--vtk", action="store_true",
+                     help="also write DIR/vtk/: the run as a ParaView time series (as flexbody export DIR does)")
+
+    export = sub.add_parser(
+        "export", help="write a run's result for other programs: a VTK time series for ParaView",
+        description="Read DIR/result.npz (written by flexbody run) and write DIR/vtk/: run.pvd (open it in "
+                    "ParaView) and frames/frame_*.vtu with the particles, the links as lines, and point data "
+                    "velocity, contact_force, phase (1 held by the ground, 0 free) and mass.  An existing DIR/vtk "
+                    "is replaced whole, in one step.",
+    )  # fmt: skip
+    export.add_argument("dir", metavar="DIR", help="a run's folder (flexbody run SCENE --out DIR)")
+    export.add_argument("--format", choices=("vtk",), default="vtk", help="file format (only vtk for now)")
+    export.add_argument("--every", type=int, default=1, metavar="K",
+                        help="export every K-th output sample, and the last one (default 1: all)")
 
     derive = sub.add_parser("derive", help="derive and generate a scene's model into generated/",
                             description="Derive the equations of motion (SymPy, Kane's method) and render "
@@ -242,6 +257,18 @@ def _run(args: argparse.Namespace) -> int:
     return run_command(args)
 
 
+def _export(args: argparse.Namespace) -> int:
+    from .export import export_folder
+
+    try:
+        pvd, count = export_folder(args.dir, every=args.every, fmt=args.format)
+    except OSError as exc:  # the folder was checked; writing failed (disk full, permissions)
+        print(f"error: could not write {args.dir}/vtk: {exc}\nnothing was written", file=sys.stderr)
+        return EXIT_FAILED
+    print(f"wrote {pvd} and {count} frames in {pvd.parent / 'frames'}/; open {pvd.name} in ParaView")
+    return 0
+
+
 def _bench(args: argparse.Namespace) -> int:
     from pathlib import Path
 
@@ -257,7 +284,7 @@ def _sweep(args: argparse.Namespace) -> int:
     return sweep_command(args)
 
 
-COMMANDS = {"run": _run, "derive": _derive, "show": _show, "bench": _bench, "sweep": _sweep}
+COMMANDS = {"run": _run, "export": _export, "derive": _derive, "show": _show, "bench": _bench, "sweep": _sweep}
 
 
 def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:

@@ -422,7 +422,13 @@ def render_all(result: SimulationResult, grounds: Sequence | None = None) -> dic
         A run, complete or partial (a failed run's samples up to where it stopped).
     grounds : sequence of objects with ``.point`` and ``.normal``, optional
         The scene's grounds (``scene.grounds``); default the ground y = 0.
+        A 3D result (positions of shape (nt, n, 3)) gets the 3D figures of
+        :func:`flexbody.figures3d.render_all` instead.
     """
+    if result.positions.shape[2] == 3:
+        from .figures3d import render_all as render_all_3d
+
+        return render_all_3d(result, grounds)
     return {
         "fig5_1_free_fall.png": _png(figure_free_fall(result, grounds)),
         "fig5_2_impact.png": _png(figure_impact(result, grounds)),

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -85,8 +86,11 @@ class SimulationResult:
     def arrays(self) -> dict[str, np.ndarray]:
         return {key: getattr(self, key) for key in ARRAY_KEYS}
 
-    def save(self, out_dir: str | Path, extra_files: dict[str, bytes] | None = None) -> Path:
+    def save(self, out_dir: str | Path, extra_files: dict[str, bytes | Callable[[Path], object]] | None = None) -> Path:
         """Write ``result.npz`` and ``summary.json`` (and ``extra_files``) as the folder ``out_dir``.
+
+        ``extra_files`` maps a relative path to its bytes, or to a function that writes
+        that path (a file or a folder) when given it inside the folder being written.
 
         The files are written into a temporary folder beside ``out_dir``, which then
         replaces ``out_dir`` whole (:func:`flexbody.paths.staged_folder`): a crash leaves
@@ -105,7 +109,12 @@ class SimulationResult:
             summary = dict(self.stats, status=self.status, message=self.message)
             (staging / "summary.json").write_text(json.dumps(summary, indent=1, default=_plain) + "\n")
             for name, data in (extra_files or {}).items():
-                (staging / name).write_bytes(data)
+                path = staging / name
+                path.parent.mkdir(parents=True, exist_ok=True)
+                if callable(data):  # a writer: for a sub-folder, or files too many to hold in memory
+                    data(path)
+                else:
+                    path.write_bytes(data)
         return Path(out_dir)
 
 

@@ -58,6 +58,10 @@ def run_command(args: argparse.Namespace) -> int:
         from .figures import render_all
 
         extra = render_all(result, scene.grounds)
+    if args.vtk:
+        from .export import export_vtk
+
+        extra["vtk"] = lambda folder: export_vtk(result, folder, scene.grounds)
     try:
         result.save(out, extra_files=extra)
     except OSError as exc:  # the folder was checked before the run; something changed since
@@ -72,7 +76,8 @@ def run_command(args: argparse.Namespace) -> int:
         f"  {s['impacts']} impacts ({s['not_held']} not held), {s['liftoffs']} lift-offs; "
         f"max penetration {s['max_penetration_m']:.2g} m; energy drift {s['energy_drift_J']:.2g} J "
         f"({s['energy_drift_relative']:.2g} of E0)\n"
-        f"  wrote {out}/result.npz, summary.json" + (", figures and drop.gif" if extra else "")
+        f"  wrote {out}/result.npz, summary.json" + (", figures and drop.gif" if not args.no_figures else "")
+        + (", vtk/run.pvd (ParaView)" if args.vtk else "")
     )
     for warning in s["warnings"]:
         print(f"warning: {warning}", file=sys.stderr)
