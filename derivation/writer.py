@@ -3,11 +3,9 @@
 from __future__ import annotations
 
 import difflib
-import os
-import shutil
-import tempfile
 from pathlib import Path
 
+from flexbody.paths import staged_folder
 from flexbody.scene import Scene
 
 from .codegen import render
@@ -20,28 +18,12 @@ def render_scene(scene: Scene, formulation: str, *, source: str, command: str) -
 
 
 def write_model(files: dict[str, str], out_dir: Path) -> Path:
-    """Write ``files`` into ``out_dir``, replacing it whole (never half-written).
-
-    The files go to a sibling temporary folder first, which is then renamed into place.
-    """
-    out_dir = Path(out_dir)
-    out_dir.parent.mkdir(parents=True, exist_ok=True)
-    staging = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}-", dir=out_dir.parent))
-    os.chmod(staging, 0o755)  # mkdtemp makes it private; generated code is for everyone to read
-    try:
+    """Write ``files`` into ``out_dir``, replacing it whole (never half-written): they go to
+    a sibling temporary folder first, which is then renamed into place."""
+    with staged_folder(out_dir) as staging:
         for name, text in files.items():
             (staging / name).write_text(text)
-        old = None
-        if out_dir.exists():
-            old = out_dir.with_name(f".{out_dir.name}-old-{os.getpid()}")
-            out_dir.rename(old)
-        staging.rename(out_dir)
-        if old is not None:
-            shutil.rmtree(old)
-    except BaseException:
-        shutil.rmtree(staging, ignore_errors=True)
-        raise
-    return out_dir
+    return Path(out_dir)
 
 
 def check_model(files: dict[str, str], out_dir: Path) -> list[str]:
