@@ -56,18 +56,23 @@ def main(argv: list[str] | None = None) -> int:
                              command=f"flexbody derive {name} --formulation {formulation}")
         seconds = time.perf_counter() - start
         folder = root / model_dir_name(scene.name, formulation)
-        if args.check:
-            problems = check_model(files, folder)
-            stale += bool(problems)
-            print(f"{folder}: {'STALE' if problems else 'fresh'} (derived in {seconds:.1f} s)")
-            for problem in problems:
-                print(problem)
-        else:
-            write_model(files, folder)
-            print(f"wrote {folder} ({formulation}, derived and rendered in {seconds:.1f} s)")
+        stale += _write_or_check(files, folder, args.check, f"{formulation}, derived and rendered in {seconds:.1f} s")
     if stale:
         print("generated code is stale: regenerate with `flexbody derive SCENE` and commit it", file=sys.stderr)
     return 1 if stale else 0
+
+
+def _write_or_check(files: dict[str, str], folder: Path, check: bool, how: str) -> bool:
+    """Write ``files`` as ``folder``, or compare them with it; True if it is stale."""
+    if not check:
+        write_model(files, folder)
+        print(f"wrote {folder} ({how})")
+        return False
+    problems = check_model(files, folder)
+    print(f"{folder}: {'STALE' if problems else 'fresh'} ({how})")
+    for problem in problems:
+        print(problem)
+    return bool(problems)
 
 
 def _runtime(args: argparse.Namespace) -> int:
@@ -81,16 +86,7 @@ def _runtime(args: argparse.Namespace) -> int:
         start = time.perf_counter()
         files = render()
         seconds = time.perf_counter() - start
-        folder = root / name
-        if args.check:
-            problems = check_model(files, folder)
-            stale += bool(problems)
-            print(f"{folder}: {'STALE' if problems else 'fresh'} (rendered in {seconds:.1f} s)")
-            for problem in problems:
-                print(problem)
-        else:
-            write_model(files, folder)
-            print(f"wrote {folder} (rendered in {seconds:.1f} s)")
+        stale += _write_or_check(files, root / name, args.check, f"rendered in {seconds:.1f} s")
     if stale:
         print("generated code is stale: regenerate with `flexbody derive --runtime` and commit it", file=sys.stderr)
     return 1 if stale else 0

@@ -24,7 +24,7 @@ import numpy as np
 
 from . import runtime
 from .cbuild import kernels_dir
-from .model import Model, runtime_time_rhs, runtime_trajectory, singular_matrix_error
+from .model import Model, singular_matrix_error
 from .scene import Scene
 
 FloatArray = np.ndarray
@@ -140,7 +140,7 @@ class AssembledModel(Model):
         return sparse.eye(self.ny, format="csr") + sparse.coo_matrix((vals, (rows, cols)), shape=(self.ny, self.ny))
 
 
-class AssembledC(AssembledModel):
+class AssembledC(runtime.SystemModel, AssembledModel):
     """The assembled particles formulation in C (the runtime library)."""
 
     backend = "c"
@@ -169,62 +169,6 @@ class AssembledC(AssembledModel):
         self._system_cache = (key, system)
         return system
 
-    def _address(self, p) -> int:
-        return ctypes.addressof(self.system(p))
-
-    def gaps(self, q, p):
-        q = np.ascontiguousarray(q, dtype=float)  # the gaps read positions only
-        out = np.empty(self.n_contacts)
-        self.lib.fb_sys_gaps(self._address(p), q.ctypes.data, out.ctypes.data)
-        return out
-
-    def rhs(self, y, p, held, push):
-        y = np.ascontiguousarray(y, dtype=float)
-        held = np.ascontiguousarray(held, dtype=np.intc)
-        push = np.ascontiguousarray(push, dtype=float)
-        ydot, lam = np.empty(self.ny), np.empty(self.n_contacts)
-        if self.lib.fb_sys_rhs(self._address(p), y.ctypes.data, held.ctypes.data, push.ctypes.data,
-                               ydot.ctypes.data, lam.ctypes.data):
-            raise singular_matrix_error()
-        return ydot, lam
-
-    def rhs_function(self, p, held, push):
-        # Pointers of the frozen inputs are taken once: a call costs ~1 µs of ctypes.
-        keep = [np.ascontiguousarray(held, dtype=np.intc), np.ascontiguousarray(push, dtype=float),
-                np.empty(self.n_contacts)]
-        system = self.system(p)
-        address, (held_ptr, push_ptr, lam_ptr) = ctypes.addressof(system), (a.ctypes.data for a in keep)
-        call, ny = self.lib.fb_sys_rhs, self.ny
-
-        def f(t, y):
-            y = np.ascontiguousarray(y, dtype=float)
-            ydot = np.empty(ny)
-            if call(address, y.ctypes.data, held_ptr, push_ptr, ydot.ctypes.data, lam_ptr):
-                raise singular_matrix_error()
-            return ydot
-
-        f.keep = (keep, system)  # keep the buffers and the system alive as long as f
-        return f
-
-    def contact_state(self, y, p, held, push):
-        y = np.ascontiguousarray(y, dtype=float)
-        held = np.ascontiguousarray(held, dtype=np.intc)
-        push = np.ascontiguousarray(push, dtype=float)
-        gaps, vn, lam = (np.empty(self.n_contacts) for _ in range(3))
-        if self.lib.fb_sys_contact_state(self._address(p), y.ctypes.data, held.ctypes.data, push.ctypes.data,
-                                         gaps.ctypes.data, vn.ctypes.data, lam.ctypes.data):
-            raise singular_matrix_error()
-        return gaps, vn, lam
-
-    def impact(self, y, p, stop):
-        y = np.ascontiguousarray(y, dtype=float)
-        stop = np.ascontiguousarray(stop, dtype=np.intc)
-        out, loss = np.empty(self.ny), ctypes.c_double(0.0)
-        if self.lib.fb_sys_impact(self._address(p), y.ctypes.data, stop.ctypes.data, out.ctypes.data,
-                                  ctypes.addressof(loss)):
-            raise singular_matrix_error()
-        return out, loss.value
-
     def outputs(self, y, p):
         """Positions and velocities (n, dim) and energies (4,) at one state."""
         y = np.ascontiguousarray(y, dtype=float)
@@ -232,20 +176,12 @@ class AssembledC(AssembledModel):
         self.lib.fb_sys_outputs(self._address(p), y.ctypes.data, x.ctypes.data, v.ctypes.data, e.ctypes.data)
         return x, v, e
 
-    def trajectory(self, Y, p, held, push):
-        return runtime_trajectory(self, self.system(p), Y, held, push)
-
     def link_jacobians(self, y, p):
         """d(force on i)/d[x_i, x_j, v_i, v_j] per link, shape (n_links, dim, 4 dim)."""
         y = np.ascontiguousarray(y, dtype=float)
         out = np.empty((len(self.links), self.dim, 4 * self.dim))
-        system = self.system(p)
-        self.lib.fb_asm_link_jacobians(system.data, y.ctypes.data, out.ctypes.data)
+        self.lib.fb_asm_link_jacobians(self.system(p).data, y.ctypes.data, out.ctypes.data)
         return out
-
-    def time_rhs(self, y, p, held, push, calls: int = 20000) -> float:
-        """Mean seconds per right-hand-side call at ``y``, timed inside C (no Python overhead)."""
-        return runtime_time_rhs(self, self.system(p), y, held, push, calls)
 
 
 class _AssemblyHandle:

@@ -31,9 +31,7 @@ class ModelError(RuntimeError):
     """A generated model is missing, stale or does not match the scene."""
 
 
-def singular_matrix_error() -> FloatingPointError:
-    """What a nonzero status of a generated C function means."""
-    return FloatingPointError("mass or contact matrix not positive definite at this state")
+singular_matrix_error = runtime.singular_matrix_error
 
 
 class Model:
@@ -259,8 +257,9 @@ class NumpyModel(GeneratedModel):
         return dynamics.constrained_rhs(self, y, p, held, push)
 
 
-class CModel(GeneratedModel):
-    """Evaluates the compiled C module (``model.c``) through ctypes."""
+class CModel(runtime.SystemModel, GeneratedModel):
+    """Evaluates the compiled C module (``model.c``) through ctypes: its generated
+    functions directly, the constrained dynamics through the runtime as an FbSystem."""
 
     backend = "c"
 
@@ -278,17 +277,11 @@ class CModel(GeneratedModel):
             fn.argtypes = [ptr] * 5
             fn.restype = None
             self._fn[name] = fn
-        self._rhs = lib.fb_rhs
-        self._rhs.argtypes = [ctypes.c_double] + [ptr] * 6
-        self._rhs.restype = ctypes.c_int
-        self._contact_state = lib.fb_contact_state
-        self._contact_state.argtypes = [ptr] * 7
-        self._impact = lib.fb_impact
-        self._impact.argtypes = [ptr] * 5
         self._fb_system = lib.fb_system
         self._fb_system.argtypes = [ptr, ptr]
         self._fb_system.restype = None
         self._zeros = np.zeros(max(self.nu, self.nq, 1))
+        self._system_cache: tuple[bytes, runtime.FbSystem] | None = None
 
     def _call(self, name, q, u, p, a=None):
         q = np.ascontiguousarray(q, dtype=float)
@@ -299,95 +292,20 @@ class CModel(GeneratedModel):
         self._fn[name](q.ctypes.data, u.ctypes.data, p.ctypes.data, a.ctypes.data, out.ctypes.data)
         return out[0] if name == "damping_power" else out
 
-    def rhs(self, y, p, held, push):
-        y = np.ascontiguousarray(y, dtype=float)
-        p = np.ascontiguousarray(p, dtype=float)
-        held = np.ascontiguousarray(held, dtype=np.intc)
-        push = np.ascontiguousarray(push, dtype=float)
-        ydot, lam = np.empty(self.ny), np.empty(self.n_contacts)
-        status = self._rhs(0.0, y.ctypes.data, p.ctypes.data, held.ctypes.data, push.ctypes.data,
-                           ydot.ctypes.data, lam.ctypes.data)
-        if status:
-            raise singular_matrix_error()
-        return ydot, lam
-
-    def contact_state(self, y, p, held, push):
-        y = np.ascontiguousarray(y, dtype=float)
-        held = np.ascontiguousarray(held, dtype=np.intc)
-        gaps, vn, lam = np.empty(self.n_contacts), np.empty(self.n_contacts), np.empty(self.n_contacts)
-        if self._contact_state(y.ctypes.data, p.ctypes.data, held.ctypes.data, push.ctypes.data, gaps.ctypes.data,
-                               vn.ctypes.data, lam.ctypes.data):
-            raise singular_matrix_error()
-        return gaps, vn, lam
-
-    def impact(self, y, p, stop):
-        y = np.ascontiguousarray(y, dtype=float)
-        stop = np.ascontiguousarray(stop, dtype=np.intc)
-        out, loss = np.empty(self.ny), ctypes.c_double(0.0)
-        if self._impact(y.ctypes.data, p.ctypes.data, stop.ctypes.data, out.ctypes.data, ctypes.addressof(loss)):
-            raise singular_matrix_error()
-        return out, loss.value
-
-    def rhs_function(self, p, held, push):
-        # Pointers of the frozen inputs are taken once: the call is ~1 µs, not ~5.
-        keep = [np.ascontiguousarray(p, dtype=float), np.ascontiguousarray(held, dtype=np.intc),
-                np.ascontiguousarray(push, dtype=float), np.empty(self.n_contacts)]
-        p_ptr, held_ptr, push_ptr, lam_ptr = (a.ctypes.data for a in keep)
-        rhs, ny = self._rhs, self.ny
-
-        def f(t, y):
-            y = np.ascontiguousarray(y, dtype=float)
-            ydot = np.empty(ny)
-            if rhs(t, y.ctypes.data, p_ptr, held_ptr, push_ptr, ydot.ctypes.data, lam_ptr):
-                raise singular_matrix_error()
-            return ydot
-
-        f.keep = keep  # keep the buffers alive as long as f
-        return f
+    def gaps(self, q, p):
+        return self._call("gaps", q, None, p)
 
     def system(self, p: np.ndarray) -> runtime.FbSystem:
-        """This model as an FbSystem with parameters ``p`` (kept alive by the struct)."""
-        p = np.ascontiguousarray(p, dtype=float)
+        """This model as an FbSystem with parameters ``p`` (a copy, kept alive by the struct)."""
+        p = np.array(p, dtype=float)
+        key = p.tobytes()
+        if self._system_cache is not None and self._system_cache[0] == key:
+            return self._system_cache[1]
         system = runtime.FbSystem()
         self._fb_system(ctypes.addressof(system), p.ctypes.data)
         system.keep = p
+        self._system_cache = (key, system)
         return system
-
-    def trajectory(self, Y, p, held, push):
-        return runtime_trajectory(self, self.system(p), Y, held, push)
-
-    def time_rhs(self, y, p, held, push, calls: int = 20000) -> float:
-        """Mean seconds per right-hand-side call at ``y``, timed inside C (no Python overhead)."""
-        return runtime_time_rhs(self, self.system(p), y, held, push, calls)
-
-
-def runtime_trajectory(model: Model, system: runtime.FbSystem, Y, held, push):
-    """Outputs along ``Y (nt, ny)`` of a C model through the runtime's ``fb_trajectory``.
-
-    Returns positions and velocities (nt, n, dim), energies (nt, 4), contact forces (nt, nc).
-    """
-    Y = np.ascontiguousarray(Y, dtype=float)
-    held = np.ascontiguousarray(held, dtype=np.intc)
-    push = np.ascontiguousarray(push, dtype=float)
-    n = len(Y)
-    X, V = np.empty((n, model.n_particles, model.dim)), np.empty((n, model.n_particles, model.dim))
-    E, lam = np.empty((n, 4)), np.empty((n, model.n_contacts))
-    work = runtime.Work(model.ny, model.n_contacts)
-    if runtime.library().fb_trajectory(work.address, ctypes.addressof(system), n, Y.ctypes.data, held.ctypes.data,
-                                       push.ctypes.data, X.ctypes.data, V.ctypes.data, E.ctypes.data,
-                                       lam.ctypes.data):
-        raise singular_matrix_error()
-    return X, V, E, lam
-
-
-def runtime_time_rhs(model: Model, system: runtime.FbSystem, y, held, push, calls: int) -> float:
-    """Mean seconds per right-hand-side call of a C model at ``y``, timed inside C."""
-    y = np.ascontiguousarray(y, dtype=float)
-    held = np.ascontiguousarray(held, dtype=np.intc)
-    push = np.ascontiguousarray(push, dtype=float)
-    work = runtime.Work(model.ny, model.n_contacts)
-    return runtime.library().fb_time_rhs(work.address, ctypes.addressof(system), calls, y.ctypes.data,
-                                         held.ctypes.data, push.ctypes.data)
 
 
 BACKENDS = {"c": CModel, "numpy": NumpyModel}

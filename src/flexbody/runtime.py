@@ -11,6 +11,8 @@ from __future__ import annotations
 import ctypes
 import functools
 
+import numpy as np
+
 from . import cbuild
 
 _ptr, _int, _double, _long = ctypes.c_void_p, ctypes.c_int, ctypes.c_double, ctypes.c_long
@@ -72,3 +74,97 @@ class Work:
         if getattr(self, "address", None):
             self._lib.fb_work_free(self.address)
             self.address = None
+
+
+def singular_matrix_error() -> FloatingPointError:
+    """What a nonzero status of a C evaluation means."""
+    return FloatingPointError("mass or contact matrix not positive definite at this state")
+
+
+def _ints(a) -> np.ndarray:
+    return np.ascontiguousarray(a, dtype=np.intc)
+
+
+def _floats(a) -> np.ndarray:
+    return np.ascontiguousarray(a, dtype=float)
+
+
+class SystemModel:
+    """The C evaluations of a model that offers itself as an FbSystem (``system(p)``),
+    through the runtime library's ``fb_sys_*`` entry points: one code path for the
+    assembled and the whole-scene C models.  Needs ``ny, n_contacts, n_particles, dim``.
+    """
+
+    def system(self, p: np.ndarray) -> FbSystem:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def _address(self, p) -> int:
+        return ctypes.addressof(self.system(p))
+
+    def gaps(self, q, p) -> np.ndarray:
+        """Gap of each contact, shape (nc,); reads positions only (q may be a whole state)."""
+        q = _floats(q)
+        out = np.empty(self.n_contacts)
+        library().fb_sys_gaps(self._address(p), q.ctypes.data, out.ctypes.data)
+        return out
+
+    def rhs(self, y, p, held, push):
+        y, held, push = _floats(y), _ints(held), _floats(push)
+        ydot, lam = np.empty(self.ny), np.empty(self.n_contacts)
+        if library().fb_sys_rhs(self._address(p), y.ctypes.data, held.ctypes.data, push.ctypes.data,
+                                ydot.ctypes.data, lam.ctypes.data):
+            raise singular_matrix_error()
+        return ydot, lam
+
+    def rhs_function(self, p, held, push):
+        # Pointers of the frozen inputs are taken once: a call costs ~1 µs of ctypes.
+        keep = [_ints(held), _floats(push), np.empty(self.n_contacts)]
+        system = self.system(p)
+        address, (held_ptr, push_ptr, lam_ptr) = ctypes.addressof(system), (a.ctypes.data for a in keep)
+        call, ny = library().fb_sys_rhs, self.ny
+
+        def f(t, y):
+            y = _floats(y)
+            ydot = np.empty(ny)
+            if call(address, y.ctypes.data, held_ptr, push_ptr, ydot.ctypes.data, lam_ptr):
+                raise singular_matrix_error()
+            return ydot
+
+        f.keep = (keep, system)  # keep the buffers and the system alive as long as f
+        return f
+
+    def contact_state(self, y, p, held, push):
+        y, held, push = _floats(y), _ints(held), _floats(push)
+        gaps, vn, lam = (np.empty(self.n_contacts) for _ in range(3))
+        if library().fb_sys_contact_state(self._address(p), y.ctypes.data, held.ctypes.data, push.ctypes.data,
+                                          gaps.ctypes.data, vn.ctypes.data, lam.ctypes.data):
+            raise singular_matrix_error()
+        return gaps, vn, lam
+
+    def impact(self, y, p, stop):
+        y, stop = _floats(y), _ints(stop)
+        out, loss = np.empty(self.ny), ctypes.c_double(0.0)
+        if library().fb_sys_impact(self._address(p), y.ctypes.data, stop.ctypes.data, out.ctypes.data,
+                                   ctypes.addressof(loss)):
+            raise singular_matrix_error()
+        return out, loss.value
+
+    def trajectory(self, Y, p, held, push):
+        """Positions and velocities (nt, n, dim), energies (nt, 4) and contact forces (nt, nc)
+        along states ``Y (nt, ny)`` with contact sets ``held``, ``push`` (nt, nc)."""
+        Y, held, push = _floats(Y), _ints(held), _floats(push)
+        n = len(Y)
+        X, V = np.empty((n, self.n_particles, self.dim)), np.empty((n, self.n_particles, self.dim))
+        E, lam = np.empty((n, 4)), np.empty((n, self.n_contacts))
+        work = Work(self.ny, self.n_contacts)
+        if library().fb_trajectory(work.address, self._address(p), n, Y.ctypes.data, held.ctypes.data,
+                                   push.ctypes.data, X.ctypes.data, V.ctypes.data, E.ctypes.data, lam.ctypes.data):
+            raise singular_matrix_error()
+        return X, V, E, lam
+
+    def time_rhs(self, y, p, held, push, calls: int = 20000) -> float:
+        """Mean seconds per right-hand-side call at ``y``, timed inside C (no Python overhead)."""
+        y, held, push = _floats(y), _ints(held), _floats(push)
+        work = Work(self.ny, self.n_contacts)
+        return library().fb_time_rhs(work.address, self._address(p), calls, y.ctypes.data, held.ctypes.data,
+                                     push.ctypes.data)
