@@ -86,3 +86,18 @@ def test_a_stiffness_the_integrator_cannot_step_ends_too_slow_inside_one_segment
     r = flexbody.simulate(scene, max_wall_time=1.0)
     assert r.status == "too_slow"
     assert r.stats["t_reached"] < 1e-3
+
+
+@needs_cc
+def test_a_stiffness_beyond_any_step_is_a_step_size_collapse():
+    """stiffness 1e26 N/m: the stable step of dopri5 (~1e-14 s) is below 10 ulp of the
+    segment's end, where no step can make progress: status step_size_collapse at once, with
+    a message naming what to change."""
+    import tomllib
+    from importlib import resources
+
+    table = tomllib.loads((resources.files("flexbody") / "scenes" / "thesis_ball.toml").read_text())
+    table["bodies"][0]["stiffness"] = 1e26
+    r = flexbody.simulate(flexbody.load_scene(table), max_wall_time=60.0)
+    assert r.status == "step_size_collapse"
+    assert "Radau" in r.message and "too stiff" in r.message
