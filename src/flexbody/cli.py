@@ -208,17 +208,24 @@ def _outside_package_note(scene_arg: str) -> str:
     from .paths import cache_root
     from .scene import load_scene, resolve_scene_path
 
+    from .paths import generated_root
+
     bundled = Path(str(resources.files("flexbody") / "scenes")).resolve()
-    if resolve_scene_path(scene_arg).resolve().parent == bundled:
-        return ""
     scene = load_scene(scene_arg)
-    lines = [f"{scene_arg}: not a bundled scene, so it has no committed model in generated/ to check."]
+    if resolve_scene_path(scene_arg).resolve().parent == bundled:
+        if (generated_root() / f"{scene.name}_particles").is_dir():
+            return ""
+        what = "a bundled scene without committed whole-scene models (it runs assembled)"
+    else:
+        what = "not a bundled scene"
+    lines = [f"{scene_arg}: {what}, so it has no committed model in generated/ to check."]
     lines.append("  particles: runs assembled from the element kernels (generated/kernels): nothing to derive or "
                  "check; `flexbody show` derives its equations whole on request")
-    folder = find_model_dir(scene, "floating")
-    where = f"derived, in {folder}" if folder else \
-        f"not derived yet; `flexbody run --formulation floating` derives it on first use into {cache_root() / 'models'}/"
-    lines.append(f"  floating: {where}")
+    if scene.dim == 2:
+        folder = find_model_dir(scene, "floating")
+        where = f"derived, in {folder}" if folder else \
+            f"not derived yet; `flexbody run --formulation floating` derives it on first use into {cache_root() / 'models'}/"
+        lines.append(f"  floating: {where}")
     lines.append("Models in the cache are keyed by the scene's topology (particles, links, dampers, grounds) and are "
                  "never stale for it; to write the files somewhere to read or commit, use "
                  f"`flexbody derive {scene_arg} --out DIR` (then `--check --out DIR` compares against DIR).")
