@@ -22,7 +22,8 @@ from .conftest import HAS_CC
 COMMITTED = [s for s in bundled_scenes() if (generated_root() / f"{s}_particles").is_dir()]
 
 
-@pytest.mark.parametrize("scene", COMMITTED)
+@pytest.mark.parametrize("scene", [pytest.param(s, marks=pytest.mark.slow) if s == "thesis_ball" else s
+                                   for s in COMMITTED])  # the thesis ball's floating model takes minutes
 def test_generated_code_is_fresh(scene):
     """Regenerate in memory and compare byte for byte; fails with a diff when stale."""
     run = subprocess.run([sys.executable, "-m", "flexbody.cli", "derive", scene, "--check"],

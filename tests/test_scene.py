@@ -68,7 +68,7 @@ def test_overdamped_link_warns():
     "table, field, rule",
     [
         (scene_table(body(colour="red")), "bodies[0].colour", "unknown key"),
-        (scene_table(body(), gravity=[0.0, -9.81, 0.0]), "gravity", "list of 2 finite numbers"),
+        (scene_table(body(), gravity=[0.0, -9.81, 0.0, 1.0]), "gravity", "list of 2 (planar) or 3 (spatial) finite numbers"),
         (scene_table(body(position=[0.0, float("nan")])), "bodies[0].position", "finite"),
         (scene_table(body(mass=0.0)), "bodies[0].mass", "> 0"),
         (scene_table(body(mass=None, masses=[0.1, -1.0])), "bodies[0].masses", "> 0"),
