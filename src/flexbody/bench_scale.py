@@ -27,6 +27,8 @@ import tempfile
 import time
 from pathlib import Path
 
+import numpy as np
+
 SIZES = (23, 100, 1000, 10000)
 QUICK_SIZES = (23, 100, 1000)
 DERIVE_MAX = 100
@@ -160,11 +162,15 @@ def _plot(rows: list[dict]):
     ax.set_ylabel("time (s)")
     ax.set_title("Cost vs size (assembled element kernels)")
     ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=8, loc="upper left")
-    mem.loglog(n, [r["peak_rss_mb"] for r in rows], "o-")
+    ax.legend(fontsize=8, loc="lower right")
+    memory = [r["peak_rss_mb"] for r in rows]
+    slope, base = np.polyfit(n, memory, 1)
+    mem.plot(n, memory, "o", label="measured")
+    mem.plot([0, max(n)], [base, base + slope * max(n)], "--", label=f"{base:.0f} MB + {slope * 1024:.1f} kB per particle")
     mem.set_xlabel("particles")
     mem.set_ylabel("peak resident memory of the process (MB)")
-    mem.set_title("Memory vs size")
+    mem.set_title("Memory vs size (linear axes)")
+    mem.legend(fontsize=8)
     mem.grid(True, which="both", alpha=0.3)
     fig.tight_layout()
     return fig
