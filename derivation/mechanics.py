@@ -110,36 +110,67 @@ class _Builder:
         N, points = self.N, []
         first = 0
         for b, body in enumerate(top.bodies):
-            X, vX = self.coordinate(f"X{b}", f"vX{b}", f"x of T{b}'s origin in N (q1, m)")
-            Y, vY = self.coordinate(f"Y{b}", f"vY{b}", f"y of T{b}'s origin in N (q2, m)")
-            O = self.origin.locatenew(f"O{b}", X * N.x + Y * N.y)
-            O.set_vel(N, vX * N.x + vY * N.y)
+            axes = list(zip("XYZ"[: top.dim], (N.x, N.y, N.z)))
+            origin = velocity = 0 * N.x
+            for q_name, (axis, unit) in enumerate(axes, start=1):
+                c, v = self.coordinate(f"{axis}{b}", f"v{axis}{b}", f"{axis.lower()} of T{b}'s origin in N (q{q_name}, m)")
+                origin, velocity = origin + c * unit, velocity + v * unit
+            O = self.origin.locatenew(f"O{b}", origin)
+            O.set_vel(N, velocity)
             T = ReferenceFrame(f"T{b}")
-            anchor, reference = body.gauge
-            if body.n_particles > 1:
+            if body.n_particles == 1:
+                T.orient_axis(N, N.z, 0)
+            elif top.dim == 2:
                 th, w = self.coordinate(f"theta{b}", f"omega{b}", f"angle of T{b} about N3 (q3, rad)")
                 T.orient_axis(N, N.z, th)
                 T.set_ang_vel(N, w * N.z)
             else:
-                T.orient_axis(N, N.z, 0)
+                self._orient_3d(T, b)
             for i in range(body.n_particles):
-                g = first + i
-                if i == anchor:
-                    P = O.locatenew(f"P{g}", 0 * T.x)
-                    P.set_vel(N, O.vel(N))
-                    points.append(P)
-                    continue
-                xi, vxi = self.coordinate(f"xi{g}", f"vxi{g}", f"x of particle {g} in T{b} (m)")
-                if i == reference:
-                    eta, veta = sp.S.Zero, sp.S.Zero
-                else:
-                    eta, veta = self.coordinate(f"eta{g}", f"veta{g}", f"y of particle {g} in T{b} (m)")
-                P = O.locatenew(f"P{g}", xi * T.x + eta * T.y)
-                P.set_vel(T, vxi * T.x + veta * T.y)
-                P.v1pt_theory(O, N, T)
-                points.append(P)
+                points.append(self._particle_in_t(O, T, body.gauge, i, first + i, b, top.dim))
             first += body.n_particles
         return points
+
+    def _orient_3d(self, T: ReferenceFrame, b: int) -> None:
+        """T's orientation in N by body-fixed X-Y-Z angles; the speeds are their rates (q' = u).
+
+        Singular (gimbal lock) where beta = +-90 deg, i.e. T's z-axis along N's x-axis: see
+        the module docstring.
+        """
+        meaning = ("first, about N1; in 3D the equations below are Kane's raw rows, not regrouped by cause",
+                   "second, about the rotated 2-axis (+-90 deg: gimbal lock)",
+                   "third, about T3")
+        angles, rates = [], []
+        for k, (name, text) in enumerate(zip(("alpha", "beta", "gamma"), meaning), start=4):
+            a, w = self.coordinate(f"{name}{b}", f"v{name}{b}",
+                                   f"body-fixed X-Y-Z angle of T{b} in N, {text} (q{k}, rad)")
+            angles.append(a)
+            rates.append(w)
+        T.orient_body_fixed(self.N, angles, "XYZ")
+        # The angular velocity in the speeds (the angles' rates), in T's components.
+        omega = T.ang_vel_in(self.N).express(T).xreplace({a.diff(): w for a, w in zip(angles, rates)})
+        T.set_ang_vel(self.N, omega)
+
+    def _particle_in_t(self, O: Point, T: ReferenceFrame, gauge: tuple[int, ...], i: int, g: int, b: int,
+                       dim: int) -> Point:
+        """Particle g (index i in body b) at coordinates in T, less those the gauge removes.
+
+        The anchor is at T's origin (no coordinate), the reference on T's x-axis (x only),
+        and in 3D the third particle in T's x-y plane (x and y only).
+        """
+        if i == gauge[0]:
+            P = O.locatenew(f"P{g}", 0 * T.x)
+            P.set_vel(self.N, O.vel(self.N))
+            return P
+        kept = 1 if i == gauge[1] else 2 if dim == 2 or i == gauge[2] else 3
+        position = velocity = 0 * T.x
+        for name, axis, unit in list(zip(("xi", "eta", "zeta"), "xyz", (T.x, T.y, T.z)))[:kept]:
+            c, v = self.coordinate(f"{name}{g}", f"v{name}{g}", f"{axis} of particle {g} in T{b} (m)")
+            position, velocity = position + c * unit, velocity + v * unit
+        P = O.locatenew(f"P{g}", position)
+        P.set_vel(T, velocity)
+        P.v1pt_theory(O, self.N, T)
+        return P
 
 
 def _kinematics_solver(A: sp.Matrix, b: sp.Matrix) -> sp.Matrix:
@@ -183,8 +214,11 @@ def derive(top: Topology, formulation: str) -> SymbolicModel:
     """
     if formulation not in ("particles", "floating"):
         raise ValueError(f"`formulation` = {formulation!r}: must be 'particles' or 'floating'")
-    if formulation == "floating" and top.dim != 2:
-        raise ValueError("the floating formulation is derived for planar scenes only (frames N and T about N3)")
+    if formulation == "floating" and top.dim == 3:
+        unfixed = [b for b, body in enumerate(top.bodies) if body.n_particles > 1 and body.gauge[2] < 0]
+        if unfixed:
+            raise ValueError(f"bodies {unfixed}: all particles on one line, so no third particle fixes the rotation "
+                             "about it; the floating formulation needs one in 3D")
     p, text = _parameters(top)
     sym = {s.name: s for s in p}
     build = _Builder()

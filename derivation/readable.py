@@ -18,7 +18,9 @@ ingredients, ``F_r = sum_i (F_i - m_i a_i) . dv_i/du_r``, grouped by cause:
 
 Vectors are dotted in the frame of their body (T in the floating formulation, N in the
 particles one): both factors then carry no angle, so no trigonometric simplification is
-needed.  :func:`check_identity` substitutes the named terms back and compares with Kane's
+needed.  The 3D floating frame (three angles) has no such form yet: its rows are Kane's
+raw ``M`` and ``F``, under one cause, "raw", and its angles' descriptions in ``eom.md``
+say so.  :func:`check_identity` substitutes the named terms back and compares with Kane's
 ``M`` and ``F``; the tests run it.
 """
 
@@ -119,7 +121,8 @@ def _signed_sum(items: list[tuple[sp.Expr, str]], show, latex: bool) -> str:
     return out
 
 
-_GREEK = {"theta": r"\theta", "xi": r"\xi", "eta": r"\eta"}
+_GREEK = {"theta": r"\theta", "xi": r"\xi", "eta": r"\eta", "zeta": r"\zeta", "alpha": r"\alpha",
+          "beta": r"\beta", "gamma": r"\gamma"}
 
 
 def _latex_coordinate(name: str) -> tuple[str, str]:
@@ -157,6 +160,9 @@ def readable(model: SymbolicModel) -> ReadableEquations:
     q, u = model.q, model.u
     sym = {s.name: s for s in model.p}
     names: dict = {s: _latex_coordinate(s.name) for s in q}  # coordinate -> (stem, subscript)
+    if model.formulation == "floating" and top.dim == 3:  # not regrouped yet: Kane's rows as derived
+        M, F = model.outputs["mass_matrix"], model.outputs["forcing"]
+        return ReadableEquations(list(u), list(q), M, [{"raw": F[r]} for r in range(len(u))], {}, names)
     by_name = {s.name: s for s in q}
     X = model.outputs["positions"]  # (n, 2) in N
     V = model.outputs["velocities"]  # (n, 2) in N, linear in u
