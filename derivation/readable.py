@@ -19,8 +19,8 @@ ingredients, ``F_r = sum_i (F_i - m_i a_i) . dv_i/du_r``, grouped by cause:
 Vectors are dotted in the frame of their body (T in the floating formulation, N in the
 particles one): both factors then carry no angle, so no trigonometric simplification is
 needed.  The 3D floating frame (three angles) has no such form yet: its rows are Kane's
-raw ``M`` and ``F``, under one cause, "raw", and its angles' descriptions in ``eom.md``
-say so.  :func:`check_identity` substitutes the named terms back and compares with Kane's
+``M`` with the forcing named ``F_<speed>`` (not expanded: it is printed once, in the raw
+rows), and its first angle's description in ``eom.md`` says so.  :func:`check_identity` substitutes the named terms back and compares with Kane's
 ``M`` and ``F``; the tests run it.
 """
 
@@ -160,9 +160,11 @@ def readable(model: SymbolicModel) -> ReadableEquations:
     q, u = model.q, model.u
     sym = {s.name: s for s in model.p}
     names: dict = {s: _latex_coordinate(s.name) for s in q}  # coordinate -> (stem, subscript)
-    if model.formulation == "floating" and top.dim == 3:  # not regrouped yet: Kane's rows as derived
-        M, F = model.outputs["mass_matrix"], model.outputs["forcing"]
-        return ReadableEquations(list(u), list(q), M, [{"raw": F[r]} for r in range(len(u))], {}, names)
+    if model.formulation == "floating" and top.dim == 3:  # not regrouped yet: F_r is printed once, in the raw rows
+        forcing = [sp.Symbol(f"F_{s.name}", real=True) for s in u]
+        names |= {f: rf"F_{{{r}}}" for r, f in enumerate(forcing)}
+        return ReadableEquations(list(u), list(q), model.outputs["mass_matrix"], [{"raw": f} for f in forcing], {},
+                                 names)
     by_name = {s.name: s for s in q}
     X = model.outputs["positions"]  # (n, 2) in N
     V = model.outputs["velocities"]  # (n, 2) in N, linear in u
