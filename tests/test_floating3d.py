@@ -183,3 +183,27 @@ def test_a_body_starting_at_the_gimbal_lock_is_refused(models):
     np.testing.assert_allclose(R @ R0[:, 2], [1.0, 0.0, 0.0], atol=1e-12)
     with pytest.raises(InputError, match=r"body 'b'.*starts with its z-axis [-0-9.e]+ deg from N's x-axis.*particles"):
         initial_coordinates(scene, models["tetrahedron", "floating"])
+
+
+@needs_cc
+def test_a_body_tumbling_through_the_gimbal_lock_stops_with_blow_up():
+    """The 2x2x2 box starts with T's angles (45, 0, 0) deg (T's y-axis is the face diagonal
+    (0, 1, 1)/sqrt(2), see the gauge test); spun about that axis, T's z-axis reaches N's x-axis
+    after a quarter turn: M is singular there, and the run stops with blow_up, having
+    matched the particles formulation until then."""
+    spin = 2.0
+    axis = np.array([0.0, 1.0, 1.0]) / np.sqrt(2.0)
+    points, links = cube()
+    scene = make_scene(body(particles=points.tolist(), links=links, mass=0.1, stiffness=3000.0, damping=0.3,
+                            damper="axial", position=[0.0, 0.0, 0.3], angular_velocity=(spin * axis).tolist()),
+                       gravity=[0.0, 0.0, 0.0], grounds=[{"point": [0.0, 0.0, -10.0], "normal": [0.0, 0.0, 1.0]}],
+                       simulation={"t_end": 1.5, "output_dt": 1e-3})
+    q, _ = initial_coordinates(scene, load_derived_model(scene, "numpy", "floating"))
+    np.testing.assert_allclose(q[3:6], [np.pi / 4, 0.0, 0.0], atol=1e-14)
+    runs = {f: flexbody.simulate(scene, formulation=f, backend="c", method="dopri5", rtol=1e-8, atol=1e-10)
+            for f in ("particles", "floating")}
+    a, b = runs["particles"], runs["floating"]
+    assert a.success
+    assert b.status == "blow_up" and "not positive definite" in b.message
+    assert abs(b.t[-1] - np.pi / 2 / spin) <= 1e-3
+    assert np.abs(a.positions[: len(b.t)] - b.positions).max() <= 1e-8
