@@ -161,7 +161,7 @@ class _Builder:
         the module docstring.
         """
         meaning = ("first, about N1. In 3D the rows below are not regrouped by cause: F_<speed> is "
-                   "Kane's raw forcing, printed in the raw equations",
+                   "the forcing as derived, printed in the raw equations",
                    "second, about the rotated 2-axis (+-90 deg: gimbal lock)",
                    "third, about T3")
         angles, rates = [], []

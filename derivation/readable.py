@@ -20,7 +20,8 @@ Vectors are dotted in the frame of their body (T in the floating formulation, N 
 particles one): both factors then carry no angle, so no trigonometric simplification is
 needed.  The 3D floating frame (three angles) has no such form yet: its rows are Kane's
 ``M`` with the forcing named ``F_<speed>`` (not expanded: it is printed once, in the raw
-rows), and its first angle's description in ``eom.md`` says so.  :func:`check_identity` substitutes the named terms back and compares with Kane's
+rows), and its first angle's description in ``eom.md`` says so; :func:`check_identity`
+does not apply to it.  :func:`check_identity` substitutes the named terms back and compares with Kane's
 ``M`` and ``F``; the tests run it.
 """
 
