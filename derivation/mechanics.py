@@ -18,6 +18,24 @@ Formulations
     coordinate), see :func:`flexbody.topology.gauge_particles`.  This removes the three
     rigid-motion redundancies, so M is nonsingular.
 
+    In 3D, q1..q3 place T's origin and q4..q6 are body-fixed X-Y-Z angles (alpha about N1,
+    beta about the turned 2-axis, gamma about T3), with their rates as the speeds, so
+    ``q' = u`` holds as in every other model (the generated C copies u into q').  The
+    gauge also puts a third particle in T's x-y plane (its z in T is not a coordinate):
+    six coordinates removed, one per rigid motion.  Bodies of one particle have no
+    angles; bodies whose particles are all on one line (two particles, a straight chain)
+    have no third particle and are refused (the rotation about the line is not fixed).
+
+    Gimbal lock: at beta = +-90 deg (T's z-axis along N's x-axis) the angles' rates no
+    longer span every spin and M is singular.  A quaternion has no such point, but needs
+    ``q' = G(q) u != u`` and a norm constraint that drifts; the angles keep the runtime's
+    kinematics the identity.  T is only a gauge (the particles' motion does not depend on
+    it), so the lock is a property of the coordinates, not of the physics: a body must
+    start at least 10 deg from it (:func:`flexbody.state.initial_coordinates` refuses
+    otherwise, naming the body), and a body that tumbles close to it makes M
+    ill-conditioned; on M singular the runtime stops with status ``blow_up``.  The
+    particles formulation (the default) has no such point.
+
 Never inverts M symbolically: the runtime solves ``M u' = F`` numerically.
 """
 
@@ -85,6 +103,7 @@ class _Builder:
         self.q: list = []
         self.u: list = []
         self.text: dict[str, str] = {}
+        self.frames: list[dict] = []  # per 3D floating body: what _equations_in_t needs
 
     def coordinate(self, name: str, speed: str, meaning: str):
         q, u = dynamicsymbols(f"{name} {speed}")
@@ -110,36 +129,166 @@ class _Builder:
         N, points = self.N, []
         first = 0
         for b, body in enumerate(top.bodies):
-            X, vX = self.coordinate(f"X{b}", f"vX{b}", f"x of T{b}'s origin in N (q1, m)")
-            Y, vY = self.coordinate(f"Y{b}", f"vY{b}", f"y of T{b}'s origin in N (q2, m)")
-            O = self.origin.locatenew(f"O{b}", X * N.x + Y * N.y)
-            O.set_vel(N, vX * N.x + vY * N.y)
+            axes = list(zip("XYZ"[: top.dim], (N.x, N.y, N.z)))
+            origin = velocity = 0 * N.x
+            for q_name, (axis, unit) in enumerate(axes, start=1):
+                c, v = self.coordinate(f"{axis}{b}", f"v{axis}{b}", f"{axis.lower()} of T{b}'s origin in N (q{q_name}, m)")
+                origin, velocity = origin + c * unit, velocity + v * unit
+            O = self.origin.locatenew(f"O{b}", origin)
+            O.set_vel(N, velocity)
             T = ReferenceFrame(f"T{b}")
-            anchor, reference = body.gauge
-            if body.n_particles > 1:
+            frame = {"first": first, "n": body.n_particles, "T": T, "origin_speeds": list(self.u[-top.dim:]),
+                     "angles": [], "rates": [], "rho": {}, "vrel": {}, "speeds": {}}
+            if body.n_particles == 1:
+                T.orient_axis(N, N.z, 0)
+            elif top.dim == 2:
                 th, w = self.coordinate(f"theta{b}", f"omega{b}", f"angle of T{b} about N3 (q3, rad)")
                 T.orient_axis(N, N.z, th)
                 T.set_ang_vel(N, w * N.z)
             else:
-                T.orient_axis(N, N.z, 0)
+                frame["angles"], frame["rates"] = self._orient_3d(T, b)
             for i in range(body.n_particles):
-                g = first + i
-                if i == anchor:
-                    P = O.locatenew(f"P{g}", 0 * T.x)
-                    P.set_vel(N, O.vel(N))
-                    points.append(P)
-                    continue
-                xi, vxi = self.coordinate(f"xi{g}", f"vxi{g}", f"x of particle {g} in T{b} (m)")
-                if i == reference:
-                    eta, veta = sp.S.Zero, sp.S.Zero
-                else:
-                    eta, veta = self.coordinate(f"eta{g}", f"veta{g}", f"y of particle {g} in T{b} (m)")
-                P = O.locatenew(f"P{g}", xi * T.x + eta * T.y)
-                P.set_vel(T, vxi * T.x + veta * T.y)
-                P.v1pt_theory(O, N, T)
-                points.append(P)
+                points.append(self._particle_in_t(O, T, body.gauge, i, first + i, b, top.dim, frame))
+            if top.dim == 3:
+                self.frames.append(frame)
             first += body.n_particles
         return points
+
+    def _orient_3d(self, T: ReferenceFrame, b: int) -> tuple[list, list]:
+        """T's orientation in N by body-fixed X-Y-Z angles; the speeds are their rates (q' = u).
+
+        Singular (gimbal lock) where beta = +-90 deg, i.e. T's z-axis along N's x-axis: see
+        the module docstring.
+        """
+        meaning = ("first, about N1. In 3D the rows below are not regrouped by cause: F_<speed> is "
+                   "the forcing as derived, printed in the raw equations",
+                   "second, about the rotated 2-axis (+-90 deg: gimbal lock)",
+                   "third, about T3")
+        angles, rates = [], []
+        for k, (name, text) in enumerate(zip(("alpha", "beta", "gamma"), meaning), start=4):
+            a, w = self.coordinate(f"{name}{b}", f"v{name}{b}",
+                                   f"body-fixed X-Y-Z angle of T{b} in N, {text} (q{k}, rad)")
+            angles.append(a)
+            rates.append(w)
+        T.orient_body_fixed(self.N, angles, "XYZ")
+        # The angular velocity in the speeds (the angles' rates), in T's components.
+        omega = T.ang_vel_in(self.N).express(T).xreplace({a.diff(): w for a, w in zip(angles, rates)})
+        T.set_ang_vel(self.N, omega)
+        return angles, rates
+
+    def _particle_in_t(self, O: Point, T: ReferenceFrame, gauge: tuple[int, ...], i: int, g: int, b: int,
+                       dim: int, frame: dict) -> Point:
+        """Particle g (index i in body b) at coordinates in T, less those the gauge removes.
+
+        The anchor is at T's origin (no coordinate), the reference on T's x-axis (x only),
+        and in 3D the third particle in T's x-y plane (x and y only).
+        """
+        frame["rho"][i], frame["vrel"][i], frame["speeds"][i] = sp.zeros(3, 1), sp.zeros(3, 1), []
+        if i == gauge[0]:
+            P = O.locatenew(f"P{g}", 0 * T.x)
+            P.set_vel(self.N, O.vel(self.N))
+            return P
+        kept = 1 if i == gauge[1] else 2 if dim == 2 or i == gauge[2] else 3
+        position = velocity = 0 * T.x
+        for k, (name, axis, unit) in enumerate(list(zip(("xi", "eta", "zeta"), "xyz", (T.x, T.y, T.z)))[:kept]):
+            c, v = self.coordinate(f"{name}{g}", f"v{name}{g}", f"{axis} of particle {g} in T{b} (m)")
+            position, velocity = position + c * unit, velocity + v * unit
+            frame["rho"][i][k], frame["vrel"][i][k] = c, v
+            frame["speeds"][i].append((k, v))
+        P = O.locatenew(f"P{g}", position)
+        P.set_vel(T, velocity)
+        P.v1pt_theory(O, self.N, T)
+        return P
+
+
+def _cross(a: sp.Matrix, b: sp.Matrix) -> sp.Matrix:
+    return sp.Matrix([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
+
+
+def _equations_in_t(build: _Builder, top: Topology, sym: dict[str, sp.Symbol]) -> tuple[sp.Matrix, sp.Matrix]:
+    """``M`` and ``F`` of the 3D floating formulation, assembled from Kane's terms in T's components.
+
+    Kane's ``F_r = sum_i (f_i - m_i a_i|u'=0) . dv_i/du_r`` and ``M_rs = sum_i m_i
+    dv_i/du_r . dv_i/du_s``, with ``v_i = v_O + v_i/T + w x rho_i``, written so that what
+    cancels does so before it is printed: the internal forces in the translation rows
+    (they sum to zero) and, for springs and axial dampers, in the rotation rows (a force
+    along the link has no moment about it); ``a_O|u'=0 = 0`` (O's speeds are its velocity
+    components in N); ``R^T R = 1``.  What SymPy's KanesMethod returns is the same
+    up to trigonometric identities, but about 10x longer in 3D, and the forcing Jacobians
+    grew with it (minutes for eight particles).
+
+    Returns
+    -------
+    M : Matrix, shape (nu, nu)
+    F : Matrix, shape (nu, 1)
+    """
+    N, nu = build.N, len(build.u)
+    index = {u: r for r, u in enumerate(build.u)}
+    M, F = sp.zeros(nu, nu), sp.zeros(nu, 1)
+    g_n = sp.Matrix([sym[f"g_{a}"] for a in "xyz"])
+    link = 0
+    for body, frame in zip(top.bodies, build.frames):
+        T, first, n = frame["T"], frame["first"], frame["n"]
+        R = N.dcm(T)  # columns: T's axes in N
+        g_t = R.T * g_n
+        omega = sp.Matrix([T.ang_vel_in(N).dot(e) for e in (T.x, T.y, T.z)])  # (3,) in T, linear in the rates
+        rates, angles = frame["rates"], frame["angles"]
+        B = omega.jacobian(rates) if rates else sp.zeros(3, 0)
+        omega_dot = omega.jacobian(angles) * sp.Matrix(rates) if rates else sp.zeros(3, 1)  # q' = u
+        m = [sym[f"m{first + i}"] for i in range(n)]
+        rho, vrel = frame["rho"], frame["vrel"]
+        # Forces on each particle in T: gravity, then the links.
+        force = [m[i] * g_t for i in range(n)]
+        torque = sp.zeros(3, 1)  # sum_i rho_i x (internal force on i): the relative dampers only
+        for i, j in body.links:
+            k, c, rest = sym[f"k{link}"], sym[f"c{link}"], sym[f"L{link}"]
+            d = rho[i] - rho[j]
+            length = sp.sqrt(d.dot(d))
+            dv = vrel[j] - vrel[i] + _cross(omega, rho[j] - rho[i])
+            if body.damper == "relative":
+                f_damp = c * dv
+                torque += _cross(d, f_damp)
+            else:
+                f_damp = c * dv.dot(d) * d / length**2
+            f = k * (rest - length) * d / length + f_damp
+            force[i], force[j] = force[i] + f, force[j] - f
+            link += 1
+        # Inertia: a_i|u'=0 in T = w' x rho_i + w x (w x rho_i) + 2 w x v_i/T (a_O|u'=0 = 0).
+        inertia = [m[i] * (_cross(omega_dot, rho[i]) + _cross(omega, _cross(omega, rho[i]))
+                           + 2 * _cross(omega, vrel[i])) for i in range(n)]
+        mass, moment = sum(m, sp.S.Zero), sum((m[i] * rho[i] for i in range(n)), sp.zeros(3, 1))
+        momentum_t = sum((m[i] * vrel[i] for i in range(n)), sp.zeros(3, 1))
+        # sum_i of the inertia terms, linear in rho_i and v_i/T: written with their sums, once
+        total_inertia = _cross(omega_dot, moment) + _cross(omega, _cross(omega, moment)) + 2 * _cross(omega, momentum_t)
+        rows = [index[s] for s in frame["origin_speeds"]]
+        for a, r in enumerate(rows):  # translation: internal forces cancel
+            F[r] = mass * g_n[a] - (R[a, :] * total_inertia)[0]
+            M[r, r] = mass
+        # sum_i rho_i x inertia_i = J w' + w x (J w) + 2 (w h - H w): the inertia tensor J about O,
+        # h = sum_i m_i rho_i . v_i/T and H = sum_i m_i v_i/T rho_i^T; no angle in J, h, H.
+        J = sum((m[i] * (rho[i].dot(rho[i]) * sp.eye(3) - rho[i] * rho[i].T) for i in range(n)), sp.zeros(3, 3))
+        h = sum((m[i] * rho[i].dot(vrel[i]) for i in range(n)), sp.S.Zero)
+        H = sum((m[i] * vrel[i] * rho[i].T for i in range(n)), sp.zeros(3, 3))
+        spin_inertia = J * omega_dot + _cross(omega, J * omega) + 2 * (omega * h - H * omega)
+        net_moment = _cross(moment, g_t) + torque - spin_inertia
+        spins = [index[s] for s in rates]
+        for a, r in enumerate(spins):
+            F[r] = B[:, a].dot(net_moment)
+            for c_, s in enumerate(rows):
+                M[r, s] = M[s, r] = (R[c_, :] * _cross(B[:, a], moment))[0]
+            for b_, s in enumerate(spins):
+                M[r, s] = sum((m[i] * _cross(B[:, a], rho[i]).dot(_cross(B[:, b_], rho[i])) for i in range(n)),
+                              sp.S.Zero)
+        for i in range(n):
+            for axis, speed in frame["speeds"][i]:
+                r = index[speed]
+                F[r] = force[i][axis] - inertia[i][axis]
+                M[r, r] = m[i]
+                for c_, s in enumerate(rows):
+                    M[r, s] = M[s, r] = m[i] * R[c_, axis]
+                for a, s in enumerate(spins):
+                    M[r, s] = M[s, r] = m[i] * _cross(B[:, a], rho[i])[axis]
+    return M, F
 
 
 def _kinematics_solver(A: sp.Matrix, b: sp.Matrix) -> sp.Matrix:
@@ -183,8 +332,11 @@ def derive(top: Topology, formulation: str) -> SymbolicModel:
     """
     if formulation not in ("particles", "floating"):
         raise ValueError(f"`formulation` = {formulation!r}: must be 'particles' or 'floating'")
-    if formulation == "floating" and top.dim != 2:
-        raise ValueError("the floating formulation is derived for planar scenes only (frames N and T about N3)")
+    if formulation == "floating" and top.dim == 3:
+        unfixed = [b for b, body in enumerate(top.bodies) if body.n_particles > 1 and body.gauge[2] < 0]
+        if unfixed:
+            raise ValueError(f"bodies {unfixed}: all particles on one line, so no third particle fixes the rotation "
+                             "about it; the floating formulation needs one in 3D")
     p, text = _parameters(top)
     sym = {s.name: s for s in p}
     build = _Builder()
@@ -218,9 +370,13 @@ def derive(top: Topology, formulation: str) -> SymbolicModel:
         first += body.n_particles
 
     q, u = build.q, build.u
-    kane = KanesMethod(N, q_ind=q, u_ind=u, kd_eqs=[qi.diff() - ui for qi, ui in zip(q, u)],
-                       kd_eqs_solver=_kinematics_solver)
-    kane.kanes_equations([Particle(f"pa{i}", P, m) for i, (P, m) in enumerate(zip(points, masses))], loads)
+    if formulation == "floating" and top.dim == 3:
+        M, F = _equations_in_t(build, top, sym)
+    else:
+        kane = KanesMethod(N, q_ind=q, u_ind=u, kd_eqs=[qi.diff() - ui for qi, ui in zip(q, u)],
+                           kd_eqs_solver=_kinematics_solver)
+        kane.kanes_equations([Particle(f"pa{i}", P, m) for i, (P, m) in enumerate(zip(points, masses))], loads)
+        M, F = kane.mass_matrix, kane.forcing
 
     positions = [P.pos_from(build.origin).express(N) for P in points]
     velocities = [P.vel(N).express(N) for P in points]
@@ -242,8 +398,8 @@ def derive(top: Topology, formulation: str) -> SymbolicModel:
     def to_plain(expr):
         return sp.sympify(expr).xreplace(plain)
 
-    M = kane.mass_matrix.xreplace(plain)
-    F = kane.forcing.xreplace(plain)
+    M = M.xreplace(plain)
+    F = F.xreplace(plain)
     a = [sp.Symbol(f"a{r}", real=True) for r in range(len(us))]
     gap_vec = sp.Matrix([to_plain(g) for g in gaps])
     Jg = jacobian(gap_vec, qs) if gaps else sp.zeros(0, len(qs))

@@ -18,7 +18,10 @@ ingredients, ``F_r = sum_i (F_i - m_i a_i) . dv_i/du_r``, grouped by cause:
 
 Vectors are dotted in the frame of their body (T in the floating formulation, N in the
 particles one): both factors then carry no angle, so no trigonometric simplification is
-needed.  :func:`check_identity` substitutes the named terms back and compares with Kane's
+needed.  The 3D floating frame (three angles) has no such form yet: its rows are Kane's
+``M`` with the forcing named ``F_<speed>`` (not expanded: it is printed once, in the raw
+rows), and its first angle's description in ``eom.md`` says so; :func:`check_identity`
+does not apply to it.  :func:`check_identity` substitutes the named terms back and compares with Kane's
 ``M`` and ``F``; the tests run it.
 """
 
@@ -119,7 +122,8 @@ def _signed_sum(items: list[tuple[sp.Expr, str]], show, latex: bool) -> str:
     return out
 
 
-_GREEK = {"theta": r"\theta", "xi": r"\xi", "eta": r"\eta"}
+_GREEK = {"theta": r"\theta", "xi": r"\xi", "eta": r"\eta", "zeta": r"\zeta", "alpha": r"\alpha",
+          "beta": r"\beta", "gamma": r"\gamma"}
 
 
 def _latex_coordinate(name: str) -> tuple[str, str]:
@@ -157,6 +161,11 @@ def readable(model: SymbolicModel) -> ReadableEquations:
     q, u = model.q, model.u
     sym = {s.name: s for s in model.p}
     names: dict = {s: _latex_coordinate(s.name) for s in q}  # coordinate -> (stem, subscript)
+    if model.formulation == "floating" and top.dim == 3:  # not regrouped yet: F_r is printed once, in the raw rows
+        forcing = [sp.Symbol(f"F_{s.name}", real=True) for s in u]
+        names |= {f: rf"F_{{{r}}}" for r, f in enumerate(forcing)}
+        return ReadableEquations(list(u), list(q), model.outputs["mass_matrix"], [{"raw": f} for f in forcing], {},
+                                 names)
     by_name = {s.name: s for s in q}
     X = model.outputs["positions"]  # (n, 2) in N
     V = model.outputs["velocities"]  # (n, 2) in N, linear in u

@@ -412,10 +412,14 @@ def load_model(scene: Scene | str | Path, backend: str = "c", formulation: str |
         from .assembly import assembled_model
 
         return assembled_model(scene, backend)
-    if scene.dim != 2:
-        raise InputError("`formulation` = 'floating': the floating frame T is derived for planar scenes only (its "
-                         "orientation is the angle q3 about N3); 3D scenes run in the particles formulation (the "
-                         "default)")
+    if scene.dim == 3:
+        for body, gauge in zip(scene.bodies, (b.gauge for b in scene.topology().bodies)):
+            if body.n_particles > 1 and gauge[2] < 0:
+                raise InputError(
+                    f"`formulation` = 'floating': body {body.name!r} has all its {body.n_particles} particles on one "
+                    "line, so in 3D no third particle fixes T's rotation about it; use the particles formulation "
+                    "(the default)"
+                )
     if scene.n_particles > FLOATING_MAX_PARTICLES:
         raise InputError(
             f"`formulation` = 'floating' with {scene.n_particles} particles: the floating formulation is derived "

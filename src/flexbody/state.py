@@ -4,8 +4,13 @@ from __future__ import annotations
 
 import numpy as np
 
+from .errors import InputError
 from .model import Model
 from .scene import Scene
+
+#: A 3D floating body may not start with T's middle angle closer than this to +-90 deg (the
+#: gimbal lock of its X-Y-Z angles, where the mass matrix is singular), in degrees.
+GIMBAL_MARGIN_DEG = 10.0
 
 
 def _cross2(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -17,17 +22,31 @@ def initial_coordinates(scene: Scene, model: Model) -> tuple[np.ndarray, np.ndar
 
     For ``floating`` each body's T is rebuilt from its gauge (see
     :func:`flexbody.topology.gauge_particles`): origin at the anchor particle, x-axis
-    towards the reference particle; its spin is the reference particle's angular rate
-    about the anchor, and the particles' velocities in T are what remains.
+    towards the reference particle (in 3D, x-y plane through the third particle); its spin
+    is the gauge particles' rigid rotation about the anchor, and the particles' velocities
+    in T are what remains.
+
+    Raises
+    ------
+    InputError
+        A 3D floating body that starts within ``GIMBAL_MARGIN_DEG`` of its angles' gimbal
+        lock (T's z-axis along N's x-axis).
     """
     x, v = scene.initial_positions(), scene.initial_velocities()
     if model.formulation == "particles":
         return x.ravel().copy(), v.ravel().copy()
     q, u, first = [], [], 0
-    for body in model.manifest["topology"]["bodies"]:
+    for k, body in enumerate(model.manifest["topology"]["bodies"]):
         n = body["n_particles"]
-        anchor, reference = body["gauge"]
+        gauge = body["gauge"]
         xb, vb = x[first : first + n], v[first : first + n]
+        if len(gauge) == 3 and n > 1:
+            qb, ub = _floating_3d(xb, vb, gauge, scene.bodies[k].name)
+            q += qb
+            u += ub
+            first += n
+            continue
+        anchor, reference = gauge[:2]
         q += list(xb[anchor])
         u += list(vb[anchor])
         if n > 1:
@@ -51,3 +70,72 @@ def initial_coordinates(scene: Scene, model: Model) -> tuple[np.ndarray, np.ndar
                     u.append(local_v[1])
         first += n
     return np.array(q), np.array(u)
+
+
+def gauge_frame(x: np.ndarray, v: np.ndarray, gauge) -> tuple[np.ndarray, np.ndarray]:
+    """T of a 3D body from its gauge particles, and T's angular velocity.
+
+    Parameters
+    ----------
+    x, v : ndarray, shape (n, 3)
+        The body's particle positions and velocities in N.
+    gauge : (anchor, reference, third)
+
+    Returns
+    -------
+    R : ndarray, shape (3, 3)
+        T's axes in N, as columns: x towards the reference, y in the plane of the third.
+    omega : ndarray, shape (3,)
+        T's angular velocity in N, ``omega = 1/2 sum_k e_k x e_k'``.
+    """
+    anchor, reference, third = gauge
+    d, dd = x[reference] - x[anchor], v[reference] - v[anchor]
+    e1 = d / np.linalg.norm(d)
+    e1d = (dd - (dd @ e1) * e1) / np.linalg.norm(d)
+    w, wd = x[third] - x[anchor], v[third] - v[anchor]
+    p = w - (w @ e1) * e1
+    pd = wd - (wd @ e1 + w @ e1d) * e1 - (w @ e1) * e1d
+    e2 = p / np.linalg.norm(p)
+    e2d = (pd - (pd @ e2) * e2) / np.linalg.norm(p)
+    e3, e3d = np.cross(e1, e2), np.cross(e1d, e2) + np.cross(e1, e2d)
+    omega = 0.5 * (np.cross(e1, e1d) + np.cross(e2, e2d) + np.cross(e3, e3d))
+    return np.column_stack([e1, e2, e3]), omega
+
+
+def xyz_angles(R: np.ndarray) -> np.ndarray:
+    """Body-fixed X-Y-Z angles ``(alpha, beta, gamma)`` of ``R = Rx(alpha) Ry(beta) Rz(gamma)``, shape (3,)."""
+    beta = np.arcsin(np.clip(R[0, 2], -1.0, 1.0))
+    return np.array([np.arctan2(-R[1, 2], R[2, 2]), beta, np.arctan2(-R[0, 1], R[0, 0])])
+
+
+def xyz_rates(angles: np.ndarray, omega_t: np.ndarray) -> np.ndarray:
+    """The angles' rates (3,) for an angular velocity with components ``omega_t`` (3,) in T."""
+    _, b, c = angles
+    B = np.array([[np.cos(b) * np.cos(c), np.sin(c), 0.0],
+                  [-np.cos(b) * np.sin(c), np.cos(c), 0.0],
+                  [np.sin(b), 0.0, 1.0]])  # omega_t = B @ rates
+    return np.linalg.solve(B, omega_t)
+
+
+def _floating_3d(x: np.ndarray, v: np.ndarray, gauge, name: str) -> tuple[list, list]:
+    anchor, reference, third = gauge
+    R, omega = gauge_frame(x, v, gauge)
+    angles = xyz_angles(R)
+    if abs(np.degrees(angles[1])) > 90.0 - GIMBAL_MARGIN_DEG:
+        raise InputError(
+            f"body {name!r}: in the floating formulation its frame T (origin at particle {anchor}, x-axis through "
+            f"particle {reference}, x-y plane through particle {third}) starts with its z-axis "
+            f"{90.0 - abs(np.degrees(angles[1])):.3g} deg from N's x-axis; T's X-Y-Z angles must start at least "
+            f"{GIMBAL_MARGIN_DEG:g} deg from that gimbal lock: rotate the body, or use the particles formulation"
+        )
+    rates = xyz_rates(angles, R.T @ omega)
+    q, u = list(x[anchor]) + list(angles), list(v[anchor]) + list(rates)
+    for i in range(len(x)):
+        if i == anchor:
+            continue
+        r = x[i] - x[anchor]
+        local, local_v = R.T @ r, R.T @ (v[i] - v[anchor] - np.cross(omega, r))
+        kept = 1 if i == reference else 2 if i == third else 3
+        q += list(local[:kept])
+        u += list(local_v[:kept])
+    return q, u

@@ -4,7 +4,8 @@ Particle count, links, damper law, dimension and the number of grounds change th
 symbolic equations; masses, stiffness, damping, rest lengths, gravity and ground
 placement are parameters passed at run time.  The floating formulation also fixes its
 gauge from the body's geometry (which particle is pinned at T's origin, which one lies
-on T's x-axis), so that choice is part of the topology too.
+on T's x-axis and, in 3D, which one lies in T's x-y plane), so that choice is part of the
+topology too.
 """
 
 from __future__ import annotations
@@ -51,7 +52,7 @@ class BodyTopology:
     n_particles: int
     links: tuple[tuple[int, int], ...]
     damper: str
-    gauge: tuple[int, int]  # (anchor, reference), see gauge_particles
+    gauge: tuple[int, ...]  # (anchor, reference) in 2D, (anchor, reference, third) in 3D, see gauge_particles
 
 
 @dataclass(frozen=True)
@@ -92,13 +93,18 @@ class Topology:
         return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
-def gauge_particles(points: np.ndarray) -> tuple[int, int]:
+def gauge_particles(points: np.ndarray) -> tuple[int, ...]:
     """Gauge of the floating formulation for one body.
 
     The anchor is the particle nearest the body's geometric centre (the centre particle of
     a ``ring``); it is pinned at T's origin, which fixes translation.  The reference is the
-    lowest-indexed other particle; it lies on T's x-axis, which fixes rotation.  With these
-    three coordinates removed, the mass matrix is nonsingular.
+    lowest-indexed other particle; it lies on T's x-axis, which fixes the rotation in 2D
+    (three coordinates removed).  In 3D it leaves the rotation about that axis, which the
+    third particle fixes: it lies in T's x-y plane (its z in T is not a coordinate), six
+    coordinates removed in all.  The third is the particle farthest from the line through
+    anchor and reference (the lowest index among equals): the longest lever arm for the
+    rotation about T's x-axis, so the mass matrix is best conditioned.  With the rigid
+    motions removed, the mass matrix is nonsingular.
 
     Parameters
     ----------
@@ -106,13 +112,28 @@ def gauge_particles(points: np.ndarray) -> tuple[int, int]:
 
     Returns
     -------
-    (anchor, reference) : tuple of int; reference is -1 for a single particle.
+    tuple of int
+        ``(anchor, reference)`` in 2D, ``(anchor, reference, third)`` in 3D; -1 where a
+        body has no such particle: the reference of a single particle, the third of a
+        body whose particles are all on one line (two particles, a straight chain), which
+        the floating formulation cannot gauge in 3D (see
+        :func:`flexbody.model.load_model`).
     """
     points = np.asarray(points, dtype=float)
-    if len(points) == 1:
-        return (0, -1)
+    n, dim = points.shape
+    if n == 1:
+        return (0, -1) if dim == 2 else (0, -1, -1)
     distance = np.linalg.norm(points - points.mean(axis=0), axis=1)
     scale = max(float(np.ptp(points, axis=0).max()), 1e-300)
     anchor = int(np.flatnonzero(distance <= distance.min() + 1e-9 * scale)[0])
     reference = 0 if anchor != 0 else 1
-    return (anchor, reference)
+    if dim == 2:
+        return (anchor, reference)
+    axis = points[reference] - points[anchor]
+    axis = axis / np.linalg.norm(axis)
+    offset = points - points[anchor]
+    off_line = np.linalg.norm(offset - np.outer(offset @ axis, axis), axis=1)  # (n,) distance from the line
+    if off_line.max() <= 1e-9 * scale:
+        return (anchor, reference, -1)
+    third = int(np.flatnonzero(off_line >= off_line.max() - 1e-9 * scale)[0])
+    return (anchor, reference, third)
