@@ -702,3 +702,17 @@ void fb_sys_outputs(const FbSystem *s, const double *y, double *x, double *v, do
 {
     s->outputs(s, y, x, v, energies);
 }
+
+/* Contact c alone (FbSystem.contact): *gap, *lam_c and, in entries (capacity), the state
+ * entries it reads, *k of them.  0, -1 as rhs, -2 if the system has no per-contact
+ * evaluation, -3 if more than capacity entries. */
+int fb_sys_contact(const FbSystem *s, const double *y, const int *held, const double *push, int c, double *gap,
+                   double *lam_c, int *entries, int capacity, int *k)
+{
+    if (!s->contact || !s->stencil) return -2;
+    const int *listed;
+    *k = s->stencil(s, c, &listed);
+    if (*k > capacity) return -3;
+    memcpy(entries, listed, sizeof(int) * (size_t)*k);
+    return s->contact(s, y, held, push, c, gap, lam_c);
+}
