@@ -194,9 +194,10 @@ def test_a_400_particle_ring_lands_and_lifts_off_cleanly():
 @pytest.mark.parametrize("dim", [2, 3])
 @pytest.mark.parametrize("seed", [0, 1])
 def test_one_contact_alone_equals_the_whole_system_and_reads_only_its_stencil(seed, dim, rng):
-    """Event location evaluates one contact from its particle's stencil: its gap and held
-    force must equal gaps() and rhs() bit for bit (else a root and the step's end disagree),
-    and every state entry outside the stencil may be garbage."""
+    """Event location and event instants evaluate one contact from its particle's stencil:
+    its gap, normal velocity and held force must equal contact_state's and rhs's bit for bit
+    (else a root and the step's end disagree), and every entry outside the stencil may be
+    garbage."""
     scene = random_scene(seed, dim)
     model = assembled_model(scene, "c")
     p, nc, G = model.parameters(scene), model.n_contacts, model.n_grounds
@@ -207,11 +208,12 @@ def test_one_contact_alone_equals_the_whole_system_and_reads_only_its_stencil(se
         if G > 1:
             held.reshape(-1, G)[:, 1:] &= rng.random((scene.n_particles, 1)) < 0.5
         push = np.where(rng.random(nc) < 0.3, rng.uniform(0, 5, nc), 0.0) * (1 - held)
-        gaps, (_, lam) = model.gaps(y, p), model.rhs(y, p, held, push)
+        gaps, vn, lam = model.contact_state(y, p, held, push)
+        np.testing.assert_array_equal(lam, model.rhs(y, p, held, push)[1])
         for c in range(nc):
             i = c // G
-            gap, lam_c, entries = model.contact(y, p, held, push, c)
-            assert gap == gaps[c] and lam_c == lam[c], f"contact {c}"
+            gap, vn_c, lam_c, entries = model.contact(y, p, held, push, c)
+            assert (gap, vn_c, lam_c) == (gaps[c], vn[c], lam[c]), f"contact {c}"
             neighbours = {i} | {int(j) for a, b in links for j in (a, b) if i in (a, b)}
             expected = {k for j in neighbours for k in range(dim * j, dim * j + dim)}
             expected |= {dim * scene.n_particles + k for k in expected}  # their velocities
@@ -219,7 +221,7 @@ def test_one_contact_alone_equals_the_whole_system_and_reads_only_its_stencil(se
             assert entries[:dim].tolist() == list(range(dim * i, dim * i + dim))  # its position first
             garbage = np.full_like(y, np.nan)
             garbage[entries] = y[entries]
-            assert model.contact(garbage, p, held, push, c)[:2] == (gap, lam_c)
+            assert model.contact(garbage, p, held, push, c)[:3] == (gap, vn_c, lam_c)
 
 
 @pytest.mark.skipif(not HAS_CC, reason="no C compiler")

@@ -223,12 +223,16 @@ static void free_acceleration_2d(const Assembly *A, const double *y, const doubl
 
 /* Contact c alone (FbSystem.contact): its gap and, if held, its force, O(its stencil). */
 static int contact_2d(const FbSystem *s, const double *y, const int *held, const double *push, int c,
-                     double *gap, double *lam_c)
+                     double *gap, double *vn, double *lam_c)
 {
     const Assembly *A = s->data;
     const int G = A->n_grounds, i = c / G;
     double J[2], acc[2], lam[G];
     ground_2d(A, y, i, c % G, gap, J);
+    if (vn) { /* as contact_state sums it */
+        *vn = 0.0;
+        for (int a = 0; a < 2; ++a) *vn += J[a] * y[s->nq + 2 * i + a];
+    }
     *lam_c = 0.0;
     if (!held[c]) return 0;
     free_acceleration_2d(A, y, push, i, acc);
@@ -471,12 +475,16 @@ static void free_acceleration_3d(const Assembly *A, const double *y, const doubl
 
 /* Contact c alone (FbSystem.contact): its gap and, if held, its force, O(its stencil). */
 static int contact_3d(const FbSystem *s, const double *y, const int *held, const double *push, int c,
-                     double *gap, double *lam_c)
+                     double *gap, double *vn, double *lam_c)
 {
     const Assembly *A = s->data;
     const int G = A->n_grounds, i = c / G;
     double J[3], acc[3], lam[G];
     ground_3d(A, y, i, c % G, gap, J);
+    if (vn) { /* as contact_state sums it */
+        *vn = 0.0;
+        for (int a = 0; a < 3; ++a) *vn += J[a] * y[s->nq + 3 * i + a];
+    }
     *lam_c = 0.0;
     if (!held[c]) return 0;
     free_acceleration_3d(A, y, push, i, acc);
@@ -703,16 +711,16 @@ void fb_sys_outputs(const FbSystem *s, const double *y, double *x, double *v, do
     s->outputs(s, y, x, v, energies);
 }
 
-/* Contact c alone (FbSystem.contact): *gap, *lam_c and, in entries (capacity), the state
- * entries it reads, *k of them.  0, -1 as rhs, -2 if the system has no per-contact
+/* Contact c alone (FbSystem.contact): *gap, *vn, *lam_c and, in entries (capacity), the
+ * state entries it reads, *k of them.  0, -1 as rhs, -2 if the system has no per-contact
  * evaluation, -3 if more than capacity entries. */
 int fb_sys_contact(const FbSystem *s, const double *y, const int *held, const double *push, int c, double *gap,
-                   double *lam_c, int *entries, int capacity, int *k)
+                   double *vn, double *lam_c, int *entries, int capacity, int *k)
 {
     if (!s->contact || !s->stencil) return -2;
     const int *listed;
     *k = s->stencil(s, c, &listed);
     if (*k > capacity) return -3;
     memcpy(entries, listed, sizeof(int) * (size_t)*k);
-    return s->contact(s, y, held, push, c, gap, lam_c);
+    return s->contact(s, y, held, push, c, gap, vn, lam_c);
 }

@@ -37,21 +37,37 @@ int fb_resolve(FbWork *w, const FbSystem *s, double t, double *y, int *phase, do
     const int nc = s->nc, ny = s->ny;
     int *touching = w->r_touching, *impacted = w->r_impacted, *settled = w->r_settled;
     int *was_held = w->r_was_held, *held = w->r_held, *hit = w->r_hit, *ending = w->r_ending;
-    int *instant = w->r_instant, *stop = w->r_stop;
+    int *instant = w->r_instant, *stop = w->r_stop, *visit = w->r_visit, n_visit = 0;
     double *gaps = w->r_gaps, *vn = w->r_vn, *lam = w->r_lam, *y_new = w->r_y_new;
     int done = 0;
     *n_events = 0;
     *loss = 0.0;
+    if (s->contact) s->gaps(s, y, gaps);
+    /* Where contacts decouple (s->contact), only the contacts this instant can change are
+     * visited: touched, leaving, held, pushed, or free within gap_tol of their floor.  An
+     * instant moves no particle, so the others stay free and far: O(contacts involved).
+     * Where they couple, every contact is visited. */
     for (int c = 0; c < nc; ++c) {
         touching[c] = touching_in[c] != 0;
-        was_held[c] = phase[c] == FB_HELD; /* on the ground before this instant, so v_n = 0 */
-        impacted[c] = settled[c] = not_held[c] = 0;
+        was_held[c] = held[c] = phase[c] == FB_HELD; /* on the ground before this instant, so v_n = 0 */
+        impacted[c] = settled[c] = not_held[c] = hit[c] = ending[c] = instant[c] = stop[c] = 0;
+        vn[c] = lam[c] = 0.0;
+        if (!s->contact || touching[c] || leaving[c] || phase[c] != FB_FREE || gaps[c] <= floor[c] + gap_tol)
+            visit[n_visit++] = c;
     }
     for (*iterations = 1; *iterations < 2 * nc + 3; ++*iterations) {
-        for (int c = 0; c < nc; ++c) held[c] = phase[c] == FB_HELD;
-        if (s->contact_state(s, y, held, push, gaps, vn, lam)) return -1;
+        for (int m = 0; m < n_visit; ++m) held[visit[m]] = phase[visit[m]] == FB_HELD;
+        if (s->contact) {
+            for (int m = 0; m < n_visit; ++m) {
+                const int c = visit[m];
+                if (s->contact(s, y, held, push, c, gaps + c, vn + c, lam + c)) return -1;
+            }
+        } else if (s->contact_state(s, y, held, push, gaps, vn, lam)) {
+            return -1;
+        }
         int changed = 0, any_instant = 0;
-        for (int c = 0; c < nc; ++c) {
+        for (int m = 0; m < n_visit; ++m) {
+            const int c = visit[m];
             const int near = phase[c] == FB_FREE && (touching[c] || gaps[c] <= floor[c] + gap_tol);
             /* strictly approaching: <= 0 would flip-flop forever */
             hit[c] = near && vn[c] < 0.0 && !impacted[c] && !was_held[c];
@@ -69,7 +85,8 @@ int fb_resolve(FbWork *w, const FbSystem *s, double t, double *y, int *phase, do
             }
         }
         /* after a window, what velocity is left towards the ground is stopped instantly */
-        for (int c = 0; c < nc; ++c) {
+        for (int m = 0; m < n_visit; ++m) {
+            const int c = visit[m];
             instant[c] = hit[c] || (ending[c] && vn[c] < 0.0);
             any_instant |= instant[c];
             stop[c] = instant[c] || phase[c] == FB_HELD;
@@ -79,22 +96,26 @@ int fb_resolve(FbWork *w, const FbSystem *s, double t, double *y, int *phase, do
             if (s->impact(s, y, stop, y_new, &lost)) return -1;
             memcpy(y, y_new, sizeof(double) * ny);
             *loss += lost;
-            for (int c = 0; c < nc; ++c)
-                if (instant[c]) phase[c] = FB_HELD;
+            for (int m = 0; m < n_visit; ++m)
+                if (instant[visit[m]]) phase[visit[m]] = FB_HELD;
             changed = 1;
         }
-        for (int c = 0; c < nc; ++c)
+        for (int m = 0; m < n_visit; ++m) {
+            const int c = visit[m];
             if (ending[c] && vn[c] >= 0.0) {
                 phase[c] = FB_FREE;
                 floor[c] = fmin(0.0, gaps[c]) - gap_tol;
                 changed = 1;
             }
+        }
         if (changed) continue; /* the dampers saw the velocity jump: recompute the forces */
         /* release the most pulling held contact (the first of equals), then recompute */
         int release = -1;
-        for (int c = 0; c < nc; ++c)
+        for (int m = 0; m < n_visit; ++m) {
+            const int c = visit[m];
             if (phase[c] == FB_HELD && (lam[c] < 0.0 || (leaving[c] && lam[c] <= force_tol[c])))
                 if (release < 0 || lam[c] < lam[release]) release = c;
+        }
         if (release < 0) {
             done = 1;
             break;
@@ -105,8 +126,9 @@ int fb_resolve(FbWork *w, const FbSystem *s, double t, double *y, int *phase, do
         else add_event(ev_contact, ev_kind, ev_vn, n_events, release, FB_LIFTOFF, 0.0);
     }
     if (!done) return -2;
-    /* a free contact too close to its floor to be armed gets a floor a hair below */
-    s->gaps(s, y, gaps);
+    /* a free contact too close to its floor to be armed gets a floor a hair below (no
+     * particle moved: the gaps are those evaluated, where contacts decouple) */
+    if (!s->contact) s->gaps(s, y, gaps);
     for (int c = 0; c < nc; ++c) {
         if (phase[c] == FB_FREE && gaps[c] - floor[c] <= gap_tol) floor[c] = fmin(0.0, gaps[c]) - gap_tol;
         if (phase[c] != FB_PUSHED) {
