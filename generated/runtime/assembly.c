@@ -326,6 +326,35 @@ static int contact_state_2d(const FbSystem *s, const double *y, const int *held,
     return 0;
 }
 
+/* Set particle i, stopped on its grounds in S, onto those it is below: event location stops
+ * it within the gap tolerance under the ground, and without this each stop-release-stop
+ * cycle of a chattering particle would start the next a tolerance lower.  The least move
+ * dx with J_S (x + dx) - P = max(gap, 0); at most the tolerance, so the energy it adds
+ * (a spring force or weight times it) is far below the ledger's resolution.  0 or -1. */
+static int settle_2d(const Assembly *A, double *x, int i, const int *S)
+{
+    const int G = A->n_grounds;
+    int k = 0, below = 0;
+    double J[(G > 0 ? G : 1) * 2], b[G > 0 ? G : 1], M[(G > 0 ? G * G : 1)], gap;
+    for (int g = 0; g < G; ++g)
+        if (S[g]) {
+            ground_2d(A, x, i, g, &gap, J + 2 * k);
+            b[k] = gap < 0.0 ? -gap : 0.0;
+            below |= gap < 0.0;
+            ++k;
+        }
+    if (!below) return 0;
+    for (int r = 0; r < k; ++r)
+        for (int c = 0; c < k; ++c) {
+            M[r * k + c] = 0.0;
+            for (int a = 0; a < 2; ++a) M[r * k + c] += J[2 * r + a] * J[2 * c + a];
+        }
+    if (small_solve(M, k, b)) return -1;
+    for (int r = 0; r < k; ++r)
+        for (int a = 0; a < 2; ++a) x[2 * i + a] += J[2 * r + a] * b[r];
+    return 0;
+}
+
 static int impact_2d(const FbSystem *s, const double *y, const int *stop, double *y_out, double *loss)
 {
     const Assembly *A = s->data;
@@ -342,6 +371,7 @@ static int impact_2d(const FbSystem *s, const double *y, const int *stop, double
         if (constrain_2d(A, y, i, stop + i * G, u, lam)) return -1;
         fb_k_particle_2d(y + 2 * i, u, A->mass + i, A->gravity, f, &potential, &after);
         *loss += before - after;
+        if (settle_2d(A, y_out, i, stop + i * G)) return -1;
     }
     return 0;
 }
@@ -578,6 +608,35 @@ static int contact_state_3d(const FbSystem *s, const double *y, const int *held,
     return 0;
 }
 
+/* Set particle i, stopped on its grounds in S, onto those it is below: event location stops
+ * it within the gap tolerance under the ground, and without this each stop-release-stop
+ * cycle of a chattering particle would start the next a tolerance lower.  The least move
+ * dx with J_S (x + dx) - P = max(gap, 0); at most the tolerance, so the energy it adds
+ * (a spring force or weight times it) is far below the ledger's resolution.  0 or -1. */
+static int settle_3d(const Assembly *A, double *x, int i, const int *S)
+{
+    const int G = A->n_grounds;
+    int k = 0, below = 0;
+    double J[(G > 0 ? G : 1) * 3], b[G > 0 ? G : 1], M[(G > 0 ? G * G : 1)], gap;
+    for (int g = 0; g < G; ++g)
+        if (S[g]) {
+            ground_3d(A, x, i, g, &gap, J + 3 * k);
+            b[k] = gap < 0.0 ? -gap : 0.0;
+            below |= gap < 0.0;
+            ++k;
+        }
+    if (!below) return 0;
+    for (int r = 0; r < k; ++r)
+        for (int c = 0; c < k; ++c) {
+            M[r * k + c] = 0.0;
+            for (int a = 0; a < 3; ++a) M[r * k + c] += J[3 * r + a] * J[3 * c + a];
+        }
+    if (small_solve(M, k, b)) return -1;
+    for (int r = 0; r < k; ++r)
+        for (int a = 0; a < 3; ++a) x[3 * i + a] += J[3 * r + a] * b[r];
+    return 0;
+}
+
 static int impact_3d(const FbSystem *s, const double *y, const int *stop, double *y_out, double *loss)
 {
     const Assembly *A = s->data;
@@ -594,6 +653,7 @@ static int impact_3d(const FbSystem *s, const double *y, const int *stop, double
         if (constrain_3d(A, y, i, stop + i * G, u, lam)) return -1;
         fb_k_particle_3d(y + 3 * i, u, A->mass + i, A->gravity, f, &potential, &after);
         *loss += before - after;
+        if (settle_3d(A, y_out, i, stop + i * G)) return -1;
     }
     return 0;
 }

@@ -43,17 +43,24 @@ int fb_resolve(FbWork *w, const FbSystem *s, double t, double *y, int *phase, do
     *n_events = 0;
     *loss = 0.0;
     if (s->contact) s->gaps(s, y, gaps);
-    /* Where contacts decouple (s->contact), only the contacts this instant can change are
-     * visited: touched, leaving, held, pushed, or free within gap_tol of their floor.  An
-     * instant moves no particle, so the others stay free and far: O(contacts involved).
-     * Where they couple, every contact is visited. */
+    /* Where contacts decouple (s->contact), only the particles this instant can change are
+     * visited, with all their contacts: those with a contact touched, leaving, held, pushed,
+     * or free within gap_tol of its floor.  An instant changes only the velocities (and, by
+     * at most the gap tolerance, the positions) of the particles it stops, so the others
+     * stay free and far: O(contacts involved).  Where contacts couple, all are visited. */
+    const int per_particle = nc / (s->n_particles > 0 ? s->n_particles : 1);
     for (int c = 0; c < nc; ++c) {
         touching[c] = touching_in[c] != 0;
         was_held[c] = held[c] = phase[c] == FB_HELD; /* on the ground before this instant, so v_n = 0 */
         impacted[c] = settled[c] = not_held[c] = hit[c] = ending[c] = instant[c] = stop[c] = 0;
         vn[c] = lam[c] = 0.0;
-        if (!s->contact || touching[c] || leaving[c] || phase[c] != FB_FREE || gaps[c] <= floor[c] + gap_tol)
-            visit[n_visit++] = c;
+    }
+    for (int first = 0; first < nc; first += per_particle) {
+        int involved = !s->contact;
+        for (int c = first; c < first + per_particle; ++c)
+            involved |= touching[c] || leaving[c] || phase[c] != FB_FREE || gaps[c] <= floor[c] + gap_tol;
+        if (involved)
+            for (int c = first; c < first + per_particle; ++c) visit[n_visit++] = c;
     }
     for (*iterations = 1; *iterations < 2 * nc + 3; ++*iterations) {
         for (int m = 0; m < n_visit; ++m) held[visit[m]] = phase[visit[m]] == FB_HELD;
@@ -126,9 +133,12 @@ int fb_resolve(FbWork *w, const FbSystem *s, double t, double *y, int *phase, do
         else add_event(ev_contact, ev_kind, ev_vn, n_events, release, FB_LIFTOFF, 0.0);
     }
     if (!done) return -2;
-    /* a free contact too close to its floor to be armed gets a floor a hair below (no
-     * particle moved: the gaps are those evaluated, where contacts decouple) */
-    if (!s->contact) s->gaps(s, y, gaps);
+    /* a free contact too close to its floor to be armed gets a floor a hair below (the
+     * gaps of particles not visited did not change, where contacts decouple) */
+    if (s->contact)
+        for (int m = 0; m < n_visit; ++m) s->contact(s, y, held, push, visit[m], gaps + visit[m], 0, lam + visit[m]);
+    else
+        s->gaps(s, y, gaps);
     for (int c = 0; c < nc; ++c) {
         if (phase[c] == FB_FREE && gaps[c] - floor[c] <= gap_tol) floor[c] = fmin(0.0, gaps[c]) - gap_tol;
         if (phase[c] != FB_PUSHED) {
