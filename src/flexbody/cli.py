@@ -108,9 +108,11 @@ def _parser() -> argparse.ArgumentParser:
 
     bench = sub.add_parser("bench", help="speed and accuracy benchmarks (prints and saves numbers)",
                            description="Benchmarks, not tests: work-precision diagram (wp), stability map "
-                                       "(stability), resolution study (resolution), the whole run command (run), cost vs size (scale), Dask sweeps (sweep); "
+                                       "(stability), resolution study (resolution), the whole run command (run), cost vs size (scale), Dask sweeps (sweep), "
+                                       "friction: work-precision on the incline (friction_wp) and the mu x e map (friction_map); "
                                        "JSON and PNG in --out.")
-    bench.add_argument("--study", choices=("wp", "stability", "resolution", "mujoco", "run", "scale", "sweep"), action="append",
+    bench.add_argument("--study", choices=("wp", "stability", "resolution", "mujoco", "run", "scale", "sweep",
+                                           "friction_wp", "friction_map"), action="append",
                        help="which study (repeatable; default: all; mujoco needs flexbody[mujoco])")
     bench.add_argument("--out", default="bench", metavar="DIR", help="output folder")
     bench.add_argument("--repeats", type=int, default=5, help="timing repeats (median is reported)")
