@@ -25,6 +25,7 @@ typedef struct {
     double *link_par;  /* (n_links, 3): k, c, L per link, packed from p for the link kernel */
     double *inv_mass;  /* (n,) */
     const double *mass, *gravity, *grounds; /* views into p; grounds (n_grounds, 2, dim) */
+    double *laws;      /* (n_grounds, 2): Coulomb mu and Newton e per ground (0: the thesis's ground) */
     double *scratch;   /* (2 nq + 2): a right-hand side for contact_state */
 } Assembly;
 
@@ -49,8 +50,10 @@ Assembly *fb_asm_new(int dim, int n, int n_links, int n_grounds, const int *link
     A->link_par = malloc(sizeof(double) * (3 * (size_t)n_links + 1));
     A->inv_mass = malloc(sizeof(double) * ((size_t)n + 1));
     A->scratch = malloc(sizeof(double) * (2 * (size_t)n * dim + 2));
-    if (!A->links || !A->axial || !A->p || !A->link_par || !A->inv_mass || !A->scratch) {
+    A->laws = calloc(2 * (size_t)n_grounds + 1, sizeof(double));
+    if (!A->links || !A->axial || !A->p || !A->link_par || !A->inv_mass || !A->scratch || !A->laws) {
         free(A->links); free(A->axial); free(A->p); free(A->link_par); free(A->inv_mass); free(A->scratch);
+        free(A->laws);
         free(A);
         return 0;
     }
@@ -63,7 +66,14 @@ void fb_asm_free(Assembly *A)
 {
     if (!A) return;
     free(A->links); free(A->axial); free(A->p); free(A->link_par); free(A->inv_mass); free(A->scratch);
+    free(A->laws);
     free(A);
+}
+
+/* Take the grounds' contact laws (n_grounds, 2): Coulomb mu and Newton e (copied). */
+void fb_asm_laws(Assembly *A, const double *laws)
+{
+    memcpy(A->laws, laws, sizeof(double) * 2 * (size_t)A->n_grounds);
 }
 
 /* Take the parameter values p (copied). */
@@ -237,6 +247,27 @@ static int contact_state_2d(const FbSystem *s, const double *y, const int *held,
     return rhs_2d(s, 0.0, y, held, push, A->scratch, lam);
 }
 
+/* After the plastic impulse P_n = lam (>= 0 pushing) that stopped particle i's velocity u
+ * along ground g's normal: the rebound -e v_n- (code FB_REBOUND), then Coulomb's tangential
+ * impulse min(m |v_t|, mu P_n) against v_t (DESIGN §6).  One ground only: a particle stopped
+ * on two grounds at once with friction or restitution is refused by the driver. */
+static void contact_laws_2d(const Assembly *A, const double *x, int i, int g, int code, double *u, double lam)
+{
+    const double mu = A->laws[2 * g], e = code == FB_REBOUND ? A->laws[2 * g + 1] : 0.0;
+    if (mu == 0.0 && e == 0.0) return;
+    double gap, J[2], normal[2], tangents[2], vn, vt[2], speed;
+    const double *ground = A->grounds + 2 * 2 * g;
+    fb_k_ground_2d(x + 2 * i, ground, ground + 2, &gap, J, normal, tangents);
+    /* lam / m = -v_n-; a held contact's v_n- is 0 up to round-off, either sign: no impulse */
+    const double stopped = fmax(lam, 0.0) * A->inv_mass[i], rebound = e * stopped;
+    for (int a = 0; a < 2; ++a) u[a] += rebound * normal[a];
+    fb_k_split_2d(u, normal, &vn, vt, &speed);
+    const double impulse = mu * (stopped + rebound); /* mu P_n / m: the most friction can take */
+    if (!(speed > 0.0)) return;
+    const double keep = impulse >= speed ? 0.0 : 1.0 - impulse / speed;
+    for (int a = 0; a < 2; ++a) u[a] -= (1.0 - keep) * vt[a];
+}
+
 static int impact_2d(const FbSystem *s, const double *y, const int *stop, double *y_out, double *loss)
 {
     const Assembly *A = s->data;
@@ -245,12 +276,14 @@ static int impact_2d(const FbSystem *s, const double *y, const int *stop, double
     memcpy(y_out, y, sizeof(double) * s->ny);
     *loss = 0.0;
     for (int i = 0; i < A->n; ++i) {
-        int any = 0;
-        for (int g = 0; g < G; ++g) any |= stop[i * G + g];
-        if (!any) continue;
+        int stopped = 0, g_stop = 0;
+        for (int g = 0; g < G; ++g)
+            if (stop[i * G + g]) { ++stopped; g_stop = g; }
+        if (!stopped) continue;
         double *u = y_out + s->nq + 2 * i, f[2], potential, before, after;
         fb_k_particle_2d(y + 2 * i, u, A->mass + i, A->gravity, f, &potential, &before);
         if (constrain_2d(A, y, i, stop + i * G, u, lam)) return -1;
+        if (stopped == 1) contact_laws_2d(A, y, i, g_stop, stop[i * G + g_stop], u, lam[g_stop]);
         fb_k_particle_2d(y + 2 * i, u, A->mass + i, A->gravity, f, &potential, &after);
         *loss += before - after;
     }
@@ -431,6 +464,27 @@ static int contact_state_3d(const FbSystem *s, const double *y, const int *held,
     return rhs_3d(s, 0.0, y, held, push, A->scratch, lam);
 }
 
+/* After the plastic impulse P_n = lam (>= 0 pushing) that stopped particle i's velocity u
+ * along ground g's normal: the rebound -e v_n- (code FB_REBOUND), then Coulomb's tangential
+ * impulse min(m |v_t|, mu P_n) against v_t (DESIGN §6).  One ground only: a particle stopped
+ * on two grounds at once with friction or restitution is refused by the driver. */
+static void contact_laws_3d(const Assembly *A, const double *x, int i, int g, int code, double *u, double lam)
+{
+    const double mu = A->laws[2 * g], e = code == FB_REBOUND ? A->laws[2 * g + 1] : 0.0;
+    if (mu == 0.0 && e == 0.0) return;
+    double gap, J[3], normal[3], tangents[6], vn, vt[3], speed;
+    const double *ground = A->grounds + 2 * 3 * g;
+    fb_k_ground_3d(x + 3 * i, ground, ground + 3, &gap, J, normal, tangents);
+    /* lam / m = -v_n-; a held contact's v_n- is 0 up to round-off, either sign: no impulse */
+    const double stopped = fmax(lam, 0.0) * A->inv_mass[i], rebound = e * stopped;
+    for (int a = 0; a < 3; ++a) u[a] += rebound * normal[a];
+    fb_k_split_3d(u, normal, &vn, vt, &speed);
+    const double impulse = mu * (stopped + rebound); /* mu P_n / m: the most friction can take */
+    if (!(speed > 0.0)) return;
+    const double keep = impulse >= speed ? 0.0 : 1.0 - impulse / speed;
+    for (int a = 0; a < 3; ++a) u[a] -= (1.0 - keep) * vt[a];
+}
+
 static int impact_3d(const FbSystem *s, const double *y, const int *stop, double *y_out, double *loss)
 {
     const Assembly *A = s->data;
@@ -439,12 +493,14 @@ static int impact_3d(const FbSystem *s, const double *y, const int *stop, double
     memcpy(y_out, y, sizeof(double) * s->ny);
     *loss = 0.0;
     for (int i = 0; i < A->n; ++i) {
-        int any = 0;
-        for (int g = 0; g < G; ++g) any |= stop[i * G + g];
-        if (!any) continue;
+        int stopped = 0, g_stop = 0;
+        for (int g = 0; g < G; ++g)
+            if (stop[i * G + g]) { ++stopped; g_stop = g; }
+        if (!stopped) continue;
         double *u = y_out + s->nq + 3 * i, f[3], potential, before, after;
         fb_k_particle_3d(y + 3 * i, u, A->mass + i, A->gravity, f, &potential, &before);
         if (constrain_3d(A, y, i, stop + i * G, u, lam)) return -1;
+        if (stopped == 1) contact_laws_3d(A, y, i, g_stop, stop[i * G + g_stop], u, lam[g_stop]);
         fb_k_particle_3d(y + 3 * i, u, A->mass + i, A->gravity, f, &potential, &after);
         *loss += before - after;
     }

@@ -16,6 +16,9 @@
 #define FB_PUSHED 2
 #define FB_IMPACT 0
 #define FB_LIFTOFF 1
+#define FB_KEEP 0
+#define FB_STOP 1
+#define FB_REBOUND 2
 #define FB_GROUP_TIME 1e-12
 #define FB_REACHED 0
 #define FB_EVENT 1
@@ -39,8 +42,10 @@ struct FbSystem {
     /* gaps, normal velocities vn and the held contacts' forces lam (each nc).  0 or -1. */
     int (*contact_state)(const FbSystem *s, const double *y, const int *held, const double *push,
                          double *gaps, double *vn, double *lam);
-    /* Plastic impulses zeroing the normal velocity of every contact with stop[c]: y_out (ny)
-     * and the kinetic energy removed.  0 or -1. */
+    /* Impulses on every contact with stop[c] != FB_KEEP: its normal velocity zeroed (FB_STOP)
+     * or reversed by its ground's restitution (FB_REBOUND; models without contact laws treat
+     * it as FB_STOP), and its ground's Coulomb friction impulse: y_out (ny) and the kinetic
+     * energy removed.  0 or -1. */
     int (*impact)(const FbSystem *s, const double *y, const int *stop, double *y_out, double *loss);
     /* Particle positions x and velocities v (n_particles, dim) and energies (4): kinetic,
      * spring, gravity, damping power. */
@@ -64,8 +69,8 @@ int fb_integrate(FbWork *w, const FbSystem *s, int method, double t0, const doub
 
 int fb_resolve(FbWork *w, const FbSystem *s, double t, double *y, int *phase, double *floor, double *push,
                double *push_until, const int *touching_in, const int *leaving, double gap_tol,
-               const double *force_tol, const double *masses, int thesis, double impact_dt,
-               int *ev_contact, int *ev_kind, double *ev_vn, int *n_events, int *not_held,
+               const double *force_tol, const double *masses, const double *restitution,
+               const double *min_rebound, int thesis, double impact_dt, int *ev_contact, int *ev_kind, double *ev_vn, int *n_events, int *not_held,
                double *loss, int *iterations);
 
 int fb_trajectory(FbWork *w, const FbSystem *s, long n, const double *Y, const int *held, const double *push,

@@ -23,15 +23,17 @@ static void add_event(int *contact, int *kind, double *vn, int *n, int c, int k,
  *   phase[c]: FB_FREE, FB_HELD or FB_PUSHED; floor[c]: a free contact's gap event level;
  *   push[c], push_until[c]: a pushed contact's force and window end (0 and INFINITY elsewhere);
  *   touching[c], leaving[c]: the gap and force events that fired at t;
- *   thesis: 0 for instant impacts, 1 for the thesis mode's force -m v_n / impact_dt;
+ *   restitution[c]: Newton's e of the contact's ground; min_rebound[c]: a slower rebound
+ *     (e |v_n|) is plastic (it would not rise 1e-9 of the scene's size: no Zeno cascade);
+ *   thesis: 0 for instant impacts, 1 for the thesis mode's force -(1 + e) m v_n / impact_dt;
  *   events (at most 2 nc): contact, kind (FB_IMPACT, FB_LIFTOFF), normal velocity before;
- *   not_held[c]: stopped at t, then released at once; *loss: kinetic energy of the impacts.
+ *   not_held[c]: stopped at t, then released at once, or rebounded; *loss: kinetic energy of the impacts.
  * Returns 0, -1 if a mass or contact matrix was not positive definite, -2 if the fixed point
  * did not settle. */
 int fb_resolve(FbWork *w, const FbSystem *s, double t, double *y, int *phase, double *floor, double *push,
                double *push_until, const int *touching_in, const int *leaving, double gap_tol,
-               const double *force_tol, const double *masses, int thesis, double impact_dt,
-               int *ev_contact, int *ev_kind, double *ev_vn, int *n_events, int *not_held,
+               const double *force_tol, const double *masses, const double *restitution,
+               const double *min_rebound, int thesis, double impact_dt, int *ev_contact, int *ev_kind, double *ev_vn, int *n_events, int *not_held,
                double *loss, int *iterations)
 {
     const int nc = s->nc, ny = s->ny;
@@ -60,19 +62,21 @@ int fb_resolve(FbWork *w, const FbSystem *s, double t, double *y, int *phase, do
             if (hit[c]) add_event(ev_contact, ev_kind, ev_vn, n_events, c, FB_IMPACT, vn[c]);
             impacted[c] |= hit[c];
             settled[c] |= ending[c] || (hit[c] && !thesis);
+            const int rebounds = hit[c] && restitution[c] > 0.0 && -restitution[c] * vn[c] >= min_rebound[c];
             if (hit[c] && thesis) { /* eq. 4.6: the impulse spread as a force over impact_dt */
                 phase[c] = FB_PUSHED;
-                push[c] = -masses[c] * vn[c] / impact_dt;
+                push[c] = -masses[c] * vn[c] * (1.0 + (rebounds ? restitution[c] : 0.0)) / impact_dt;
                 push_until[c] = t + impact_dt;
                 hit[c] = 0;
                 changed = 1;
             }
+            stop[c] = hit[c] ? (rebounds ? FB_REBOUND : FB_STOP) : FB_KEEP;
         }
         /* after a window, what velocity is left towards the ground is stopped instantly */
         for (int c = 0; c < nc; ++c) {
             instant[c] = hit[c] || (ending[c] && vn[c] < 0.0);
             any_instant |= instant[c];
-            stop[c] = instant[c] || phase[c] == FB_HELD;
+            if (!hit[c]) stop[c] = instant[c] || phase[c] == FB_HELD ? FB_STOP : FB_KEEP;
         }
         if (any_instant) {
             double lost;
@@ -80,7 +84,11 @@ int fb_resolve(FbWork *w, const FbSystem *s, double t, double *y, int *phase, do
             memcpy(y, y_new, sizeof(double) * ny);
             *loss += lost;
             for (int c = 0; c < nc; ++c)
-                if (instant[c]) phase[c] = FB_HELD;
+                if (stop[c] == FB_REBOUND) { /* it leaves the ground at once */
+                    phase[c] = FB_FREE;
+                    floor[c] = fmin(0.0, gaps[c]) - gap_tol;
+                    not_held[c] = 1;
+                } else if (instant[c]) phase[c] = FB_HELD;
             changed = 1;
         }
         for (int c = 0; c < nc; ++c)

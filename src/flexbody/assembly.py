@@ -24,6 +24,7 @@ import numpy as np
 
 from . import runtime
 from .cbuild import kernels_dir
+from .constants import REBOUND
 from .model import Model, singular_matrix_error
 from .scene import Scene
 
@@ -65,6 +66,8 @@ class AssembledModel(Model):
         self.links = np.ascontiguousarray(scene.links(), dtype=np.intc).reshape(-1, 2)
         self.axial = np.concatenate([np.full(len(b.links), b.damper == "axial") for b in scene.bodies])
         self.masses = scene.masses.copy()
+        # Contact laws per ground (mu, e): runtime data, not parameters of the derived equations.
+        self.laws = np.array([[g.friction, g.restitution] for g in scene.grounds], float).reshape(-1, 2)
         self.nq = self.nu = n * self.dim
         self.ny = 2 * self.nq + 2
         self.n_contacts = n * self.n_grounds
@@ -163,6 +166,7 @@ class AssembledC(runtime.SystemModel, AssembledModel):
         if not handle:
             raise MemoryError(f"cannot allocate the assembly of {self.n_particles} particles")
         lib.fb_asm_bind(handle, p.ctypes.data)
+        lib.fb_asm_laws(handle, np.ascontiguousarray(self.laws).ctypes.data)
         system = runtime.FbSystem()
         lib.fb_asm_system(handle, ctypes.addressof(system))
         system.owner = _AssemblyHandle(lib, handle)
@@ -226,6 +230,7 @@ class AssembledNumpy(AssembledModel):
                                True: getattr(self.k, f"link_axial_{tag}_jacobian")}
         self._particle = getattr(self.k, f"particle_{tag}")
         self._ground = getattr(self.k, f"ground_{tag}")
+        self._split_kernel = getattr(self.k, f"split_{tag}")
         self._groups = [(law, np.flatnonzero(self.axial == law)) for law in (False, True) if (self.axial == law).any()]
 
     def _link_inputs(self, x, v, link_par, index):
@@ -303,10 +308,32 @@ class AssembledNumpy(AssembledModel):
         out = np.array(y, float)
         x, v = self._split(out)
         v_before = v.copy()
-        self._constrain(x, v, p, stop)  # v is a view into out
-        masses = self._views(p)[0]
+        lam = self._constrain(x, v, p, stop)  # v is a view into out
+        masses, _, _, grounds = self._views(p)
+        self._contact_laws(v, lam, masses, grounds, np.asarray(stop).reshape(lam.shape))
         loss = 0.5 * float(np.sum(masses * (np.sum(v_before**2, axis=1) - np.sum(v**2, axis=1))))
         return out, loss
+
+    def _contact_laws(self, v, lam, masses, grounds, stop):
+        """Restitution and the friction impulse after the plastic impulses ``lam (n, G)``, on
+        particles stopped on one ground (the twin of ``contact_laws`` in assembly.c)."""
+        single = np.count_nonzero(stop, axis=1) == 1
+        particles = np.flatnonzero(single)
+        g = np.argmax(stop[particles] != 0, axis=1)
+        mu, e = self.laws[g, 0], np.where(stop[particles, g] == REBOUND, self.laws[g, 1], 0.0)
+        active = (mu != 0.0) | (e != 0.0)
+        particles, g, mu, e = particles[active], g[active], mu[active], e[active]
+        if not len(particles):
+            return
+        normal = grounds[g, 1, :]  # (k, d): the ground kernel's normal is the unit normal itself
+        stopped = np.maximum(lam[particles, g], 0.0) / masses[particles]  # -v_n-; held: 0 up to round-off
+        v[particles] += (e * stopped)[:, None] * normal
+        _, vt, speed = self._split_kernel(v[particles].T, normal.T)
+        impulse, speed = mu * (1.0 + e) * stopped, speed[0]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            keep = np.where(impulse >= speed, 0.0, 1.0 - impulse / speed)
+        moving = speed > 0.0
+        v[particles[moving]] -= ((1.0 - keep[moving]) * vt[:, moving]).T
 
     def outputs(self, y, p):
         """Positions and velocities (n, dim) and energies (4,) at one state."""

@@ -49,10 +49,13 @@ class CompiledPath:
         Receives the states at the grid times.
     force_tolerance, masses : ndarray, shape (nc,)
     gap_tolerance : float
+    restitution, min_rebound : ndarray, shape (nc,), optional
+        Each contact's Newton e and slowest rebound (see :func:`flexbody.contact.resolve`); 0 by default.
     """
 
     def __init__(self, model: Model, p: np.ndarray, y: np.ndarray, phases: Phases, grid: np.ndarray,
-                 samples: np.ndarray, force_tolerance: np.ndarray, masses: np.ndarray, gap_tolerance: float) -> None:
+                 samples: np.ndarray, force_tolerance: np.ndarray, masses: np.ndarray, gap_tolerance: float,
+                 restitution: np.ndarray | None = None, min_rebound: np.ndarray | None = None) -> None:
         nc = model.n_contacts
         self.model, self.gap_tolerance, self.n_grid = model, gap_tolerance, len(grid)
         self.lib = runtime.library()
@@ -70,6 +73,9 @@ class CompiledPath:
         # The buffers (kept alive as long as C holds their addresses):
         self.p, self.y, self.phases, self.grid, self.samples = p, y, phases, grid, samples
         self.force_tolerance, self.masses = force_tolerance, masses
+        self.restitution = np.zeros(nc) if restitution is None else np.ascontiguousarray(restitution, float)
+        self.min_rebound = np.zeros(nc) if min_rebound is None else np.ascontiguousarray(min_rebound, float)
+        self._laws = (_address(self.restitution), _address(self.min_rebound))
         self._y = _address(y)
         self._phase, self._floor = _address(phases.phase, np.intc), _address(phases.floor)
         self._push, self._push_until = _address(phases.push), _address(phases.push_until)
@@ -130,7 +136,7 @@ class CompiledPath:
             self.leaving[:] = leaving
         status = self.lib.fb_resolve(
             self._work, self._system, t, self._y, self._phase, self._floor, self._push, self._push_until, self._touching,
-            self._leaving, self.gap_tolerance, self._force_tol, self._masses, int(thesis), impact_dt or 0.0,
+            self._leaving, self.gap_tolerance, self._force_tol, self._masses, *self._laws, int(thesis), impact_dt or 0.0,
             *self._events, *self._resolve_out,
         )
         if status == -1:

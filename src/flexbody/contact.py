@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .constants import FREE, HELD, PUSHED
+from .constants import FREE, HELD, KEEP, PUSHED, REBOUND, STOP
 from .model import Model
 
 __all__ = ["FREE", "HELD", "PUSHED", "Event", "Phases", "Resolution", "UnsettledInstant", "resolve"]
@@ -80,7 +80,7 @@ class Resolution:
     y: np.ndarray
     phases: Phases
     events: list[Event] = field(default_factory=list)
-    not_held: np.ndarray | None = None  # bool (nc,): stopped at this instant, then released at once
+    not_held: np.ndarray | None = None  # bool (nc,): stopped at this instant, then released at once (or rebounded)
     impact_loss: float = 0.0  # kinetic energy removed by instant impacts (J)
     iterations: int = 0
 
@@ -99,6 +99,8 @@ def resolve(
     masses: np.ndarray,
     impact: str = "instant",
     impact_dt: float | None = None,
+    restitution: np.ndarray | None = None,
+    min_rebound: np.ndarray | None = None,
 ) -> Resolution:
     """Apply the event fixed point at instant ``t``.
 
@@ -121,6 +123,13 @@ def resolve(
     impact : {"instant", "thesis"}
     impact_dt : float, optional
         The thesis mode's ΔT (s).
+    restitution : ndarray, shape (nc,), optional
+        Newton's e of each contact's ground (default 0: plastic).  A contact hit at speed
+        ``|v_n|`` leaves at ``e |v_n|`` (instant mode), or is pushed with ``(1 + e)`` times
+        the plastic force (thesis mode), unless ``e |v_n| < min_rebound``.
+    min_rebound : ndarray, shape (nc,), optional
+        Rebound speeds below this are plastic: the rebound would not rise
+        :data:`~flexbody.constants.ZENO_RISE` of the scene's size (default 0).
 
     Returns
     -------
@@ -129,6 +138,8 @@ def resolve(
     phases = phases.copy()
     touching = touching.copy()
     nc = model.n_contacts
+    e = np.zeros(nc) if restitution is None else np.asarray(restitution, float)
+    slowest = np.zeros(nc) if min_rebound is None else np.asarray(min_rebound, float)
     events: list[Event] = []
     loss = 0.0
     impacted, settled, not_held = np.zeros(nc, bool), np.zeros(nc, bool), np.zeros(nc, bool)
@@ -144,19 +155,26 @@ def resolve(
         events += [Event(t, int(c), "impact", float(vn[c])) for c in np.flatnonzero(hit)]
         impacted |= hit
         settled |= ending | (hit & (impact == "instant"))  # stopped on the ground at this instant
+        # A rebound too slow to rise ZENO_RISE of the scene is plastic: no endless bouncing.
+        rebounds = hit & (e > 0.0) & (-e * vn >= slowest)
         started = hit if impact == "thesis" else np.zeros_like(hit)
         if started.any():
-            # eq. 4.6: the impulse -m v_n spread as a force over dT; no velocity jump now.
+            # eq. 4.6: the impulse -(1 + e) m v_n spread as a force over dT; no velocity jump now.
             phases.phase[started] = PUSHED
-            phases.push[started] = -masses[started] * vn[started] / impact_dt
+            phases.push[started] = -masses[started] * vn[started] * (1.0 + np.where(rebounds, e, 0.0)[started]) / impact_dt
             phases.push_until[started] = t + impact_dt
             hit = np.zeros_like(hit)
         # After a window, what velocity is left towards the ground is stopped instantly.
         instant = hit | (ending & (vn < 0.0))
         if instant.any():
-            y, lost = model.impact(y, p, instant | (phases.phase == HELD))
+            stop = np.where(instant | (phases.phase == HELD), STOP, KEEP)
+            stop[hit & rebounds] = REBOUND
+            y, lost = model.impact(y, p, stop.astype(np.intc))
             loss += lost
-            phases.phase[instant] = HELD
+            bounced = stop == REBOUND  # it leaves the ground at once
+            phases.phase[instant & ~bounced] = HELD
+            phases.floor[bounced] = np.minimum(0.0, gaps[bounced]) - gap_tolerance
+            not_held |= bounced
         away = ending & (vn >= 0.0)
         phases.phase[away] = FREE
         phases.floor[away] = np.minimum(0.0, gaps[away]) - gap_tolerance

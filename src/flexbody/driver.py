@@ -20,7 +20,7 @@ import numpy as np
 
 from . import __version__
 from .compiled import IMPACT, CompiledPath
-from .constants import EVENT, NON_FINITE, SINGULAR, STEP_COLLAPSE, TOO_SLOW
+from .constants import EVENT, NON_FINITE, SINGULAR, STEP_COLLAPSE, TOO_SLOW, ZENO_RISE
 from .assembly import AssembledModel
 from .contact import HELD, PUSHED, Event, Phases, UnsettledInstant, resolve
 from .events import EventFunctions, locate
@@ -124,6 +124,21 @@ def _settings(scene: Scene, overrides: dict) -> SimulationSettings:
     return SimulationSettings(**values)
 
 
+def _rebound_laws(scene: Scene, contacts: np.ndarray, size: float) -> tuple[np.ndarray, np.ndarray]:
+    """Each contact's Newton e and slowest rebound speed, shape (nc,) each.
+
+    A rebound at ``v`` against gravity's pull ``a = -g . n`` rises ``v^2 / (2 a)``; below
+    ``ZENO_RISE * size`` it is plastic (DESIGN §6), so a bouncing particle comes to rest at
+    its Zeno time t1 (1 + e) / (1 - e) instead of bouncing ever faster.  Grounds gravity does
+    not pull towards never stop a rebound this way (0).
+    """
+    grounds = scene.grounds
+    ground = contacts[:, 1] if len(contacts) else np.zeros(0, int)
+    e = np.array([g.restitution for g in grounds])[ground]
+    pull = np.array([max(0.0, -float(np.dot(scene.gravity, g.normal))) for g in grounds])[ground]
+    return e, np.sqrt(2.0 * pull * ZENO_RISE * size)
+
+
 @dataclass
 class _Stop:
     t: float
@@ -154,6 +169,7 @@ class _Run:
         # For point masses on flat grounds a contact's effective mass 1 / (J M^-1 J^T) is its particle's.
         self.contact_masses = scene.masses[model.contacts[:, 0]]
         self.force_tolerance = 1e-10 * self.contact_masses * max(float(np.linalg.norm(scene.gravity)), 1.0)
+        self.restitution, self.min_rebound = _rebound_laws(scene, model.contacts, size)
         self.grid = np.linspace(0.0, settings.t_end, int(round(settings.t_end / settings.output_dt)) + 1)
         n = len(self.grid)
         self.Y = np.empty((n, model.ny))  # samples at the grid times, the first n_samples of them taken
@@ -170,7 +186,8 @@ class _Run:
         self.compiled = None
         if model.backend == "c":
             self.compiled = CompiledPath(model, self.p, self.y, self.phases, self.grid, self.Y,
-                                         self.force_tolerance, self.contact_masses, self.gap_tolerance)
+                                         self.force_tolerance, self.contact_masses, self.gap_tolerance,
+                                         self.restitution, self.min_rebound)
 
     @property
     def counters(self) -> np.ndarray:
@@ -301,7 +318,8 @@ class _Run:
         else:
             res = resolve(self.model, t, self.y, self.p, self.phases, touching, leaving,
                           gap_tolerance=self.gap_tolerance, force_tolerance=self.force_tolerance,
-                          masses=self.contact_masses, impact=s.impact, impact_dt=s.impact_dt)
+                          masses=self.contact_masses, impact=s.impact, impact_dt=s.impact_dt,
+                          restitution=self.restitution, min_rebound=self.min_rebound)
             self.y[:] = res.y
             self.phases.assign(res.phases)
             new, not_held, loss = res.events, res.not_held, res.impact_loss
