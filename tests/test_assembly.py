@@ -17,6 +17,7 @@ from flexbody.assembly import assembled_model
 from flexbody.dynamics import state_jacobian
 from flexbody.model import NumpyModel, load_derived_model
 from flexbody.paths import cache_root
+from flexbody.state import initial_coordinates
 
 from .conftest import BACKENDS, HAS_CC, body, make_scene
 
@@ -187,3 +188,45 @@ def test_a_400_particle_ring_lands_and_lifts_off_cleanly():
     assert result.positions[:, :, 1].min() >= -tolerance
     total = result.total_energy
     assert np.abs(total - total[0]).max() <= 1e-5 * abs(total[0])
+
+
+@pytest.mark.skipif(not HAS_CC, reason="no C compiler")
+@pytest.mark.parametrize("dim", [2, 3])
+@pytest.mark.parametrize("seed", [0, 1])
+def test_one_contact_alone_equals_the_whole_system_and_reads_only_its_stencil(seed, dim, rng):
+    """Event location evaluates one contact from its particle's stencil: its gap and held
+    force must equal gaps() and rhs() bit for bit (else a root and the step's end disagree),
+    and every state entry outside the stencil may be garbage."""
+    scene = random_scene(seed, dim)
+    model = assembled_model(scene, "c")
+    p, nc, G = model.parameters(scene), model.n_contacts, model.n_grounds
+    links = np.asarray(model.links)
+    for _ in range(3):
+        y = random_state(model, rng, scene)
+        held = (rng.random(nc) < 0.5).astype(np.intc)
+        if G > 1:
+            held.reshape(-1, G)[:, 1:] &= rng.random((scene.n_particles, 1)) < 0.5
+        push = np.where(rng.random(nc) < 0.3, rng.uniform(0, 5, nc), 0.0) * (1 - held)
+        gaps, (_, lam) = model.gaps(y, p), model.rhs(y, p, held, push)
+        for c in range(nc):
+            i = c // G
+            gap, lam_c, entries = model.contact(y, p, held, push, c)
+            assert gap == gaps[c] and lam_c == lam[c], f"contact {c}"
+            neighbours = {i} | {int(j) for a, b in links for j in (a, b) if i in (a, b)}
+            expected = {k for j in neighbours for k in range(dim * j, dim * j + dim)}
+            expected |= {dim * scene.n_particles + k for k in expected}  # their velocities
+            assert set(entries.tolist()) == expected
+            assert entries[:dim].tolist() == list(range(dim * i, dim * i + dim))  # its position first
+            garbage = np.full_like(y, np.nan)
+            garbage[entries] = y[entries]
+            assert model.contact(garbage, p, held, push, c)[:2] == (gap, lam_c)
+
+
+@pytest.mark.skipif(not HAS_CC, reason="no C compiler")
+def test_whole_scene_models_have_no_per_contact_evaluation():
+    """Contacts of the floating formulation couple through M: no per-contact shortcut."""
+    scene = flexbody.load_scene("dumbbell")
+    model = flexbody.load_model(scene, formulation="floating")
+    y = np.concatenate([*initial_coordinates(scene, model), [0.0, 0.0]])
+    nc = model.n_contacts
+    assert model.contact(y, model.parameters(scene), np.zeros(nc, np.intc), np.zeros(nc), 0) is None

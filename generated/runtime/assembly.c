@@ -26,13 +26,17 @@ typedef struct {
     double *inv_mass;  /* (n,) */
     const double *mass, *gravity, *grounds; /* views into p; grounds (n_grounds, 2, dim) */
     double *laws;      /* (n_grounds, 2): Coulomb mu and Newton e per ground (0: the thesis's ground) */
-    double *scratch;   /* (2 nq + 2): a right-hand side for contact_state */
+    /* Each particle's links (CSR, ascending: the order the right-hand side sums them in) and
+     * its stencil, the state entries its force reads: its own q and u, then its neighbours'. */
+    int *adj_start, *adj, *stencil_start, *stencil;
 } Assembly;
 
 static int n_parameters(const Assembly *A)
 {
     return A->n + 3 * A->n_links + A->dim + 2 * A->dim * A->n_grounds;
 }
+
+void fb_asm_free(Assembly *A);
 
 /* A new assembly of n particles of dimension dim, links (n_links, 2) with their damper
  * laws, and n_grounds grounds; the index arrays are copied.  Bind parameters before use. */
@@ -49,24 +53,49 @@ Assembly *fb_asm_new(int dim, int n, int n_links, int n_grounds, const int *link
     A->p = malloc(sizeof(double) * ((size_t)n_parameters(A) + 1));
     A->link_par = malloc(sizeof(double) * (3 * (size_t)n_links + 1));
     A->inv_mass = malloc(sizeof(double) * ((size_t)n + 1));
-    A->scratch = malloc(sizeof(double) * (2 * (size_t)n * dim + 2));
+    A->adj_start = calloc((size_t)n + 1, sizeof(int));
+    A->adj = malloc(sizeof(int) * (2 * (size_t)n_links + 1));
+    A->stencil_start = malloc(sizeof(int) * ((size_t)n + 1));
+    A->stencil = malloc(sizeof(int) * (2 * (size_t)dim * ((size_t)n + 2 * (size_t)n_links) + 1));
     A->laws = calloc(2 * (size_t)n_grounds + 1, sizeof(double));
-    if (!A->links || !A->axial || !A->p || !A->link_par || !A->inv_mass || !A->scratch || !A->laws) {
-        free(A->links); free(A->axial); free(A->p); free(A->link_par); free(A->inv_mass); free(A->scratch);
-        free(A->laws);
-        free(A);
+    if (!A->links || !A->axial || !A->p || !A->link_par || !A->inv_mass || !A->adj_start || !A->adj
+        || !A->stencil_start || !A->stencil || !A->laws) {
+        fb_asm_free(A);
         return 0;
     }
     memcpy(A->links, links, sizeof(int) * 2 * (size_t)n_links);
     memcpy(A->axial, axial, sizeof(int) * (size_t)n_links);
+    for (int l = 0; l < 2 * n_links; ++l) A->adj_start[links[l] + 1]++;
+    for (int i = 0; i < n; ++i) A->adj_start[i + 1] += A->adj_start[i];
+    int *cursor = A->stencil_start; /* borrowed as the fill cursor until the stencils are built */
+    memcpy(cursor, A->adj_start, sizeof(int) * (size_t)n);
+    for (int l = 0; l < n_links; ++l) {
+        A->adj[cursor[links[2 * l]]++] = l;
+        A->adj[cursor[links[2 * l + 1]]++] = l;
+    }
+    int k = 0;
+    for (int i = 0; i < n; ++i) {
+        A->stencil_start[i] = k;
+        const int start = A->adj_start[i], end = A->adj_start[i + 1];
+        for (int m = start - 1; m < end; ++m) { /* i itself, then its neighbours */
+            int p = i;
+            if (m >= start) {
+                const int *link = links + 2 * A->adj[m];
+                p = link[0] == i ? link[1] : link[0];
+            }
+            for (int a = 0; a < dim; ++a) A->stencil[k++] = dim * p + a;
+            for (int a = 0; a < dim; ++a) A->stencil[k++] = dim * (n + p) + a;
+        }
+    }
+    A->stencil_start[n] = k;
     return A;
 }
 
 void fb_asm_free(Assembly *A)
 {
     if (!A) return;
-    free(A->links); free(A->axial); free(A->p); free(A->link_par); free(A->inv_mass); free(A->scratch);
-    free(A->laws);
+    free(A->links); free(A->axial); free(A->p); free(A->link_par); free(A->inv_mass);
+    free(A->adj_start); free(A->adj); free(A->stencil_start); free(A->stencil); free(A->laws);
     free(A);
 }
 
@@ -171,6 +200,51 @@ static int constrain_2d(const Assembly *A, const double *x, int i, const int *S,
     return 0;
 }
 
+/* Particle i's acceleration without its contacts' forces (its links, gravity and prescribed
+ * forces), from its stencil alone: the right-hand side's sums in its order, bit for bit. */
+static void free_acceleration_2d(const Assembly *A, const double *y, const double *push, int i, double *acc)
+{
+    const int G = A->n_grounds;
+    const double *x = y, *v = y + 2 * A->n;
+    for (int a = 0; a < 2; ++a) acc[a] = 0.0;
+    for (int m = A->adj_start[i]; m < A->adj_start[i + 1]; ++m) {
+        const int l = A->adj[m], first = A->links[2 * l], second = A->links[2 * l + 1];
+        const int a_i = 2 * first, a_j = 2 * second;
+        double f[2], pw;
+        if (A->axial[l]) fb_k_link_axial_2d_force(x + a_i, x + a_j, v + a_i, v + a_j, A->link_par + 3 * l, f, &pw);
+        else fb_k_link_relative_2d_force(x + a_i, x + a_j, v + a_i, v + a_j, A->link_par + 3 * l, f, &pw);
+        for (int a = 0; a < 2; ++a) {
+            if (first == i) acc[a] += f[a];
+            else acc[a] -= f[a];
+        }
+    }
+    double f[2], potential, kinetic;
+    fb_k_particle_2d(x + 2 * i, v + 2 * i, A->mass + i, A->gravity, f, &potential, &kinetic);
+    for (int a = 0; a < 2; ++a) acc[a] = (acc[a] + f[a]) * A->inv_mass[i];
+    for (int g = 0; g < G; ++g)
+        if (push[i * G + g] != 0.0) {
+            double gap, J[2];
+            ground_2d(A, x, i, g, &gap, J);
+            for (int a = 0; a < 2; ++a) acc[a] += J[a] * push[i * G + g] * A->inv_mass[i];
+        }
+}
+
+/* Contact c alone (FbSystem.contact): its gap and, if held, its force, O(its stencil). */
+static int contact_2d(const FbSystem *s, const double *y, const int *held, const double *push, int c,
+                     double *gap, double *lam_c)
+{
+    const Assembly *A = s->data;
+    const int G = A->n_grounds, i = c / G;
+    double J[2], acc[2], lam[G];
+    ground_2d(A, y, i, c % G, gap, J);
+    *lam_c = 0.0;
+    if (!held[c]) return 0;
+    free_acceleration_2d(A, y, push, i, acc);
+    if (constrain_2d(A, y, i, held + i * G, acc, lam)) return -1;
+    *lam_c = lam[c % G];
+    return 0;
+}
+
 /* The right-hand side: springs and dampers over the links, gravity over the particles,
  * prescribed forces and held contacts over the contacts. */
 static int rhs_2d(const FbSystem *s, double t, const double *y, const int *held, const double *push,
@@ -231,20 +305,29 @@ static void gaps_2d(const FbSystem *s, const double *y, double *gaps)
         for (int g = 0; g < A->n_grounds; ++g) ground_2d(A, y, i, g, gaps + i * A->n_grounds + g, J);
 }
 
+/* Gaps and normal velocities of every contact, the forces of held ones particle by particle
+ * (the right-hand side's values, without its O(n) pass over the links). */
 static int contact_state_2d(const FbSystem *s, const double *y, const int *held, const double *push,
                              double *gaps, double *vn, double *lam)
 {
     const Assembly *A = s->data;
+    const int G = A->n_grounds;
     const double *v = y + s->nq;
-    double J[2];
-    for (int i = 0; i < A->n; ++i)
-        for (int g = 0; g < A->n_grounds; ++g) {
-            const int c = i * A->n_grounds + g;
+    double J[2], acc[2];
+    for (int i = 0; i < A->n; ++i) {
+        int any_held = 0;
+        for (int g = 0; g < G; ++g) {
+            const int c = i * G + g;
             ground_2d(A, y, i, g, gaps + c, J);
-            vn[c] = 0.0;
+            vn[c] = lam[c] = 0.0;
             for (int a = 0; a < 2; ++a) vn[c] += J[a] * v[2 * i + a];
+            any_held |= held[c];
         }
-    return rhs_2d(s, 0.0, y, held, push, A->scratch, lam);
+        if (!any_held) continue;
+        free_acceleration_2d(A, y, push, i, acc);
+        if (constrain_2d(A, y, i, held + i * G, acc, lam + i * G)) return -1;
+    }
+    return 0;
 }
 
 /* After the plastic impulse P_n = lam (>= 0 pushing) that stopped particle i's velocity u
@@ -388,6 +471,51 @@ static int constrain_3d(const Assembly *A, const double *x, int i, const int *S,
     return 0;
 }
 
+/* Particle i's acceleration without its contacts' forces (its links, gravity and prescribed
+ * forces), from its stencil alone: the right-hand side's sums in its order, bit for bit. */
+static void free_acceleration_3d(const Assembly *A, const double *y, const double *push, int i, double *acc)
+{
+    const int G = A->n_grounds;
+    const double *x = y, *v = y + 3 * A->n;
+    for (int a = 0; a < 3; ++a) acc[a] = 0.0;
+    for (int m = A->adj_start[i]; m < A->adj_start[i + 1]; ++m) {
+        const int l = A->adj[m], first = A->links[2 * l], second = A->links[2 * l + 1];
+        const int a_i = 3 * first, a_j = 3 * second;
+        double f[3], pw;
+        if (A->axial[l]) fb_k_link_axial_3d_force(x + a_i, x + a_j, v + a_i, v + a_j, A->link_par + 3 * l, f, &pw);
+        else fb_k_link_relative_3d_force(x + a_i, x + a_j, v + a_i, v + a_j, A->link_par + 3 * l, f, &pw);
+        for (int a = 0; a < 3; ++a) {
+            if (first == i) acc[a] += f[a];
+            else acc[a] -= f[a];
+        }
+    }
+    double f[3], potential, kinetic;
+    fb_k_particle_3d(x + 3 * i, v + 3 * i, A->mass + i, A->gravity, f, &potential, &kinetic);
+    for (int a = 0; a < 3; ++a) acc[a] = (acc[a] + f[a]) * A->inv_mass[i];
+    for (int g = 0; g < G; ++g)
+        if (push[i * G + g] != 0.0) {
+            double gap, J[3];
+            ground_3d(A, x, i, g, &gap, J);
+            for (int a = 0; a < 3; ++a) acc[a] += J[a] * push[i * G + g] * A->inv_mass[i];
+        }
+}
+
+/* Contact c alone (FbSystem.contact): its gap and, if held, its force, O(its stencil). */
+static int contact_3d(const FbSystem *s, const double *y, const int *held, const double *push, int c,
+                     double *gap, double *lam_c)
+{
+    const Assembly *A = s->data;
+    const int G = A->n_grounds, i = c / G;
+    double J[3], acc[3], lam[G];
+    ground_3d(A, y, i, c % G, gap, J);
+    *lam_c = 0.0;
+    if (!held[c]) return 0;
+    free_acceleration_3d(A, y, push, i, acc);
+    if (constrain_3d(A, y, i, held + i * G, acc, lam)) return -1;
+    *lam_c = lam[c % G];
+    return 0;
+}
+
 /* The right-hand side: springs and dampers over the links, gravity over the particles,
  * prescribed forces and held contacts over the contacts. */
 static int rhs_3d(const FbSystem *s, double t, const double *y, const int *held, const double *push,
@@ -448,20 +576,29 @@ static void gaps_3d(const FbSystem *s, const double *y, double *gaps)
         for (int g = 0; g < A->n_grounds; ++g) ground_3d(A, y, i, g, gaps + i * A->n_grounds + g, J);
 }
 
+/* Gaps and normal velocities of every contact, the forces of held ones particle by particle
+ * (the right-hand side's values, without its O(n) pass over the links). */
 static int contact_state_3d(const FbSystem *s, const double *y, const int *held, const double *push,
                              double *gaps, double *vn, double *lam)
 {
     const Assembly *A = s->data;
+    const int G = A->n_grounds;
     const double *v = y + s->nq;
-    double J[3];
-    for (int i = 0; i < A->n; ++i)
-        for (int g = 0; g < A->n_grounds; ++g) {
-            const int c = i * A->n_grounds + g;
+    double J[3], acc[3];
+    for (int i = 0; i < A->n; ++i) {
+        int any_held = 0;
+        for (int g = 0; g < G; ++g) {
+            const int c = i * G + g;
             ground_3d(A, y, i, g, gaps + c, J);
-            vn[c] = 0.0;
+            vn[c] = lam[c] = 0.0;
             for (int a = 0; a < 3; ++a) vn[c] += J[a] * v[3 * i + a];
+            any_held |= held[c];
         }
-    return rhs_3d(s, 0.0, y, held, push, A->scratch, lam);
+        if (!any_held) continue;
+        free_acceleration_3d(A, y, push, i, acc);
+        if (constrain_3d(A, y, i, held + i * G, acc, lam + i * G)) return -1;
+    }
+    return 0;
 }
 
 /* After the plastic impulse P_n = lam (>= 0 pushing) that stopped particle i's velocity u
@@ -551,6 +688,15 @@ static void link_jacobians_3d(const Assembly *A, const double *y, double *out)
     }
 }
 
+/* The state entries contact c's gap and force read (FbSystem.stencil): its particle's stencil. */
+static int stencil(const FbSystem *s, int c, const int **entries)
+{
+    const Assembly *A = s->data;
+    const int i = c / A->n_grounds;
+    *entries = A->stencil + A->stencil_start[i];
+    return A->stencil_start[i + 1] - A->stencil_start[i];
+}
+
 /* Fill s with this assembly as a system (sizes, data and functions of its dimension). */
 void fb_asm_system(Assembly *A, FbSystem *s)
 {
@@ -567,6 +713,7 @@ void fb_asm_system(Assembly *A, FbSystem *s)
         s->contact_state = contact_state_2d;
         s->impact = impact_2d;
         s->outputs = outputs_2d;
+        s->contact = contact_2d;
     }
     if (A->dim == 3) {
         s->rhs = rhs_3d;
@@ -574,7 +721,9 @@ void fb_asm_system(Assembly *A, FbSystem *s)
         s->contact_state = contact_state_3d;
         s->impact = impact_3d;
         s->outputs = outputs_3d;
+        s->contact = contact_3d;
     }
+    s->stencil = stencil;
 }
 
 /* d(force on i)/d[x_i, x_j, v_i, v_j] of every link at y: out (n_links, dim, 4 dim). */
@@ -606,4 +755,18 @@ int fb_sys_impact(const FbSystem *s, const double *y, const int *stop, double *y
 void fb_sys_outputs(const FbSystem *s, const double *y, double *x, double *v, double *energies)
 {
     s->outputs(s, y, x, v, energies);
+}
+
+/* Contact c alone (FbSystem.contact): *gap, *lam_c and, in entries (capacity), the state
+ * entries it reads, *k of them.  0, -1 as rhs, -2 if the system has no per-contact
+ * evaluation, -3 if more than capacity entries. */
+int fb_sys_contact(const FbSystem *s, const double *y, const int *held, const double *push, int c, double *gap,
+                   double *lam_c, int *entries, int capacity, int *k)
+{
+    if (!s->contact || !s->stencil) return -2;
+    const int *listed;
+    *k = s->stencil(s, c, &listed);
+    if (*k > capacity) return -3;
+    memcpy(entries, listed, sizeof(int) * (size_t)*k);
+    return s->contact(s, y, held, push, c, gap, lam_c);
 }

@@ -4,8 +4,9 @@
  * The interface between the model-independent runtime (integrator.c, phases.c: compiled
  * once) and a model: the assembled particles formulation (assembly.c, over the element
  * kernels) or a whole-scene derived model (generated/<scene>_<formulation>/model.c).
- * A model is an FbSystem: its sizes, its data and five functions.  State y (ny,) =
- * [q (nq), u (nu), damping work, impact work]; contacts c = particle * n_grounds + ground.
+ * A model is an FbSystem: its sizes, its data, five functions and three optional ones.
+ * State y (ny,) = [q (nq), u (nu), damping work, impact work]; contacts c = particle *
+ * n_grounds + ground.
  */
 #ifndef FLEXBODY_RUNTIME_H
 #define FLEXBODY_RUNTIME_H
@@ -54,6 +55,14 @@ struct FbSystem {
      * velocity 0 (the least correction in the mass metric), against integration drift
      * where the gaps are nonlinear in q.  0, or -1 if a matrix is not positive definite. */
     int (*project)(const FbSystem *s, double *y, const int *held);
+    /* Optional (both NULL where contacts couple, as in whole-scene models): contact c alone,
+     * where each particle's contacts decouple from the others'.  contact gives its gap and,
+     * if held[c], its force lam_c (the values gaps and rhs give, bit for bit), reading only
+     * the state entries stencil lists (its particle's position first, dim entries): event
+     * location costs O(1) per contact, not a right-hand side.  0, or -1 as rhs. */
+    int (*contact)(const FbSystem *s, const double *y, const int *held, const double *push, int c,
+                   double *gap, double *lam_c);
+    int (*stencil)(const FbSystem *s, int c, const int **entries);
 };
 
 /* Work buffers of one run, sized once (integrator.c). */

@@ -125,8 +125,13 @@ static void events_from(Problem *P, const double *y, const double *lam, double *
 static void events_at(Problem *P, double t, const double *y, double *g)
 {
     FbWork *w = P->w;
-    if (P->any_held) {
-        if (P->s->rhs(P->s, t, y, P->held, P->push, w->ev_dy, w->ev_lam)) P->failed = 1;
+    const FbSystem *s = P->s;
+    if (P->any_held && s->contact) { /* held contacts one by one: O(held), not a right-hand side */
+        double gap;
+        for (int c = 0; c < P->nc; ++c)
+            if (P->held[c] && s->contact(s, y, P->held, P->push, c, &gap, w->ev_lam + c)) P->failed = 1;
+    } else if (P->any_held) {
+        if (s->rhs(s, t, y, P->held, P->push, w->ev_dy, w->ev_lam)) P->failed = 1;
         P->nevent++;
     }
     events_from(P, y, w->ev_lam, g, w->ev_gaps);
@@ -268,10 +273,10 @@ static void prepare_dense(Problem *P, Stepper *S)
     }
 }
 
-/* The accepted step's interpolant at t, its first n entries.  dopri5: straight from the
- * stages with the weights w_j(x) = h sum_r P_jr x^(r+1); dop853: from its coefficients,
- * built on first use (they need three more stages). */
-static void dense(Problem *P, Stepper *S, double t, double *out, int n)
+/* The accepted step's interpolant at t: its first n entries, or (idx not NULL) the n entries
+ * idx lists.  dopri5: straight from the stages with the weights w_j(x) = h sum_r P_jr
+ * x^(r+1); dop853: from its coefficients, built on first use (they need three more stages). */
+static void dense(Problem *P, Stepper *S, double t, double *out, int n, const int *idx)
 {
     const double x = (t - S->t_old) / S->h;
     if (S->method == 0) {
@@ -282,12 +287,15 @@ static void dense(Problem *P, Stepper *S, double t, double *out, int n)
             for (int r = 0; r < 4; ++r, power *= x) sum += D5_P[j][r] * power;
             w[j] = S->h * sum;
         }
-        for (int i = 0; i < n; ++i)
-            out[i] = S->y_old[i] + w[0] * K[0][i] + w[2] * K[2][i] + w[3] * K[3][i] + w[4] * K[4][i] + w[5] * K[5][i] + w[6] * K[6][i];
+#define D5_ENTRY(i) out[i] = S->y_old[i] + w[0] * K[0][i] + w[2] * K[2][i] + w[3] * K[3][i] + w[4] * K[4][i] + w[5] * K[5][i] + w[6] * K[6][i]
+        if (idx) for (int m = 0; m < n; ++m) D5_ENTRY(idx[m]);
+        else for (int i = 0; i < n; ++i) D5_ENTRY(i);
+#undef D5_ENTRY
         return;
     }
     if (!S->dense_ready) prepare_dense(P, S);
-    for (int i = 0; i < n; ++i) {
+    for (int m = 0; m < n; ++m) {
+        const int i = idx ? idx[m] : m;
         double v = 0.0;
         for (int r = 6; r >= 0; --r) {
             v += S->Q[r][i];
@@ -325,12 +333,19 @@ static double root(Problem *P, Stepper *S, int c, double a, double fa, double b,
         } else { d = m; e = m; }
         a = b; fa = fb;
         b += fabs(d) > tol ? d : (m > 0.0 ? tol : -tol);
-        if (free_contact) { /* the same value events_from gives: gap - floor */
-            dense(P, S, b, y, P->s->nq);
+        if (P->s->contact) { /* contact c alone, from the entries of the state it reads */
+            const int *entries;
+            const int k = P->s->stencil(P->s, c, &entries);
+            double gap, lam;
+            dense(P, S, b, y, free_contact ? P->s->dim : k, entries);
+            if (P->s->contact(P->s, y, P->held, P->push, c, &gap, &lam)) P->failed = 1;
+            fb = free_contact ? gap - P->floor[c] : lam + P->force_tol[c];
+        } else if (free_contact) { /* the same value events_from gives: gap - floor */
+            dense(P, S, b, y, P->s->nq, 0);
             P->s->gaps(P->s, y, g);
             fb = g[c] - P->floor[c];
         } else {
-            dense(P, S, b, y, P->n_event);
+            dense(P, S, b, y, P->n_event, 0);
             events_at(P, b, y, g);
             fb = g[c];
         }
@@ -345,7 +360,7 @@ static int locate(Problem *P, Stepper *S, const double *g_old, const double *g_n
     double *y = w->mid_y, *g_mid = w->g_mid, *roots = w->roots;
     double t_mid = S->t_old + 0.5 * S->h;
     const int nc = P->nc;
-    dense(P, S, t_mid, y, P->n_event);
+    dense(P, S, t_mid, y, P->n_event, 0);
     events_at(P, t_mid, y, g_mid);
     int crossed = 0;
     for (int c = 0; c < nc; ++c)
@@ -483,13 +498,13 @@ int fb_integrate(FbWork *w, const FbSystem *s, int method, double t0, const doub
         if (P.failed) { status = FB_SINGULAR; goto done; }
         double t_end_step = hit ? t_hit : t_new;
         while (next < n_grid && grid[next] <= t_end_step) {
-            dense(&P, &S, grid[next], samples + (long)next * ny, ny);
+            dense(&P, &S, grid[next], samples + (long)next * ny, ny, 0);
             if (project && s->project(s, samples + (long)next * ny, P.held)) { status = FB_SINGULAR; goto done; }
             ++next;
         }
         if (hit) { /* the step is cut at the event: its end beyond it is not part of the solution */
             t = t_hit;
-            dense(&P, &S, t_hit, y_stop, ny);
+            dense(&P, &S, t_hit, y_stop, ny, 0);
             if (project && s->project(s, y_stop, P.held)) { status = FB_SINGULAR; goto done; }
             s->gaps(s, y_stop, gaps);
             for (int c = 0; c < nc; ++c)

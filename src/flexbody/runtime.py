@@ -24,7 +24,7 @@ class FbSystem(ctypes.Structure):
     _fields_ = [
         ("nq", _int), ("nu", _int), ("nc", _int), ("ny", _int), ("n_particles", _int), ("dim", _int),
         ("data", _ptr), ("rhs", _ptr), ("gaps", _ptr), ("contact_state", _ptr), ("impact", _ptr),
-        ("outputs", _ptr), ("project", _ptr),
+        ("outputs", _ptr), ("project", _ptr), ("contact", _ptr), ("stencil", _ptr),
     ]  # fmt: skip
 
 
@@ -49,6 +49,7 @@ SIGNATURES = {
     "fb_sys_contact_state": (_int, [_ptr, _ptr, _ptr, _ptr, _ptr, _ptr, _ptr]),
     "fb_sys_impact": (_int, [_ptr, _ptr, _ptr, _ptr, _ptr]),
     "fb_sys_outputs": (None, [_ptr, _ptr, _ptr, _ptr, _ptr]),
+    "fb_sys_contact": (_int, [_ptr, _ptr, _ptr, _ptr, _int, _ptr, _ptr, _ptr, _int, _ptr]),
 }
 
 
@@ -141,6 +142,21 @@ class SystemModel:
                                           gaps.ctypes.data, vn.ctypes.data, lam.ctypes.data):
             raise singular_matrix_error()
         return gaps, vn, lam
+
+    def contact(self, y, p, held, push, c: int) -> tuple[float, float, np.ndarray] | None:
+        """Contact ``c`` alone, as event location evaluates it: its gap, its force if held, and
+        the state entries it reads (int array); None where contacts couple (whole-scene models)."""
+        y, held, push = _floats(y), _ints(held), _floats(push)
+        gap, lam, k = ctypes.c_double(0.0), ctypes.c_double(0.0), ctypes.c_int(0)
+        entries = np.empty(self.ny, np.intc)
+        status = library().fb_sys_contact(self._address(p), y.ctypes.data, held.ctypes.data, push.ctypes.data,
+                                          int(c), ctypes.addressof(gap), ctypes.addressof(lam), entries.ctypes.data,
+                                          self.ny, ctypes.addressof(k))
+        if status == -2:
+            return None
+        if status:
+            raise singular_matrix_error()
+        return gap.value, lam.value, entries[: k.value].copy()
 
     def impact(self, y, p, stop):
         y, stop = _floats(y), _ints(stop)
