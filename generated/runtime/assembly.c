@@ -229,6 +229,70 @@ static void free_acceleration_2d(const Assembly *A, const double *y, const doubl
         }
 }
 
+/* Coulomb friction on particle i held on ground g alone (DESIGN §6), after its normal
+ * constraint: acc (dim) is its acceleration with the normal force lam applied.  code FB_HELD
+ * sticks (the tangential force ft = -m a_t holds it: acc becomes 0), FB_SLIDING slips (ft =
+ * -mu lam v_t / |v_t|, or against the tangential pull a_t when v_t = 0).  Writes vt, ft
+ * (dim) and the sticking slack mu lam - |ft| (N; INFINITY without friction); returns the
+ * power friction dissipates (W, >= 0). */
+static double coulomb_2d(const Assembly *A, const double *x, const double *v, int i, int g, int code,
+                           double lam, double *acc, double *vt, double *ft, double *slack)
+{
+    const double mu = A->laws[2 * g], m = A->mass[i];
+    double gap, J[2], normal[2], tangents[2], vn, speed, an, at[2], pull;
+    const double *ground = A->grounds + 2 * 2 * g;
+    fb_k_ground_2d(x + 2 * i, ground, ground + 2, &gap, J, normal, tangents);
+    fb_k_split_2d(v + 2 * i, normal, &vn, vt, &speed);
+    for (int a = 0; a < 2; ++a) ft[a] = 0.0;
+    *slack = INFINITY;
+    if (mu == 0.0) return 0.0;
+    fb_k_split_2d(acc, normal, &an, at, &pull);
+    if (code != FB_SLIDING) { /* sticking: the tangential force cancels the tangential pull */
+        for (int a = 0; a < 2; ++a) {
+            ft[a] = -m * at[a];
+            acc[a] -= at[a];
+        }
+        *slack = mu * lam - m * pull;
+        return 0.0;
+    }
+    const double *along = speed > 0.0 ? vt : at, size = speed > 0.0 ? speed : pull;
+    const double force = mu * fmax(lam, 0.0);
+    if (!(size > 0.0)) return 0.0;
+    for (int a = 0; a < 2; ++a) {
+        ft[a] = -force * along[a] / size;
+        acc[a] += ft[a] / m;
+    }
+    *slack = 0.0;
+    return force * speed;
+}
+
+/* Contact c's friction (FbSystem.friction), O(its stencil): its tangential velocity vt and
+ * force ft (dim) and sticking slack (see coulomb), and its normal force lam_c if held. */
+static int friction_2d(const FbSystem *s, const double *y, const int *held, const double *push, int c,
+                      double *vt, double *ft, double *slack, double *lam_c)
+{
+    const Assembly *A = s->data;
+    const int G = A->n_grounds, i = c / G, g = c % G;
+    double acc[2], lam[G];
+    int n_held = 0;
+    for (int k = 0; k < G; ++k) n_held += held[i * G + k] != 0;
+    *lam_c = 0.0;
+    if (!held[c] || n_held != 1) { /* free, or a corner (refused with friction by the driver): no friction */
+        double normal[2], J[2], tangents[2], gap, vn, speed;
+        const double *ground = A->grounds + 2 * 2 * g;
+        fb_k_ground_2d(y + 2 * i, ground, ground + 2, &gap, J, normal, tangents);
+        fb_k_split_2d(y + s->nq + 2 * i, normal, &vn, vt, &speed);
+        for (int a = 0; a < 2; ++a) ft[a] = 0.0;
+        *slack = INFINITY;
+        if (!held[c]) return 0;
+    }
+    free_acceleration_2d(A, y, push, i, acc);
+    if (constrain_2d(A, y, i, held + i * G, acc, lam)) return -1;
+    *lam_c = lam[g];
+    if (n_held == 1) coulomb_2d(A, y, y + s->nq, i, g, held[c], lam[g], acc, vt, ft, slack);
+    return 0;
+}
+
 /* Contact c alone (FbSystem.contact): its gap and, if held, its force, O(its stencil). */
 static int contact_2d(const FbSystem *s, const double *y, const int *held, const double *push, int c,
                      double *gap, double *lam_c)
@@ -291,9 +355,17 @@ static int rhs_2d(const FbSystem *s, double t, const double *y, const int *held,
             }
         }
         if (any_held && constrain_2d(A, x, i, h, acc + 2 * i, lam + i * G)) return -1;
+        int n_held = 0, g_held = 0;
+        for (int g = 0; g < G; ++g)
+            if (h[g]) { ++n_held; g_held = g; }
+        if (n_held == 1 && A->laws[2 * g_held] != 0.0) {
+            double vt[2], ft[2], slack;
+            impact_power += coulomb_2d(A, x, v, i, g_held, h[g_held], lam[i * G + g_held], acc + 2 * i,
+                                         vt, ft, &slack);
+        }
     }
     ydot[2 * nq] = power;
-    ydot[2 * nq + 1] = impact_power;
+    ydot[2 * nq + 1] = impact_power; /* friction needs instant impacts: never both in one run */
     return 0;
 }
 
@@ -332,12 +404,12 @@ static int contact_state_2d(const FbSystem *s, const double *y, const int *held,
 
 /* After the plastic impulse P_n = lam (>= 0 pushing) that stopped particle i's velocity u
  * along ground g's normal: the rebound -e v_n- (code FB_REBOUND), then Coulomb's tangential
- * impulse min(m |v_t|, mu P_n) against v_t (DESIGN §6).  One ground only: a particle stopped
+ * impulse min(m |v_t|, mu P_n) against v_t (DESIGN §6); FB_SETTLE zeroes v_t (it comes to rest).  One ground only: a particle stopped
  * on two grounds at once with friction or restitution is refused by the driver. */
 static void contact_laws_2d(const Assembly *A, const double *x, int i, int g, int code, double *u, double lam)
 {
     const double mu = A->laws[2 * g], e = code == FB_REBOUND ? A->laws[2 * g + 1] : 0.0;
-    if (mu == 0.0 && e == 0.0) return;
+    if (mu == 0.0 && e == 0.0 && code != FB_SETTLE) return;
     double gap, J[2], normal[2], tangents[2], vn, vt[2], speed;
     const double *ground = A->grounds + 2 * 2 * g;
     fb_k_ground_2d(x + 2 * i, ground, ground + 2, &gap, J, normal, tangents);
@@ -347,7 +419,7 @@ static void contact_laws_2d(const Assembly *A, const double *x, int i, int g, in
     fb_k_split_2d(u, normal, &vn, vt, &speed);
     const double impulse = mu * (stopped + rebound); /* mu P_n / m: the most friction can take */
     if (!(speed > 0.0)) return;
-    const double keep = impulse >= speed ? 0.0 : 1.0 - impulse / speed;
+    const double keep = impulse >= speed || code == FB_SETTLE ? 0.0 : 1.0 - impulse / speed;
     for (int a = 0; a < 2; ++a) u[a] -= (1.0 - keep) * vt[a];
 }
 
@@ -500,6 +572,70 @@ static void free_acceleration_3d(const Assembly *A, const double *y, const doubl
         }
 }
 
+/* Coulomb friction on particle i held on ground g alone (DESIGN §6), after its normal
+ * constraint: acc (dim) is its acceleration with the normal force lam applied.  code FB_HELD
+ * sticks (the tangential force ft = -m a_t holds it: acc becomes 0), FB_SLIDING slips (ft =
+ * -mu lam v_t / |v_t|, or against the tangential pull a_t when v_t = 0).  Writes vt, ft
+ * (dim) and the sticking slack mu lam - |ft| (N; INFINITY without friction); returns the
+ * power friction dissipates (W, >= 0). */
+static double coulomb_3d(const Assembly *A, const double *x, const double *v, int i, int g, int code,
+                           double lam, double *acc, double *vt, double *ft, double *slack)
+{
+    const double mu = A->laws[2 * g], m = A->mass[i];
+    double gap, J[3], normal[3], tangents[6], vn, speed, an, at[3], pull;
+    const double *ground = A->grounds + 2 * 3 * g;
+    fb_k_ground_3d(x + 3 * i, ground, ground + 3, &gap, J, normal, tangents);
+    fb_k_split_3d(v + 3 * i, normal, &vn, vt, &speed);
+    for (int a = 0; a < 3; ++a) ft[a] = 0.0;
+    *slack = INFINITY;
+    if (mu == 0.0) return 0.0;
+    fb_k_split_3d(acc, normal, &an, at, &pull);
+    if (code != FB_SLIDING) { /* sticking: the tangential force cancels the tangential pull */
+        for (int a = 0; a < 3; ++a) {
+            ft[a] = -m * at[a];
+            acc[a] -= at[a];
+        }
+        *slack = mu * lam - m * pull;
+        return 0.0;
+    }
+    const double *along = speed > 0.0 ? vt : at, size = speed > 0.0 ? speed : pull;
+    const double force = mu * fmax(lam, 0.0);
+    if (!(size > 0.0)) return 0.0;
+    for (int a = 0; a < 3; ++a) {
+        ft[a] = -force * along[a] / size;
+        acc[a] += ft[a] / m;
+    }
+    *slack = 0.0;
+    return force * speed;
+}
+
+/* Contact c's friction (FbSystem.friction), O(its stencil): its tangential velocity vt and
+ * force ft (dim) and sticking slack (see coulomb), and its normal force lam_c if held. */
+static int friction_3d(const FbSystem *s, const double *y, const int *held, const double *push, int c,
+                      double *vt, double *ft, double *slack, double *lam_c)
+{
+    const Assembly *A = s->data;
+    const int G = A->n_grounds, i = c / G, g = c % G;
+    double acc[3], lam[G];
+    int n_held = 0;
+    for (int k = 0; k < G; ++k) n_held += held[i * G + k] != 0;
+    *lam_c = 0.0;
+    if (!held[c] || n_held != 1) { /* free, or a corner (refused with friction by the driver): no friction */
+        double normal[3], J[3], tangents[6], gap, vn, speed;
+        const double *ground = A->grounds + 2 * 3 * g;
+        fb_k_ground_3d(y + 3 * i, ground, ground + 3, &gap, J, normal, tangents);
+        fb_k_split_3d(y + s->nq + 3 * i, normal, &vn, vt, &speed);
+        for (int a = 0; a < 3; ++a) ft[a] = 0.0;
+        *slack = INFINITY;
+        if (!held[c]) return 0;
+    }
+    free_acceleration_3d(A, y, push, i, acc);
+    if (constrain_3d(A, y, i, held + i * G, acc, lam)) return -1;
+    *lam_c = lam[g];
+    if (n_held == 1) coulomb_3d(A, y, y + s->nq, i, g, held[c], lam[g], acc, vt, ft, slack);
+    return 0;
+}
+
 /* Contact c alone (FbSystem.contact): its gap and, if held, its force, O(its stencil). */
 static int contact_3d(const FbSystem *s, const double *y, const int *held, const double *push, int c,
                      double *gap, double *lam_c)
@@ -562,9 +698,17 @@ static int rhs_3d(const FbSystem *s, double t, const double *y, const int *held,
             }
         }
         if (any_held && constrain_3d(A, x, i, h, acc + 3 * i, lam + i * G)) return -1;
+        int n_held = 0, g_held = 0;
+        for (int g = 0; g < G; ++g)
+            if (h[g]) { ++n_held; g_held = g; }
+        if (n_held == 1 && A->laws[2 * g_held] != 0.0) {
+            double vt[3], ft[3], slack;
+            impact_power += coulomb_3d(A, x, v, i, g_held, h[g_held], lam[i * G + g_held], acc + 3 * i,
+                                         vt, ft, &slack);
+        }
     }
     ydot[2 * nq] = power;
-    ydot[2 * nq + 1] = impact_power;
+    ydot[2 * nq + 1] = impact_power; /* friction needs instant impacts: never both in one run */
     return 0;
 }
 
@@ -603,12 +747,12 @@ static int contact_state_3d(const FbSystem *s, const double *y, const int *held,
 
 /* After the plastic impulse P_n = lam (>= 0 pushing) that stopped particle i's velocity u
  * along ground g's normal: the rebound -e v_n- (code FB_REBOUND), then Coulomb's tangential
- * impulse min(m |v_t|, mu P_n) against v_t (DESIGN §6).  One ground only: a particle stopped
+ * impulse min(m |v_t|, mu P_n) against v_t (DESIGN §6); FB_SETTLE zeroes v_t (it comes to rest).  One ground only: a particle stopped
  * on two grounds at once with friction or restitution is refused by the driver. */
 static void contact_laws_3d(const Assembly *A, const double *x, int i, int g, int code, double *u, double lam)
 {
     const double mu = A->laws[2 * g], e = code == FB_REBOUND ? A->laws[2 * g + 1] : 0.0;
-    if (mu == 0.0 && e == 0.0) return;
+    if (mu == 0.0 && e == 0.0 && code != FB_SETTLE) return;
     double gap, J[3], normal[3], tangents[6], vn, vt[3], speed;
     const double *ground = A->grounds + 2 * 3 * g;
     fb_k_ground_3d(x + 3 * i, ground, ground + 3, &gap, J, normal, tangents);
@@ -618,7 +762,7 @@ static void contact_laws_3d(const Assembly *A, const double *x, int i, int g, in
     fb_k_split_3d(u, normal, &vn, vt, &speed);
     const double impulse = mu * (stopped + rebound); /* mu P_n / m: the most friction can take */
     if (!(speed > 0.0)) return;
-    const double keep = impulse >= speed ? 0.0 : 1.0 - impulse / speed;
+    const double keep = impulse >= speed || code == FB_SETTLE ? 0.0 : 1.0 - impulse / speed;
     for (int a = 0; a < 3; ++a) u[a] -= (1.0 - keep) * vt[a];
 }
 
@@ -714,6 +858,7 @@ void fb_asm_system(Assembly *A, FbSystem *s)
         s->impact = impact_2d;
         s->outputs = outputs_2d;
         s->contact = contact_2d;
+        s->friction = friction_2d;
     }
     if (A->dim == 3) {
         s->rhs = rhs_3d;
@@ -722,6 +867,7 @@ void fb_asm_system(Assembly *A, FbSystem *s)
         s->impact = impact_3d;
         s->outputs = outputs_3d;
         s->contact = contact_3d;
+        s->friction = friction_3d;
     }
     s->stencil = stencil;
 }
@@ -750,6 +896,12 @@ int fb_sys_contact_state(const FbSystem *s, const double *y, const int *held, co
 int fb_sys_impact(const FbSystem *s, const double *y, const int *stop, double *y_out, double *loss)
 {
     return s->impact(s, y, stop, y_out, loss);
+}
+
+int fb_sys_friction(const FbSystem *s, const double *y, const int *held, const double *push, int c, double *vt,
+                    double *ft, double *slack, double *lam_c)
+{
+    return s->friction ? s->friction(s, y, held, push, c, vt, ft, slack, lam_c) : -2;
 }
 
 void fb_sys_outputs(const FbSystem *s, const double *y, double *x, double *v, double *energies)

@@ -6,7 +6,7 @@
  * kernels) or a whole-scene derived model (generated/<scene>_<formulation>/model.c).
  * A model is an FbSystem: its sizes, its data, five functions and three optional ones.
  * State y (ny,) = [q (nq), u (nu), damping work, impact work]; contacts c = particle *
- * n_grounds + ground.
+ * n_grounds + ground.  With friction (instant impacts only) the last entry is friction's work.
  */
 #ifndef FLEXBODY_RUNTIME_H
 #define FLEXBODY_RUNTIME_H
@@ -15,11 +15,15 @@
 #define FB_FREE 0
 #define FB_HELD 1
 #define FB_PUSHED 2
+#define FB_SLIDING 3
 #define FB_IMPACT 0
 #define FB_LIFTOFF 1
+#define FB_STICK 2
+#define FB_SLIP 3
 #define FB_KEEP 0
 #define FB_STOP 1
 #define FB_REBOUND 2
+#define FB_SETTLE 3
 #define FB_GROUP_TIME 1e-12
 #define FB_REACHED 0
 #define FB_EVENT 1
@@ -63,6 +67,13 @@ struct FbSystem {
     int (*contact)(const FbSystem *s, const double *y, const int *held, const double *push, int c,
                    double *gap, double *lam_c);
     int (*stencil)(const FbSystem *s, int c, const int **entries);
+    /* Optional (NULL without contact laws): contact c's Coulomb friction, from its stencil as
+     * contact.  held[c] is FB_HELD (sticking where its ground has friction) or FB_SLIDING; vt and
+     * ft (dim): its tangential velocity and tangential contact force; *slack: mu lam - |ft| of
+     * a sticking contact (INFINITY where there is no friction); *lam_c: its normal force (0
+     * if free).  0, or -1 as rhs. */
+    int (*friction)(const FbSystem *s, const double *y, const int *held, const double *push, int c,
+                    double *vt, double *ft, double *slack, double *lam_c);
 };
 
 /* Work buffers of one run, sized once (integrator.c). */
@@ -79,7 +90,7 @@ int fb_integrate(FbWork *w, const FbSystem *s, int method, double t0, const doub
 int fb_resolve(FbWork *w, const FbSystem *s, double t, double *y, int *phase, double *floor, double *push,
                double *push_until, const int *touching_in, const int *leaving, double gap_tol,
                const double *force_tol, const double *masses, const double *restitution,
-               const double *min_rebound, int thesis, double impact_dt, int *ev_contact, int *ev_kind, double *ev_vn, int *n_events, int *not_held,
+               const double *min_rebound, double speed_tol, int thesis, double impact_dt, int *ev_contact, int *ev_kind, double *ev_vn, int *n_events, int *not_held,
                double *loss, int *iterations);
 
 int fb_trajectory(FbWork *w, const FbSystem *s, long n, const double *Y, const int *held, const double *push,

@@ -169,6 +169,8 @@ class AssembledC(runtime.SystemModel, AssembledModel):
         lib.fb_asm_laws(handle, np.ascontiguousarray(self.laws).ctypes.data)
         system = runtime.FbSystem()
         lib.fb_asm_system(handle, ctypes.addressof(system))
+        if not (self.laws[:, 0] > 0.0).any():
+            system.friction = None  # no friction anywhere: event location skips it
         system.owner = _AssemblyHandle(lib, handle)
         self._system_cache = (key, system)
         return system

@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .constants import FREE, HELD, KEEP, PUSHED, REBOUND, STOP
+from .constants import FREE, HELD, KEEP, PUSHED, REBOUND, SETTLE, SLIDING, STOP
 from .model import Model
 
 __all__ = ["FREE", "HELD", "PUSHED", "Event", "Phases", "Resolution", "UnsettledInstant", "resolve"]
@@ -44,8 +44,14 @@ class Phases:
 
     @property
     def held(self) -> np.ndarray:
-        """1 where held, as the C ABI wants it (int array)."""
-        return (self.phase == HELD).astype(np.intc)
+        """The contact-law code of each held contact (HELD, or SLIDING), 0 elsewhere: the
+        ``held`` array of the right-hand side (np.intc, as the C ABI wants it)."""
+        return np.where(self.on_ground, self.phase, 0).astype(np.intc)
+
+    @property
+    def on_ground(self) -> np.ndarray:
+        """Bool (nc,): held along the normal (sticking, frictionless or sliding)."""
+        return (self.phase == HELD) | (self.phase == SLIDING)
 
     def copy(self) -> Phases:
         return Phases(self.phase.copy(), self.floor.copy(), self.push.copy(), self.push_until.copy())
