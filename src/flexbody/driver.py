@@ -375,6 +375,7 @@ class _Run:
         none = np.zeros(model.n_contacts, bool)
         try:
             self.resolve_at(0.0, none, none)
+            self.keep_samples(0, 1)  # its contact set is the instant's outcome (a slide starting at once)
             while t < s.t_end:
                 t_bound = min(s.t_end, float(phases.push_until.min()))  # a thesis-mode window ends a segment
                 stop = self.segment(t, t_bound)
