@@ -21,6 +21,9 @@ from .conftest import BACKENDS, needs_cc
 
 G = 9.81
 TIGHT = dict(rtol=1e-10, atol=1e-12)
+#: Both paths: the compiled integrator and phase machine, and SciPy's with the Python twins.
+PATHS = [pytest.param(dict(backend="c", method="dopri5"), marks=needs_cc, id="c-dopri5"),
+         pytest.param(dict(backend="numpy", method="RK45"), id="numpy-RK45")]
 
 
 def particle_scene(position, velocity, *, gravity=(0.0, -G), normal=None, friction=0.0, restitution=0.0,
@@ -47,14 +50,14 @@ def ledger_drift(result) -> float:
 # ----------------------------------------------------------------- sliding to rest
 
 
-@needs_cc
+@pytest.mark.parametrize("path", PATHS)
 @pytest.mark.parametrize("dim, direction", [(2, [1.0, 0.0]), (3, [1.0, 0.0, 0.0]), (3, [0.6, -0.8, 0.0])],
                          ids=["2d", "3d-z0-plane", "3d-off-axis"])
-def test_a_particle_slides_to_rest_in_closed_form(dim, direction):
+def test_a_particle_slides_to_rest_in_closed_form(dim, direction, path):
     mu, v0, m = 0.4, 2.0, 0.1
     gravity = [0.0, -G] if dim == 2 else [0.0, 0.0, -G]
     velocity = v0 * np.asarray(direction)
-    r = simulate(particle_scene([0.0] * dim, velocity, gravity=gravity, friction=mu, mass=m), **TIGHT)
+    r = simulate(particle_scene([0.0] * dim, velocity, gravity=gravity, friction=mu, mass=m), **path, **TIGHT)
     assert r.success, r.message
     t_stop, distance = v0 / (mu * G), v0**2 / (2 * mu * G)
     assert list(r.events_kind) == ["stick"]
@@ -89,10 +92,10 @@ def incline_pair(mu: float, theta: float):
     })
 
 
-@needs_cc
-def test_a_pair_on_an_incline_sticks_when_mu_exceeds_tan_theta():
+@pytest.mark.parametrize("path", PATHS)
+def test_a_pair_on_an_incline_sticks_when_mu_exceeds_tan_theta(path):
     theta, m = np.radians(20.0), 0.1
-    r = simulate(incline_pair(0.6, theta), **TIGHT)
+    r = simulate(incline_pair(0.6, theta), **path, **TIGHT)
     assert r.success and len(r.events_kind) == 0, (r.message, r.events_kind)
     np.testing.assert_allclose(r.velocities, 0.0, atol=1e-12)
     # Each particle's friction force holds gravity's pull along the slope, m g sin(theta), uphill.
@@ -103,11 +106,11 @@ def test_a_pair_on_an_incline_sticks_when_mu_exceeds_tan_theta():
     assert r.friction_work[-1] == 0.0
 
 
-@needs_cc
+@pytest.mark.parametrize("path", PATHS)
 @pytest.mark.parametrize("mu", [0.0, 0.2])
-def test_a_pair_on_an_incline_slides_at_g_sin_minus_mu_cos(mu):
+def test_a_pair_on_an_incline_slides_at_g_sin_minus_mu_cos(mu, path):
     theta = np.radians(20.0)
-    r = simulate(incline_pair(mu, theta), **TIGHT)
+    r = simulate(incline_pair(mu, theta), **path, **TIGHT)
     assert r.success, r.message
     along = r.positions @ np.array([np.cos(theta), np.sin(theta)])  # (nt, 2), uphill positive
     a = G * (np.sin(theta) - mu * np.cos(theta))
@@ -141,10 +144,10 @@ def test_an_oblique_impact_takes_min_m_vt_mu_pn_off_the_tangential_speed(backend
     assert loss == pytest.approx(0.5 * m * (vt**2 + vn**2 - v @ v), rel=1e-12)
 
 
-@needs_cc
-def test_an_oblique_plastic_landing_then_slides_to_rest():
+@pytest.mark.parametrize("path", PATHS)
+def test_an_oblique_plastic_landing_then_slides_to_rest(path):
     mu, h, vt = 0.3, 0.2, 2.0
-    r = simulate(particle_scene([0.0, h], [vt, 0.0], friction=mu, t_end=1.0), **TIGHT)
+    r = simulate(particle_scene([0.0, h], [vt, 0.0], friction=mu, t_end=1.0), **path, **TIGHT)
     assert r.success, r.message
     t1 = np.sqrt(2 * h / G)
     vn = G * t1
@@ -211,14 +214,15 @@ def test_the_thesis_impact_mode_converges_to_instant_restitution():
 # ----------------------------------------------------------------- 3D: a slip direction that turns
 
 
-@needs_cc
-def test_a_slip_across_a_slope_turns_stops_and_sticks_as_an_independent_integration_says():
+@pytest.mark.parametrize("path", PATHS)
+def test_a_slip_across_a_slope_turns_stops_and_sticks_as_an_independent_integration_says(path):
     from scipy.integrate import solve_ivp
 
     theta, mu, m = np.radians(15.0), 0.5, 0.1  # mu > tan(theta): it comes to rest
     gravity = [G * np.sin(theta), 0.0, -G * np.cos(theta)]  # a flat ground, gravity tilted: the slope
     v0 = np.array([-0.3, 1.0, 0.0])  # uphill and across: the slip direction turns downhill
-    r = simulate(particle_scene([0.0, 0.0, 0.0], v0, gravity=gravity, friction=mu, mass=m, t_end=1.0), **TIGHT)
+    r = simulate(particle_scene([0.0, 0.0, 0.0], v0, gravity=gravity, friction=mu, mass=m, t_end=1.0), **path,
+                 **TIGHT)
     assert r.success, r.message
     assert list(r.events_kind) == ["stick"]
 
@@ -271,8 +275,7 @@ def test_bad_contact_laws_are_one_clear_error_exit_2_and_nothing_written(tmp_pat
 def test_friction_with_what_cannot_apply_it_is_refused_before_any_work():
     scene = particle_scene([0.0, 1.0], [0.0, 0.0], friction=0.3, restitution=0.5)
     for options, says in [({"formulation": "floating"}, "only the particles formulation"),
-                          ({"impact": "thesis", "impact_dt": 1e-4}, "applied instantly only"),
-                          ({"method": "RK45", "backend": "numpy"}, "compiled methods only")]:
+                          ({"impact": "thesis", "impact_dt": 1e-4}, "applied instantly only")]:
         with pytest.raises(InputError, match=says):
             simulate(scene, **options)
 

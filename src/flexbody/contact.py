@@ -24,7 +24,8 @@ import numpy as np
 from .constants import FREE, HELD, KEEP, PUSHED, REBOUND, SETTLE, SLIDING, STOP
 from .model import Model
 
-__all__ = ["FREE", "HELD", "PUSHED", "Event", "Phases", "Resolution", "UnsettledInstant", "resolve"]
+__all__ = ["FREE", "HELD", "PUSHED", "SLIDING", "Event", "Phases", "Resolution", "UnsettledInstant", "friction_phases",
+           "resolve"]
 
 
 @dataclass
@@ -74,7 +75,7 @@ class UnsettledInstant(RuntimeError):
 class Event:
     t: float
     contact: int
-    kind: str  # "impact" or "liftoff"
+    kind: str  # "impact", "liftoff", "stick" or "slip"
     normal_velocity: float = 0.0  # before the impact (m/s, < 0)
     held: bool = True  # False: released right after its impact ("not held")
 
@@ -89,6 +90,48 @@ class Resolution:
     not_held: np.ndarray | None = None  # bool (nc,): stopped at this instant, then released at once (or rebounded)
     impact_loss: float = 0.0  # kinetic energy removed by instant impacts (J)
     iterations: int = 0
+
+
+def friction_phases(model: Model, t: float, y: np.ndarray, p: np.ndarray, phases: Phases, leaving: np.ndarray,
+                    was_held: np.ndarray, force_tolerance: np.ndarray,
+                    speed_tolerance: float) -> tuple[np.ndarray, float, list[Event]]:
+    """Coulomb friction of the held contacts once their normal forces are settled (the twin
+    of ``friction_phases`` in phases.c; ``phases`` is updated in place).
+
+    For point masses on flat grounds each particle's tangential problem is its own, so the
+    order does not matter.  A sliding contact slower than ``speed_tolerance`` comes to rest
+    (its tangential velocity is zeroed, SETTLE) and sticks if its ground can hold it
+    ("stick"), or slides on along its pull; a sticking contact whose slack ``mu lam - |ft|``
+    is negative, or within its tolerance where its event fired, slides ("slip"); a contact
+    that landed with tangential velocity left slides.
+
+    Returns
+    -------
+    y : ndarray, shape (ny,)
+    loss : float
+        Kinetic energy removed by zeroing the last tangential velocities (J).
+    events : list of Event
+    """
+    held = phases.held
+    vt, ft, slack = model.friction(y, p, held, phases.push)
+    speed = np.linalg.norm(vt, axis=1)
+    on = held != 0
+    stopping = on & (phases.phase == SLIDING) & (speed <= speed_tolerance)
+    sticking = on & (phases.phase == HELD) & np.isfinite(slack)
+    landed = sticking & (speed > speed_tolerance)
+    slips = sticking & ~landed & ((slack < 0.0) | (leaving & (slack <= force_tolerance)))
+    residue = sticking & ~landed & ~slips & (speed > 0.0)  # sticking holds the acceleration: zero the rest
+    phases.phase[landed | slips] = SLIDING
+    events = [Event(t, int(c), "slip") for c in np.flatnonzero(slips & was_held)]
+    settle = stopping | residue
+    if not settle.any():
+        return y, 0.0, events
+    y, loss = model.impact(y, p, np.where(settle, SETTLE, KEEP).astype(np.intc))
+    held = np.where(settle, HELD, held).astype(np.intc)
+    slack = model.friction(y, p, held, phases.push)[2]
+    events += [Event(t, int(c), "stick") for c in np.flatnonzero(settle & (slack >= 0.0) & (phases.phase == SLIDING))]
+    phases.phase[settle] = np.where(slack[settle] >= 0.0, HELD, SLIDING)
+    return y, loss, events
 
 
 def resolve(
@@ -107,6 +150,7 @@ def resolve(
     impact_dt: float | None = None,
     restitution: np.ndarray | None = None,
     min_rebound: np.ndarray | None = None,
+    speed_tolerance: float = 0.0,
 ) -> Resolution:
     """Apply the event fixed point at instant ``t``.
 
@@ -136,6 +180,8 @@ def resolve(
     min_rebound : ndarray, shape (nc,), optional
         Rebound speeds below this are plastic: the rebound would not rise
         :data:`~flexbody.constants.ZENO_RISE` of the scene's size (default 0).
+    speed_tolerance : float
+        A sliding contact slower than this (m/s) has come to rest (see :func:`friction_phases`).
 
     Returns
     -------
@@ -149,7 +195,7 @@ def resolve(
     events: list[Event] = []
     loss = 0.0
     impacted, settled, not_held = np.zeros(nc, bool), np.zeros(nc, bool), np.zeros(nc, bool)
-    was_held = phases.phase == HELD  # on the ground before this instant, so v_n = 0
+    was_held = phases.on_ground.copy()  # on the ground before this instant, so v_n = 0
     for iterations in range(1, 2 * nc + 3):
         gaps, vn, lam = model.contact_state(y, p, phases.held, phases.push)
         near = (phases.phase == FREE) & (touching | (gaps <= phases.floor + gap_tolerance))
@@ -173,7 +219,7 @@ def resolve(
         # After a window, what velocity is left towards the ground is stopped instantly.
         instant = hit | (ending & (vn < 0.0))
         if instant.any():
-            stop = np.where(instant | (phases.phase == HELD), STOP, KEEP)
+            stop = np.where(instant | phases.on_ground, STOP, KEEP)
             stop[hit & rebounds] = REBOUND
             y, lost = model.impact(y, p, stop.astype(np.intc))
             loss += lost
@@ -186,7 +232,7 @@ def resolve(
         phases.floor[away] = np.minimum(0.0, gaps[away]) - gap_tolerance
         if (started | instant | away).any():
             continue  # the dampers saw the velocity jump: recompute the forces before holding anyone
-        pulling = (phases.phase == HELD) & ((lam < 0.0) | (leaving & (lam <= force_tolerance)))
+        pulling = phases.on_ground & ((lam < 0.0) | (leaving & (lam <= force_tolerance)))
         if not pulling.any():
             break
         # Release the most pulling contact, then recompute: exact also for coupled contacts.
@@ -199,6 +245,10 @@ def resolve(
             events.append(Event(t, c, "liftoff"))
     else:
         raise UnsettledInstant(t, iterations)
+    if hasattr(model, "friction") and getattr(model, "laws", np.zeros((0, 2)))[:, 0].any():
+        y, lost, found = friction_phases(model, t, y, p, phases, leaving, was_held, force_tolerance, speed_tolerance)
+        loss += lost
+        events += found
     # A free contact too close to its floor to be armed (released on the ground, or left at
     # -1e-16 by round-off) gets a floor a hair below: its next event is a real approach.
     gaps = model.gaps(y[: model.nq], p)

@@ -143,9 +143,6 @@ def _contact_law_problems(scene: Scene, values: dict) -> list[str]:
     if friction and values["impact"] == "thesis":
         out.append(f"`impact` = 'thesis': grounds {friction} have friction, whose impulse is applied instantly only; "
                    "use impact = 'instant' (the default)")
-    if friction and values["method"] not in COMPILED_METHODS:
-        out.append(f"`method` = {values['method']!r}: grounds {friction} have friction, whose stick and slip phases "
-                   f"run on the compiled methods only ({', '.join(COMPILED_METHODS)}, backend 'c')")
     return out
 
 
@@ -289,6 +286,7 @@ class _Run:
         solver = getattr(scipy.integrate, s.method)(model.rhs_function(self.p, phases.held, phases.push), t0, self.y.copy(),
                                    t_bound, **options)
         events = EventFunctions(model, self.p, phases, self.force_tolerance)
+        events.renew(self.y)
         g_old = events(self.y)
         try:
             while True:
@@ -310,6 +308,9 @@ class _Run:
                 self.record(dense, t_stop)
                 if hit:
                     return _Stop(t_stop, hit.contacts & events.free, hit.contacts & events.held_mask, True)
+                if events.friction:  # the next step's slip directions
+                    events.renew(solver.y)
+                    g_new = events(solver.y)
                 if solver.status == "finished":
                     return _Stop(solver.t, np.zeros_like(events.free), np.zeros_like(events.free), False)
                 lowered = events.free & (phases.floor < 0.0)
@@ -348,7 +349,8 @@ class _Run:
             res = resolve(self.model, t, self.y, self.p, self.phases, touching, leaving,
                           gap_tolerance=self.gap_tolerance, force_tolerance=self.force_tolerance,
                           masses=self.contact_masses, impact=s.impact, impact_dt=s.impact_dt,
-                          restitution=self.restitution, min_rebound=self.min_rebound)
+                          restitution=self.restitution, min_rebound=self.min_rebound,
+                          speed_tolerance=self.speed_tolerance)
             self.y[:] = res.y
             self.phases.assign(res.phases)
             new, not_held, loss = res.events, res.not_held, res.impact_loss

@@ -5,6 +5,10 @@ One event function per contact, positive while nothing happens:
 * ``FREE``: ``gap - floor`` (``floor`` is a hair below the ground, so a particle released
   at gap -1e-16 is still armed and a restart never starts on a root);
 * ``HELD``: ``lam + force_tolerance`` (the constraint force, lift-off when it would pull);
+  with friction the smaller of that and ``mu lam - |ft| + force_tolerance`` (it slips at 0);
+* ``SLIDING``: the smaller of ``lam + force_tolerance`` and the tangential velocity along the
+  slip direction at the start of the step (it stops at 0; the direction is renewed after
+  every step because in 3D it turns, see ``friction_event`` in integrator.c);
 * ``PUSHED``: none (its window ends at a known time).
 
 SciPy's ``solve_ivp`` keeps only the first of several terminal events falling at the same
@@ -21,7 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .constants import FREE, GROUP_TIME, HELD
+from .constants import FREE, GROUP_TIME, HELD, SLIDING
 from .contact import Phases
 from .model import Model
 
@@ -34,8 +38,24 @@ class EventFunctions:
         self.model, self.p, self.phases = model, p, phases
         self.force_tolerance = force_tolerance
         self.free = phases.phase == FREE
-        self.held_mask = phases.phase == HELD
+        self.held_mask = phases.on_ground
         self.held = phases.held
+        laws = getattr(model, "laws", np.zeros((0, 2)))
+        self.friction = bool(self.held_mask.any() and laws[:, 0].any())
+        self.direction = np.zeros((model.n_contacts, model.dim))  # each sliding contact's, at the step's start
+
+    def renew(self, y: np.ndarray) -> None:
+        """Take each sliding contact's slip direction at ``y`` (the start of the next step):
+        along its tangential velocity, or from rest along its pull (-ft)."""
+        if not self.friction:
+            return
+        vt, ft, _ = self.model.friction(y, self.p, self.held, self.phases.push)
+        speed, pull = np.linalg.norm(vt, axis=1), np.linalg.norm(ft, axis=1)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            direction = np.where((speed > 0.0)[:, None], vt / speed[:, None],
+                                 np.where((pull > 0.0)[:, None], -ft / pull[:, None], 0.0))
+        sliding = self.phases.phase == SLIDING
+        self.direction[sliding] = direction[sliding]
 
     def __call__(self, y: np.ndarray) -> np.ndarray:
         m = self.model
@@ -46,6 +66,11 @@ class EventFunctions:
         if self.held_mask.any():
             _, lam = m.rhs(y, self.p, self.held, self.phases.push)
             g[self.held_mask] = lam[self.held_mask] + self.force_tolerance[self.held_mask]
+            if self.friction:
+                vt, _, slack = m.friction(y, self.p, self.held, self.phases.push)
+                sticking, sliding = self.phases.phase == HELD, self.phases.phase == SLIDING
+                g[sticking] = np.minimum(g[sticking], slack[sticking] + self.force_tolerance[sticking])
+                g[sliding] = np.minimum(g[sliding], np.sum(vt * self.direction, axis=1)[sliding])
         return g
 
 
