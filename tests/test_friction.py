@@ -389,3 +389,28 @@ def test_a_stiffer_finer_ring_rolls_closer_to_g_sin_theta_over_two():
     assert wheel_errors[0] > wheel_errors[1] > wheel_errors[2]
     assert hoop_errors[0] > hoop_errors[1] > hoop_errors[2]
     assert wheel_errors[2] < 0.01 and hoop_errors[2] < 0.01
+
+
+# ----------------------------------------------------------------- guards
+
+
+@pytest.mark.parametrize("kinds, says", [(["stick", "slip"], "stick-slip chattering"),
+                                         (["impact"], "an accumulation of impacts")])
+def test_stick_slip_chattering_and_micro_bounce_cascades_stop_with_a_status(kinds, says):
+    from flexbody.contact import Event
+    from flexbody.driver import CHATTER_FRICTION, CHATTER_IMPACTS, CHATTER_WINDOW, SimulationFailed, _Run, _settings
+
+    scene = particle_scene([0.0, 0.0], [1.0, 0.0], friction=0.3, restitution=0.5)
+    run = _Run(scene, assembled_model(scene, "numpy"), _settings(scene, {"backend": "numpy"}), None, 10**6)
+    limit = CHATTER_FRICTION if "stick" in kinds else CHATTER_IMPACTS
+    spacing = CHATTER_WINDOW / (limit + 5)
+    for k in range(limit):  # as many as allowed within the window: nothing yet
+        run.check_guards(k * spacing, [Event(k * spacing, 0, kinds[k % len(kinds)], -1e-6)])
+    with pytest.raises(SimulationFailed, match=says) as failure:
+        run.check_guards(limit * spacing, [Event(limit * spacing, 0, kinds[limit % len(kinds)], -1e-6)])
+    assert failure.value.status == "chattering"
+    # Spread over more than the window, the same number is no chattering.
+    run = _Run(scene, assembled_model(scene, "numpy"), _settings(scene, {"backend": "numpy"}), None, 10**6)
+    for k in range(2 * limit):
+        t = k * 2 * CHATTER_WINDOW / limit
+        run.check_guards(t, [Event(t, 0, kinds[k % len(kinds)], -1e-6)])

@@ -4,7 +4,12 @@ Each contact (a particle against a ground) is in one phase:
 
 * ``FREE``: no constraint force; its event is the gap reaching the ground while approaching.
 * ``HELD`` (contact): the constraint force ``lam >= 0`` keeps its gap acceleration zero
-  (eq. 4.8-4.9); its event is ``lam`` turning negative (it would pull): lift-off.
+  (eq. 4.8-4.9); its event is ``lam`` turning negative (it would pull): lift-off.  On a
+  ground with friction it also sticks: the tangential force ``ft = -(tangential pull)``
+  holds it while ``|ft| <= mu lam``; its event "slip" is that slack reaching 0.
+* ``SLIDING`` (ground with friction): held along the normal, slipping along the ground
+  against ``ft = -mu lam v_t / |v_t|``; its event "stick" is ``v_t`` reaching 0 (located
+  along the slip direction of the step's start, renewed every step: in 3D it turns).
 * ``PUSHED`` (thesis impact mode only): the estimated impact force ``-m v_n / dT``
   (eq. 4.6) acts for ``dT``; then the contact is resolved like a fresh touch.
 
@@ -13,6 +18,13 @@ strictly), then the constraint forces are recomputed (the dampers see the veloci
 contacts whose force would pull are released, and this repeats until nothing changes.
 Contact forces of point masses on flat grounds decouple (``J M^-1 J^T`` is diagonal), so
 this is the exact solution of the contact complementarity problem, in any order.
+
+Impacts follow the ground's laws (DESIGN §6): ``v_n+ = -e v_n-`` (a rebound that would not
+rise ``ZENO_RISE`` of the scene is plastic, which ends Zeno's accumulation of bounces) and a
+tangential impulse ``min(m |v_t|, mu P_n)`` against ``v_t``.  Once the normal forces are
+settled, :func:`friction_phases` decides stick and slip, per particle (exact for point
+masses on flat grounds).  A particle held on two grounds at once where one has friction (a
+frictional corner) is refused by the driver (status ``unsupported``), not approximated.
 """
 
 from __future__ import annotations
