@@ -414,3 +414,32 @@ def test_stick_slip_chattering_and_micro_bounce_cascades_stop_with_a_status(kind
     for k in range(2 * limit):
         t = k * 2 * CHATTER_WINDOW / limit
         run.check_guards(t, [Event(t, 0, kinds[k % len(kinds)], -1e-6)])
+
+
+@pytest.mark.parametrize("path", PATHS[:1])  # the Python twin takes minutes on this body at this tolerance
+def test_a_frictional_bouncing_landing_in_the_z0_plane_of_3d_is_the_2d_one(path):
+    points = [[x, 0.0] for x in np.linspace(-0.2, 0.2, 5)]
+
+    def bar(dim):
+        pad = [0.0] * (dim - 2)
+        return flexbody.load_scene({
+            "name": "bar", "gravity": [0.0, -G] + pad,
+            "grounds": [{"point": [0.0, 0.0] + pad, "normal": [0.0, 1.0] + pad, "friction": 0.3,
+                         "restitution": 0.4}],
+            "bodies": [{"name": "bar", "particles": [q + pad for q in points],
+                        "links": [[k, k + 1] for k in range(4)] + [[0, 2], [2, 4]], "mass": 0.05,
+                        "stiffness": 3000.0, "damping": 0.2, "position": [0.0, 0.1] + pad,
+                        **({"angle": 0.05} if dim == 2 else {"rotation": [0.0, 0.0, 0.05]}),
+                        "velocity": [1.5, 0.0] + pad}],
+            "simulation": {"t_end": 0.6, "output_dt": 1e-3},
+        })
+
+    flat, space = simulate(bar(2), **path, **TIGHT), simulate(bar(3), **path, **TIGHT)
+    assert flat.success and space.success
+    assert {"stick", "slip"} <= set(flat.events_kind)
+    np.testing.assert_array_equal(space.events_kind, flat.events_kind)
+    np.testing.assert_allclose(space.events_time, flat.events_time, atol=1e-9)
+    np.testing.assert_allclose(space.positions[..., :2], flat.positions, atol=1e-9)
+    np.testing.assert_allclose(space.positions[..., 2], 0.0, atol=1e-15)
+    np.testing.assert_allclose(space.friction_force[..., :2], flat.friction_force, atol=1e-6)
+    np.testing.assert_allclose(space.friction_work, flat.friction_work, atol=1e-9)
