@@ -25,6 +25,7 @@ typedef struct {
     double *link_par;  /* (n_links, 3): k, c, L per link, packed from p for the link kernel */
     double *inv_mass;  /* (n,) */
     const double *mass, *gravity, *grounds; /* views into p; grounds (n_grounds, 2, dim) */
+    double *laws;      /* (n_grounds, 2): Coulomb mu and Newton e per ground (0: the thesis's ground) */
     /* Each particle's links (CSR, ascending: the order the right-hand side sums them in) and
      * its stencil, the state entries its force reads: its own q and u, then its neighbours'. */
     int *adj_start, *adj, *stencil_start, *stencil;
@@ -56,8 +57,9 @@ Assembly *fb_asm_new(int dim, int n, int n_links, int n_grounds, const int *link
     A->adj = malloc(sizeof(int) * (2 * (size_t)n_links + 1));
     A->stencil_start = malloc(sizeof(int) * ((size_t)n + 1));
     A->stencil = malloc(sizeof(int) * (2 * (size_t)dim * ((size_t)n + 2 * (size_t)n_links) + 1));
+    A->laws = calloc(2 * (size_t)n_grounds + 1, sizeof(double));
     if (!A->links || !A->axial || !A->p || !A->link_par || !A->inv_mass || !A->adj_start || !A->adj
-        || !A->stencil_start || !A->stencil) {
+        || !A->stencil_start || !A->stencil || !A->laws) {
         fb_asm_free(A);
         return 0;
     }
@@ -93,8 +95,14 @@ void fb_asm_free(Assembly *A)
 {
     if (!A) return;
     free(A->links); free(A->axial); free(A->p); free(A->link_par); free(A->inv_mass);
-    free(A->adj_start); free(A->adj); free(A->stencil_start); free(A->stencil);
+    free(A->adj_start); free(A->adj); free(A->stencil_start); free(A->stencil); free(A->laws);
     free(A);
+}
+
+/* Take the grounds' contact laws (n_grounds, 2): Coulomb mu and Newton e (copied). */
+void fb_asm_laws(Assembly *A, const double *laws)
+{
+    memcpy(A->laws, laws, sizeof(double) * 2 * (size_t)A->n_grounds);
 }
 
 /* Take the parameter values p (copied). */
@@ -221,6 +229,70 @@ static void free_acceleration_2d(const Assembly *A, const double *y, const doubl
         }
 }
 
+/* Coulomb friction on particle i held on ground g alone (DESIGN §6), after its normal
+ * constraint: acc (dim) is its acceleration with the normal force lam applied.  code FB_HELD
+ * sticks (the tangential force ft = -m a_t holds it: acc becomes 0), FB_SLIDING slips (ft =
+ * -mu lam v_t / |v_t|, or against the tangential pull a_t when v_t = 0).  Writes vt, ft
+ * (dim) and the sticking slack mu lam - |ft| (N; INFINITY without friction); returns the
+ * power friction dissipates (W, >= 0). */
+static double coulomb_2d(const Assembly *A, const double *x, const double *v, int i, int g, int code,
+                           double lam, double *acc, double *vt, double *ft, double *slack)
+{
+    const double mu = A->laws[2 * g], m = A->mass[i];
+    double gap, J[2], normal[2], tangents[2], vn, speed, an, at[2], pull;
+    const double *ground = A->grounds + 2 * 2 * g;
+    fb_k_ground_2d(x + 2 * i, ground, ground + 2, &gap, J, normal, tangents);
+    fb_k_split_2d(v + 2 * i, normal, &vn, vt, &speed);
+    for (int a = 0; a < 2; ++a) ft[a] = 0.0;
+    *slack = INFINITY;
+    if (mu == 0.0) return 0.0;
+    fb_k_split_2d(acc, normal, &an, at, &pull);
+    if (code != FB_SLIDING) { /* sticking: the tangential force cancels the tangential pull */
+        for (int a = 0; a < 2; ++a) {
+            ft[a] = -m * at[a];
+            acc[a] -= at[a];
+        }
+        *slack = mu * lam - m * pull;
+        return 0.0;
+    }
+    const double *along = speed > 0.0 ? vt : at, size = speed > 0.0 ? speed : pull;
+    const double force = mu * fmax(lam, 0.0);
+    if (!(size > 0.0)) return 0.0;
+    for (int a = 0; a < 2; ++a) {
+        ft[a] = -force * along[a] / size;
+        acc[a] += ft[a] / m;
+    }
+    *slack = 0.0;
+    return force * speed;
+}
+
+/* Contact c's friction (FbSystem.friction), O(its stencil): its tangential velocity vt and
+ * force ft (dim) and sticking slack (see coulomb), and its normal force lam_c if held. */
+static int friction_2d(const FbSystem *s, const double *y, const int *held, const double *push, int c,
+                      double *vt, double *ft, double *slack, double *lam_c)
+{
+    const Assembly *A = s->data;
+    const int G = A->n_grounds, i = c / G, g = c % G;
+    double acc[2], lam[G];
+    int n_held = 0;
+    for (int k = 0; k < G; ++k) n_held += held[i * G + k] != 0;
+    *lam_c = 0.0;
+    if (!held[c] || n_held != 1) { /* free, or a corner (refused with friction by the driver): no friction */
+        double normal[2], J[2], tangents[2], gap, vn, speed;
+        const double *ground = A->grounds + 2 * 2 * g;
+        fb_k_ground_2d(y + 2 * i, ground, ground + 2, &gap, J, normal, tangents);
+        fb_k_split_2d(y + s->nq + 2 * i, normal, &vn, vt, &speed);
+        for (int a = 0; a < 2; ++a) ft[a] = 0.0;
+        *slack = INFINITY;
+        if (!held[c]) return 0;
+    }
+    free_acceleration_2d(A, y, push, i, acc);
+    if (constrain_2d(A, y, i, held + i * G, acc, lam)) return -1;
+    *lam_c = lam[g];
+    if (n_held == 1) coulomb_2d(A, y, y + s->nq, i, g, held[c], lam[g], acc, vt, ft, slack);
+    return 0;
+}
+
 /* Contact c alone (FbSystem.contact): its gap and, if held, its force, O(its stencil). */
 static int contact_2d(const FbSystem *s, const double *y, const int *held, const double *push, int c,
                      double *gap, double *vn, double *lam_c)
@@ -287,9 +359,17 @@ static int rhs_2d(const FbSystem *s, double t, const double *y, const int *held,
             }
         }
         if (any_held && constrain_2d(A, x, i, h, acc + 2 * i, lam + i * G)) return -1;
+        int n_held = 0, g_held = 0;
+        for (int g = 0; g < G; ++g)
+            if (h[g]) { ++n_held; g_held = g; }
+        if (n_held == 1 && A->laws[2 * g_held] != 0.0) {
+            double vt[2], ft[2], slack;
+            impact_power += coulomb_2d(A, x, v, i, g_held, h[g_held], lam[i * G + g_held], acc + 2 * i,
+                                         vt, ft, &slack);
+        }
     }
     ydot[2 * nq] = power;
-    ydot[2 * nq + 1] = impact_power;
+    ydot[2 * nq + 1] = impact_power; /* friction needs instant impacts: never both in one run */
     return 0;
 }
 
@@ -326,12 +406,9 @@ static int contact_state_2d(const FbSystem *s, const double *y, const int *held,
     return 0;
 }
 
-/* Set particle i, stopped on its grounds in S, onto those it is below: event location stops
- * it within the gap tolerance under the ground, and without this each stop-release-stop
- * cycle of a chattering particle would start the next a tolerance lower.  The least move
- * dx with J_S (x + dx) - P = max(gap, 0); at most the tolerance, so the energy it adds
- * (a spring force or weight times it) is far below the ledger's resolution.  0 or -1. */
-static int settle_2d(const Assembly *A, double *x, int i, const int *S)
+/* Set particle i, stopped on its grounds in S, onto those it is below (FbSystem.settle):
+ * the least move dx with J_S (x + dx) - P = max(gap, 0).  0 or -1. */
+static int settle_particle_2d(const Assembly *A, double *x, int i, const int *S)
 {
     const int G = A->n_grounds;
     int k = 0, below = 0;
@@ -355,6 +432,36 @@ static int settle_2d(const Assembly *A, double *x, int i, const int *S)
     return 0;
 }
 
+/* After the plastic impulse P_n = lam (>= 0 pushing) that stopped particle i's velocity u
+ * along ground g's normal: the rebound -e v_n- (code FB_REBOUND), then Coulomb's tangential
+ * impulse min(m |v_t|, mu P_n) against v_t (DESIGN §6); FB_SETTLE zeroes v_t (it comes to rest).  One ground only: a particle stopped
+ * on two grounds at once with friction or restitution is refused by the driver. */
+static void contact_laws_2d(const Assembly *A, const double *x, int i, int g, int code, double *u, double lam)
+{
+    const double mu = A->laws[2 * g], e = code == FB_REBOUND ? A->laws[2 * g + 1] : 0.0;
+    if (mu == 0.0 && e == 0.0 && code != FB_SETTLE) return;
+    double gap, J[2], normal[2], tangents[2], vn, vt[2], speed;
+    const double *ground = A->grounds + 2 * 2 * g;
+    fb_k_ground_2d(x + 2 * i, ground, ground + 2, &gap, J, normal, tangents);
+    /* lam / m = -v_n-; a held contact's v_n- is 0 up to round-off, either sign: no impulse */
+    const double stopped = fmax(lam, 0.0) * A->inv_mass[i], rebound = e * stopped;
+    for (int a = 0; a < 2; ++a) u[a] += rebound * normal[a];
+    fb_k_split_2d(u, normal, &vn, vt, &speed);
+    const double impulse = mu * (stopped + rebound); /* mu P_n / m: the most friction can take */
+    if (!(speed > 0.0)) return;
+    const double keep = impulse >= speed || code == FB_SETTLE ? 0.0 : 1.0 - impulse / speed;
+    for (int a = 0; a < 2; ++a) u[a] -= (1.0 - keep) * vt[a];
+}
+
+static int settle_2d(const FbSystem *s, double *y, const int *stop)
+{
+    const Assembly *A = s->data;
+    const int G = A->n_grounds;
+    for (int i = 0; i < A->n; ++i)
+        if (settle_particle_2d(A, y, i, stop + i * G)) return -1;
+    return 0;
+}
+
 static int impact_2d(const FbSystem *s, const double *y, const int *stop, double *y_out, double *loss)
 {
     const Assembly *A = s->data;
@@ -363,15 +470,16 @@ static int impact_2d(const FbSystem *s, const double *y, const int *stop, double
     memcpy(y_out, y, sizeof(double) * s->ny);
     *loss = 0.0;
     for (int i = 0; i < A->n; ++i) {
-        int any = 0;
-        for (int g = 0; g < G; ++g) any |= stop[i * G + g];
-        if (!any) continue;
+        int stopped = 0, g_stop = 0;
+        for (int g = 0; g < G; ++g)
+            if (stop[i * G + g]) { ++stopped; g_stop = g; }
+        if (!stopped) continue;
         double *u = y_out + s->nq + 2 * i, f[2], potential, before, after;
         fb_k_particle_2d(y + 2 * i, u, A->mass + i, A->gravity, f, &potential, &before);
         if (constrain_2d(A, y, i, stop + i * G, u, lam)) return -1;
+        if (stopped == 1) contact_laws_2d(A, y, i, g_stop, stop[i * G + g_stop], u, lam[g_stop]);
         fb_k_particle_2d(y + 2 * i, u, A->mass + i, A->gravity, f, &potential, &after);
         *loss += before - after;
-        if (settle_2d(A, y_out, i, stop + i * G)) return -1;
     }
     return 0;
 }
@@ -503,6 +611,70 @@ static void free_acceleration_3d(const Assembly *A, const double *y, const doubl
         }
 }
 
+/* Coulomb friction on particle i held on ground g alone (DESIGN §6), after its normal
+ * constraint: acc (dim) is its acceleration with the normal force lam applied.  code FB_HELD
+ * sticks (the tangential force ft = -m a_t holds it: acc becomes 0), FB_SLIDING slips (ft =
+ * -mu lam v_t / |v_t|, or against the tangential pull a_t when v_t = 0).  Writes vt, ft
+ * (dim) and the sticking slack mu lam - |ft| (N; INFINITY without friction); returns the
+ * power friction dissipates (W, >= 0). */
+static double coulomb_3d(const Assembly *A, const double *x, const double *v, int i, int g, int code,
+                           double lam, double *acc, double *vt, double *ft, double *slack)
+{
+    const double mu = A->laws[2 * g], m = A->mass[i];
+    double gap, J[3], normal[3], tangents[6], vn, speed, an, at[3], pull;
+    const double *ground = A->grounds + 2 * 3 * g;
+    fb_k_ground_3d(x + 3 * i, ground, ground + 3, &gap, J, normal, tangents);
+    fb_k_split_3d(v + 3 * i, normal, &vn, vt, &speed);
+    for (int a = 0; a < 3; ++a) ft[a] = 0.0;
+    *slack = INFINITY;
+    if (mu == 0.0) return 0.0;
+    fb_k_split_3d(acc, normal, &an, at, &pull);
+    if (code != FB_SLIDING) { /* sticking: the tangential force cancels the tangential pull */
+        for (int a = 0; a < 3; ++a) {
+            ft[a] = -m * at[a];
+            acc[a] -= at[a];
+        }
+        *slack = mu * lam - m * pull;
+        return 0.0;
+    }
+    const double *along = speed > 0.0 ? vt : at, size = speed > 0.0 ? speed : pull;
+    const double force = mu * fmax(lam, 0.0);
+    if (!(size > 0.0)) return 0.0;
+    for (int a = 0; a < 3; ++a) {
+        ft[a] = -force * along[a] / size;
+        acc[a] += ft[a] / m;
+    }
+    *slack = 0.0;
+    return force * speed;
+}
+
+/* Contact c's friction (FbSystem.friction), O(its stencil): its tangential velocity vt and
+ * force ft (dim) and sticking slack (see coulomb), and its normal force lam_c if held. */
+static int friction_3d(const FbSystem *s, const double *y, const int *held, const double *push, int c,
+                      double *vt, double *ft, double *slack, double *lam_c)
+{
+    const Assembly *A = s->data;
+    const int G = A->n_grounds, i = c / G, g = c % G;
+    double acc[3], lam[G];
+    int n_held = 0;
+    for (int k = 0; k < G; ++k) n_held += held[i * G + k] != 0;
+    *lam_c = 0.0;
+    if (!held[c] || n_held != 1) { /* free, or a corner (refused with friction by the driver): no friction */
+        double normal[3], J[3], tangents[6], gap, vn, speed;
+        const double *ground = A->grounds + 2 * 3 * g;
+        fb_k_ground_3d(y + 3 * i, ground, ground + 3, &gap, J, normal, tangents);
+        fb_k_split_3d(y + s->nq + 3 * i, normal, &vn, vt, &speed);
+        for (int a = 0; a < 3; ++a) ft[a] = 0.0;
+        *slack = INFINITY;
+        if (!held[c]) return 0;
+    }
+    free_acceleration_3d(A, y, push, i, acc);
+    if (constrain_3d(A, y, i, held + i * G, acc, lam)) return -1;
+    *lam_c = lam[g];
+    if (n_held == 1) coulomb_3d(A, y, y + s->nq, i, g, held[c], lam[g], acc, vt, ft, slack);
+    return 0;
+}
+
 /* Contact c alone (FbSystem.contact): its gap and, if held, its force, O(its stencil). */
 static int contact_3d(const FbSystem *s, const double *y, const int *held, const double *push, int c,
                      double *gap, double *vn, double *lam_c)
@@ -569,9 +741,17 @@ static int rhs_3d(const FbSystem *s, double t, const double *y, const int *held,
             }
         }
         if (any_held && constrain_3d(A, x, i, h, acc + 3 * i, lam + i * G)) return -1;
+        int n_held = 0, g_held = 0;
+        for (int g = 0; g < G; ++g)
+            if (h[g]) { ++n_held; g_held = g; }
+        if (n_held == 1 && A->laws[2 * g_held] != 0.0) {
+            double vt[3], ft[3], slack;
+            impact_power += coulomb_3d(A, x, v, i, g_held, h[g_held], lam[i * G + g_held], acc + 3 * i,
+                                         vt, ft, &slack);
+        }
     }
     ydot[2 * nq] = power;
-    ydot[2 * nq + 1] = impact_power;
+    ydot[2 * nq + 1] = impact_power; /* friction needs instant impacts: never both in one run */
     return 0;
 }
 
@@ -608,12 +788,9 @@ static int contact_state_3d(const FbSystem *s, const double *y, const int *held,
     return 0;
 }
 
-/* Set particle i, stopped on its grounds in S, onto those it is below: event location stops
- * it within the gap tolerance under the ground, and without this each stop-release-stop
- * cycle of a chattering particle would start the next a tolerance lower.  The least move
- * dx with J_S (x + dx) - P = max(gap, 0); at most the tolerance, so the energy it adds
- * (a spring force or weight times it) is far below the ledger's resolution.  0 or -1. */
-static int settle_3d(const Assembly *A, double *x, int i, const int *S)
+/* Set particle i, stopped on its grounds in S, onto those it is below (FbSystem.settle):
+ * the least move dx with J_S (x + dx) - P = max(gap, 0).  0 or -1. */
+static int settle_particle_3d(const Assembly *A, double *x, int i, const int *S)
 {
     const int G = A->n_grounds;
     int k = 0, below = 0;
@@ -637,6 +814,36 @@ static int settle_3d(const Assembly *A, double *x, int i, const int *S)
     return 0;
 }
 
+/* After the plastic impulse P_n = lam (>= 0 pushing) that stopped particle i's velocity u
+ * along ground g's normal: the rebound -e v_n- (code FB_REBOUND), then Coulomb's tangential
+ * impulse min(m |v_t|, mu P_n) against v_t (DESIGN §6); FB_SETTLE zeroes v_t (it comes to rest).  One ground only: a particle stopped
+ * on two grounds at once with friction or restitution is refused by the driver. */
+static void contact_laws_3d(const Assembly *A, const double *x, int i, int g, int code, double *u, double lam)
+{
+    const double mu = A->laws[2 * g], e = code == FB_REBOUND ? A->laws[2 * g + 1] : 0.0;
+    if (mu == 0.0 && e == 0.0 && code != FB_SETTLE) return;
+    double gap, J[3], normal[3], tangents[6], vn, vt[3], speed;
+    const double *ground = A->grounds + 2 * 3 * g;
+    fb_k_ground_3d(x + 3 * i, ground, ground + 3, &gap, J, normal, tangents);
+    /* lam / m = -v_n-; a held contact's v_n- is 0 up to round-off, either sign: no impulse */
+    const double stopped = fmax(lam, 0.0) * A->inv_mass[i], rebound = e * stopped;
+    for (int a = 0; a < 3; ++a) u[a] += rebound * normal[a];
+    fb_k_split_3d(u, normal, &vn, vt, &speed);
+    const double impulse = mu * (stopped + rebound); /* mu P_n / m: the most friction can take */
+    if (!(speed > 0.0)) return;
+    const double keep = impulse >= speed || code == FB_SETTLE ? 0.0 : 1.0 - impulse / speed;
+    for (int a = 0; a < 3; ++a) u[a] -= (1.0 - keep) * vt[a];
+}
+
+static int settle_3d(const FbSystem *s, double *y, const int *stop)
+{
+    const Assembly *A = s->data;
+    const int G = A->n_grounds;
+    for (int i = 0; i < A->n; ++i)
+        if (settle_particle_3d(A, y, i, stop + i * G)) return -1;
+    return 0;
+}
+
 static int impact_3d(const FbSystem *s, const double *y, const int *stop, double *y_out, double *loss)
 {
     const Assembly *A = s->data;
@@ -645,15 +852,16 @@ static int impact_3d(const FbSystem *s, const double *y, const int *stop, double
     memcpy(y_out, y, sizeof(double) * s->ny);
     *loss = 0.0;
     for (int i = 0; i < A->n; ++i) {
-        int any = 0;
-        for (int g = 0; g < G; ++g) any |= stop[i * G + g];
-        if (!any) continue;
+        int stopped = 0, g_stop = 0;
+        for (int g = 0; g < G; ++g)
+            if (stop[i * G + g]) { ++stopped; g_stop = g; }
+        if (!stopped) continue;
         double *u = y_out + s->nq + 3 * i, f[3], potential, before, after;
         fb_k_particle_3d(y + 3 * i, u, A->mass + i, A->gravity, f, &potential, &before);
         if (constrain_3d(A, y, i, stop + i * G, u, lam)) return -1;
+        if (stopped == 1) contact_laws_3d(A, y, i, g_stop, stop[i * G + g_stop], u, lam[g_stop]);
         fb_k_particle_3d(y + 3 * i, u, A->mass + i, A->gravity, f, &potential, &after);
         *loss += before - after;
-        if (settle_3d(A, y_out, i, stop + i * G)) return -1;
     }
     return 0;
 }
@@ -728,6 +936,8 @@ void fb_asm_system(Assembly *A, FbSystem *s)
         s->impact = impact_2d;
         s->outputs = outputs_2d;
         s->contact = contact_2d;
+        s->friction = friction_2d;
+        s->settle = settle_2d;
     }
     if (A->dim == 3) {
         s->rhs = rhs_3d;
@@ -736,6 +946,8 @@ void fb_asm_system(Assembly *A, FbSystem *s)
         s->impact = impact_3d;
         s->outputs = outputs_3d;
         s->contact = contact_3d;
+        s->friction = friction_3d;
+        s->settle = settle_3d;
     }
     s->stencil = stencil;
 }
@@ -766,9 +978,21 @@ int fb_sys_impact(const FbSystem *s, const double *y, const int *stop, double *y
     return s->impact(s, y, stop, y_out, loss);
 }
 
+int fb_sys_friction(const FbSystem *s, const double *y, const int *held, const double *push, int c, double *vt,
+                    double *ft, double *slack, double *lam_c)
+{
+    return s->friction ? s->friction(s, y, held, push, c, vt, ft, slack, lam_c) : -2;
+}
+
 void fb_sys_outputs(const FbSystem *s, const double *y, double *x, double *v, double *energies)
 {
     s->outputs(s, y, x, v, energies);
+}
+
+/* FbSystem.settle on y (in place): 0, -1, or -2 if the system has none. */
+int fb_sys_settle(const FbSystem *s, double *y, const int *stop)
+{
+    return s->settle ? s->settle(s, y, stop) : -2;
 }
 
 /* Contact c alone (FbSystem.contact): *gap, *vn, *lam_c and, in entries (capacity), the

@@ -49,6 +49,7 @@ static void layout(FbWork *w, char *base, size_t *size)
     double **vectors[] = {&w->y_old, &w->y, &w->ys, &w->tmp, &w->f1, &w->scale, &w->e5, &w->e3, &w->zero,
                           &w->dy, &w->mid_y, &w->root_y, &w->ev_dy, &w->r_y_new};
     for (size_t k = 0; k < sizeof vectors / sizeof *vectors; ++k) *vectors[k] = carve(&next, v);
+    w->fr_dir = carve(&next, 3 * c); /* (nc, dim <= 3): sliding contacts' directions */
     double **contacts[] = {&w->lam, &w->g_old, &w->g_new, &w->gaps, &w->ev_lam, &w->ev_gaps, &w->g_mid,
                            &w->roots, &w->root_g, &w->r_gaps, &w->r_vn, &w->r_lam};
     for (size_t k = 0; k < sizeof contacts / sizeof *contacts; ++k) *contacts[k] = carve(&next, c);
@@ -91,6 +92,8 @@ typedef struct {
     double gap_tol;
     long nfev, nevent;
     int failed;
+    int any_friction; /* held contacts and a system with friction (FbSystem.friction) */
+    double *dir;      /* (nc, 3): each sliding contact's direction at the start of the step */
 } Problem;
 
 typedef struct {
@@ -111,15 +114,47 @@ static double rms(const double *x, const double *scale, int n)
     return sqrt(s / n);
 }
 
-/* Event functions, positive while nothing happens: gap - floor (free), lam + tol (held);
- * the gaps themselves go to gaps. */
+/* A held contact's friction event, positive while nothing happens: a sticking contact's
+ * slack mu lam - |ft| (+ tol; it slips at 0), a sliding one's tangential velocity along its
+ * direction at the start of the step (it stops at 0).  In 3D the slip direction turns (the
+ * tangential pull bends it), so |v_t| never changes sign and a fixed direction may never be
+ * crossed: the direction is renewed at every accepted step (renew), where the value is
+ * |v_t| > 0, and within one step it turns little.  From rest the contact slides along its
+ * pull (-ft): that is its direction then. */
+static double friction_event(Problem *P, const double *y, int c, int renew)
+{
+    double vt[3], ft[3], slack, lam, along = 0.0;
+    const int d = P->s->dim;
+    double *dir = P->dir + 3 * c;
+    if (P->s->friction(P->s, y, P->held, P->push, c, vt, ft, &slack, &lam)) {
+        P->failed = 1;
+        return INFINITY;
+    }
+    if (P->held[c] != FB_SLIDING) return slack + P->force_tol[c];
+    if (renew) {
+        double speed = 0.0, pull = 0.0;
+        for (int a = 0; a < d; ++a) {
+            speed += vt[a] * vt[a];
+            pull += ft[a] * ft[a];
+        }
+        for (int a = 0; a < d; ++a)
+            dir[a] = speed > 0.0 ? vt[a] / sqrt(speed) : (pull > 0.0 ? -ft[a] / sqrt(pull) : 0.0);
+    }
+    for (int a = 0; a < d; ++a) along += vt[a] * dir[a];
+    return along;
+}
+
+/* Event functions, positive while nothing happens: gap - floor (free), lam + tol (held),
+ * and with friction the smaller of that and the friction event; the gaps go to gaps. */
 static void events_from(Problem *P, const double *y, const double *lam, double *g, double *gaps)
 {
     P->s->gaps(P->s, y, gaps);
     for (int c = 0; c < P->nc; ++c) {
         if (P->phase[c] == FB_FREE) g[c] = gaps[c] - P->floor[c];
-        else if (P->phase[c] == FB_HELD) g[c] = lam[c] + P->force_tol[c];
-        else g[c] = INFINITY;
+        else if (P->held[c]) {
+            g[c] = lam[c] + P->force_tol[c];
+            if (P->any_friction) g[c] = fmin(g[c], friction_event(P, y, c, 0));
+        } else g[c] = INFINITY;
     }
 }
 
@@ -341,6 +376,7 @@ static double root(Problem *P, Stepper *S, int c, double a, double fa, double b,
             dense(P, S, b, y, free_contact ? P->s->dim : k, entries);
             if (P->s->contact(P->s, y, P->held, P->push, c, &gap, 0, &lam)) P->failed = 1;
             fb = free_contact ? gap - P->floor[c] : lam + P->force_tol[c];
+            if (!free_contact && P->any_friction) fb = fmin(fb, friction_event(P, y, c, 0));
         } else if (free_contact) { /* the same value events_from gives: gap - floor */
             dense(P, S, b, y, P->s->nq, 0);
             P->s->gaps(P->s, y, g);
@@ -355,7 +391,7 @@ static double root(Problem *P, Stepper *S, int c, double a, double fa, double b,
 }
 
 /* Earliest sign change (+ to <= 0) in the step, checking its midpoint too; 1 if found. */
-static int locate(Problem *P, Stepper *S, const double *g_old, const double *g_new, double *t_hit, int *fired)
+static int locate(Problem *P, Stepper *S, const double *g_old, double *g_new, double *t_hit, int *fired)
 {
     FbWork *w = P->w;
     double *y = w->mid_y, *g_mid = w->g_mid, *roots = w->roots;
@@ -363,6 +399,15 @@ static int locate(Problem *P, Stepper *S, const double *g_old, const double *g_n
     const int nc = P->nc;
     dense(P, S, t_mid, y, P->n_event, 0);
     events_at(P, t_mid, y, g_mid);
+    /* A free contact armed a hair below the ground (just released or rebounded) and 2 gap
+     * tolerances above it at the midpoint is armed at the ground for the second half, as at
+     * a step's end: else a bounce within one step would be caught only at the lower floor. */
+    for (int c = 0; c < nc; ++c)
+        if (P->phase[c] == FB_FREE && P->floor[c] < 0.0 && g_mid[c] + P->floor[c] >= 2.0 * P->gap_tol) {
+            g_mid[c] += P->floor[c];
+            g_new[c] += P->floor[c];
+            P->floor[c] = 0.0;
+        }
     int crossed = 0;
     for (int c = 0; c < nc; ++c)
         crossed |= ((g_old[c] > 0.0) & (g_mid[c] <= 0.0)) | ((g_mid[c] > 0.0) & (g_new[c] <= 0.0));
@@ -416,11 +461,13 @@ int fb_integrate(FbWork *w, const FbSystem *s, int method, double t0, const doub
     Problem P = {s, w, push, force_tol, floor, w->held, w->phase, 0, s->nq, ny, nc, gap_tol, 0, 0, 0};
     for (int c = 0; c < nc; ++c) {
         P.phase[c] = phase[c];
-        P.held[c] = phase[c] == FB_HELD;
-        P.any_held |= P.held[c];
+        P.held[c] = phase[c] == FB_HELD || phase[c] == FB_SLIDING ? phase[c] : 0; /* the rhs's contact laws */
+        P.any_held |= P.held[c] != 0;
         touching[c] = leaving[c] = 0;
     }
     if (P.any_held) P.n_event = ny;
+    P.any_friction = P.any_held && s->friction;
+    P.dir = w->fr_dir;
     S.method = method;
     S.stages = method == 0 ? 6 : 12;
     S.order = method == 0 ? 4 : 7;
@@ -438,6 +485,8 @@ int fb_integrate(FbWork *w, const FbSystem *s, int method, double t0, const doub
     memcpy(S.y, y0, sizeof(double) * ny);
     double *f0 = S.K[S.stages];
     rhs(&P, t, S.y, f0, lam);
+    for (int c = 0; c < nc; ++c)
+        if (P.any_friction && P.held[c] == FB_SLIDING) friction_event(&P, S.y, c, 1);
     events_from(&P, S.y, lam, g_old, gaps);
     double h_abs, interval = t_bound - t0;
     if (*h_next > 0.0) { /* the step the controller proposed where the last segment ended */
@@ -519,13 +568,15 @@ int fb_integrate(FbWork *w, const FbSystem *s, int method, double t0, const doub
                 if (gaps[c] < *min_gap) *min_gap = gaps[c];
             for (int c = 0; c < nc; ++c) {
                 touching[c] = fired[c] && P.phase[c] == FB_FREE;
-                leaving[c] = fired[c] && P.phase[c] == FB_HELD;
+                leaving[c] = fired[c] && P.held[c];
             }
             status = FB_EVENT;
             goto finish;
         }
         for (int c = 0; c < nc; ++c) { /* gaps: at S.y, from events_from */
             if (gaps[c] < *min_gap) *min_gap = gaps[c];
+            if (P.any_friction && P.held[c] == FB_SLIDING) /* the next step's slip direction */
+                g_new[c] = fmin(lam[c] + force_tol[c], friction_event(&P, S.y, c, 1));
             if (P.phase[c] == FB_FREE && floor[c] < 0.0 && gaps[c] >= 2.0 * gap_tol) {
                 floor[c] = 0.0;
                 g_new[c] = gaps[c];
