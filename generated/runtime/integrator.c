@@ -399,15 +399,6 @@ static int locate(Problem *P, Stepper *S, const double *g_old, double *g_new, do
     const int nc = P->nc;
     dense(P, S, t_mid, y, P->n_event, 0);
     events_at(P, t_mid, y, g_mid);
-    /* A free contact armed a hair below the ground (just released or rebounded) and 2 gap
-     * tolerances above it at the midpoint is armed at the ground for the second half, as at
-     * a step's end: else a bounce within one step would be caught only at the lower floor. */
-    for (int c = 0; c < nc; ++c)
-        if (P->phase[c] == FB_FREE && P->floor[c] < 0.0 && g_mid[c] + P->floor[c] >= 2.0 * P->gap_tol) {
-            g_mid[c] += P->floor[c];
-            g_new[c] += P->floor[c];
-            P->floor[c] = 0.0;
-        }
     int crossed = 0;
     for (int c = 0; c < nc; ++c)
         crossed |= ((g_old[c] > 0.0) & (g_mid[c] <= 0.0)) | ((g_mid[c] > 0.0) & (g_new[c] <= 0.0));
@@ -417,6 +408,16 @@ static int locate(Problem *P, Stepper *S, const double *g_old, double *g_new, do
     for (int k = 0; k < 2; ++k) {
         int any = 0;
         double first = INFINITY;
+        /* Nothing in the first half: a free contact armed a hair below the ground (just
+         * released or rebounded) and 2 gap tolerances above it at the midpoint is armed at the
+         * ground for the second half, as at a step's end (else a bounce within one step is
+         * caught only at the lower floor).  Not before: the step may end in the first half. */
+        for (int c = 0; k == 1 && c < nc; ++c)
+            if (P->phase[c] == FB_FREE && P->floor[c] < 0.0 && g_mid[c] + P->floor[c] >= 2.0 * P->gap_tol) {
+                g_mid[c] += P->floor[c];
+                g_new[c] += P->floor[c];
+                P->floor[c] = 0.0;
+            }
         for (int c = 0; c < nc; ++c) {
             roots[c] = INFINITY;
             if (ga[k][c] > 0.0 && gb[k][c] <= 0.0) {

@@ -117,8 +117,11 @@ def locate(
     """
     t_mid = 0.5 * (t_old + t_new)
     g_mid = events(dense(t_mid))
-    events.rearm(g_mid, g_new)
-    for (ta, ga), (tb, gb) in (((t_old, g_old), (t_mid, g_mid)), ((t_mid, g_mid), (t_new, g_new))):
+    if not (((g_old > 0.0) & (g_mid <= 0.0)) | ((g_mid > 0.0) & (g_new <= 0.0))).any():
+        return None  # the common case: nothing happened in this step
+    for half, ((ta, ga), (tb, gb)) in enumerate((((t_old, g_old), (t_mid, g_mid)), ((t_mid, g_mid), (t_new, g_new)))):
+        if half == 1:  # nothing in the first half (the step may end there: not before)
+            events.rearm(g_mid, g_new)
         fired = np.flatnonzero((ga > 0.0) & (gb <= 0.0))
         if fired.size == 0:
             continue
