@@ -110,7 +110,7 @@ def _parser() -> argparse.ArgumentParser:
                            description="Benchmarks, not tests: work-precision diagram (wp), stability map "
                                        "(stability), resolution study (resolution), the whole run command (run), cost vs size (scale), Dask sweeps (sweep); "
                                        "JSON and PNG in --out.")
-    bench.add_argument("--study", choices=("wp", "stability", "resolution", "mujoco", "run", "scale", "sweep"), action="append",
+    bench.add_argument("--study", choices=("wp", "stability", "resolution", "mujoco", "mujoco3d", "run", "scale", "sweep"), action="append",
                        help="which study (repeatable; default: all; mujoco needs flexbody[mujoco])")
     bench.add_argument("--out", default="bench", metavar="DIR", help="output folder")
     bench.add_argument("--repeats", type=int, default=5, help="timing repeats (median is reported)")
