@@ -545,7 +545,8 @@ def plot_mujoco(data: dict):
         bottom.semilogy(t, np.abs(y - reference), style, lw=0.9, color=line.get_color())
     for row in data["rows"]:
         if row.get("diverged_at_s"):
-            top.plot([], [], " ", label=f"{row['label']}: unstable, reset at t = {row['diverged_at_s']:g} s (not drawn)")
+            top.plot([], [], " ", label=f"{row['label']}: unstable, reset at t = {row['diverged_at_s']:g} s "
+                                        "(not drawn)")
     top.set_ylabel("height of the centre of mass (m)")
     top.legend(fontsize=8)
     title = data.get("title", "Thesis ball (axial dampers)")  # a mujoco.json saved before titles were

@@ -212,7 +212,8 @@ def _plot(rows: list[dict]):
                      label=f"{_LABEL[dim]}: {base:.0f} MB + {slope * 1024:.1f} kB per particle")
     handles = [Line2D([], [], marker=m, color=c, label=label) for m, c, label, _ in quantities]
     if any(r.get("whole_scene_derive_s") for r in rows):
-        handles.append(Line2D([], [], marker="x", color="k", label="old path: derive whole scene (SymPy), before any run"))
+        handles.append(Line2D([], [], marker="x", color="k",
+                              label="old path: derive whole scene (SymPy), before any run"))
     handles += [Line2D([], [], color="0.4", marker="o", label=_LABEL[d], **_STYLE[d]) for d in dims]
     ax.set_xlabel("particles")
     ax.set_ylabel("time (s)")

@@ -13,6 +13,7 @@ A 3D scene keeps its axes.
 
 from __future__ import annotations
 
+import contextlib
 import time
 
 import numpy as np
@@ -55,7 +56,8 @@ def mjcf(scene: Scene, timestep: float) -> str:
     for i, (x, m) in enumerate(zip(scene.initial_positions() @ to3, scene.masses)):
         parts.append(
             f'<body name="p{i}" pos="{_vec(x)}">{joints}<site name="s{i}"/>'
-            f'<geom type="sphere" size="{_num(SPHERE_RADIUS)}" mass="{_num(m)}" contype="1" conaffinity="0" {contact}/></body>'
+            f'<geom type="sphere" size="{_num(SPHERE_RADIUS)}" mass="{_num(m)}" contype="1" conaffinity="0" '
+            f'{contact}/></body>'
         )
     parts.append("</worldbody><tendon>")
     constants = (np.concatenate([getattr(b, name) for b in scene.bodies]) for name in
@@ -87,35 +89,49 @@ def run(scene: Scene, timestep: float, repeats: int = 5) -> dict:
 
     model = mujoco.MjModel.from_xml_string(mjcf(scene, timestep))
     n, dim = scene.n_particles, scene.dim
-    steps = int(round(scene.simulation.t_end / timestep))
+    steps = round(scene.simulation.t_end / timestep)
     v0 = scene.initial_velocities().ravel()  # the joints of a particle are its axes, in order
 
-    def start() -> mujoco.MjData:
+    def start():
         data = mujoco.MjData(model)
         data.qvel[:] = v0
         return data
 
     times = []
-    for _ in range(repeats):
+    with _quiet(mujoco):
+        for _ in range(repeats):
+            data = start()
+            begin = time.perf_counter()
+            mujoco.mj_step(model, data, nstep=steps)
+            times.append(time.perf_counter() - begin)
         data = start()
-        begin = time.perf_counter()
-        mujoco.mj_step(model, data, nstep=steps)
-        times.append(time.perf_counter() - begin)
-    data = start()
-    x0 = scene.initial_positions()
-    positions = np.empty((steps + 1, n, dim))
-    positions[0] = x0
-    unstable = data.warning[mujoco.mjtWarning.mjWARN_BADQACC]
-    diverged = None
-    for k in range(1, steps + 1):
-        mujoco.mj_step(model, data)
-        if unstable.number:  # MuJoCo reset the state after a NaN or huge acceleration: nothing after it counts
-            diverged = k * timestep
-            positions[k:] = np.nan
-            break
-        positions[k] = x0 + data.qpos.reshape(n, dim)
+        x0 = scene.initial_positions()
+        positions = np.empty((steps + 1, n, dim))
+        positions[0] = x0
+        unstable = data.warning[mujoco.mjtWarning.mjWARN_BADQACC]
+        diverged = None
+        for k in range(1, steps + 1):
+            mujoco.mj_step(model, data)
+            if unstable.number:  # MuJoCo reset the state after a NaN or huge acceleration: nothing after counts
+                diverged = k * timestep
+                positions[k:] = np.nan
+                break
+            positions[k] = x0 + data.qpos.reshape(n, dim)
     up = -np.asarray(scene.gravity) / np.linalg.norm(scene.gravity)
     lowest = min((np.nanmin((positions - g.point) @ np.asarray(g.normal)) for g in scene.grounds), default=0.0)
+    penetration = float(max(0.0, -lowest)) if diverged is None else float("nan")
     return {"time_s": float(np.median(times)), "t": np.arange(steps + 1) * timestep, "positions": positions,
-            "heights": positions @ up, "max_penetration_m": float(max(0.0, -lowest)) if diverged is None else float("nan"), "diverged_at_s": diverged,
+            "heights": positions @ up, "max_penetration_m": penetration, "diverged_at_s": diverged,
             "version": mujoco.__version__}
+
+
+@contextlib.contextmanager
+def _quiet(mujoco):
+    """Silence MuJoCo's warnings (printed, and appended to MUJOCO_LOG.TXT in the working
+    folder): :func:`run` detects and reports the one that matters, instability."""
+    previous = mujoco.get_mju_user_warning()
+    mujoco.set_mju_user_warning(lambda text: None)
+    try:
+        yield
+    finally:
+        mujoco.set_mju_user_warning(previous)
