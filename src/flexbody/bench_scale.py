@@ -191,7 +191,7 @@ def _plot(rows: list[dict]):
     import matplotlib.pyplot as plt
     from matplotlib.lines import Line2D
 
-    fig, (ax, mem) = plt.subplots(1, 2, figsize=(11, 4.6))
+    fig, (ax, mem) = plt.subplots(1, 2, figsize=(11, 5.0))
     quantities = (("o", "C0", "whole process: scene, run 1 s, save", lambda r: r["again_wall_s"]),
                   ("s", "C1", "integration of the 1 s drop", lambda r: r["again_integration_s"]),
                   ("^", "C2", "one RHS evaluation", lambda r: r["again_rhs_per_link_ns"] * r["links"] * 1e-9))
@@ -219,11 +219,11 @@ def _plot(rows: list[dict]):
     ax.set_ylabel("time (s)")
     ax.set_title("Cost vs size (assembled element kernels)")
     ax.grid(True, which="both", alpha=0.3)
-    ax.legend(handles=handles, fontsize=8, loc="lower right")
+    fig.legend(handles=handles, fontsize=8, loc="lower center", ncol=3)  # below both panels: off the lines
     mem.set_xlabel("particles")
     mem.set_ylabel("peak resident memory of the process (MB)")
     mem.set_title("Memory vs size (linear axes)")
     mem.legend(fontsize=8)
     mem.grid(True, which="both", alpha=0.3)
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0.1, 1, 1))
     return fig
