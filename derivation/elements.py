@@ -20,6 +20,11 @@ Elements
     A plane ground through ``P`` with unit normal ``n``: the gap ``(x - P) . n``, its
     Jacobian with respect to x, the normal, and an orthonormal tangent basis (in 3D the
     branch-free basis of Duff et al., "Building an orthonormal basis, revisited", 2017).
+``split``
+    A contact vector w (a velocity, or a force) against a ground's unit normal n: its
+    normal component ``w . n``, its tangential part ``w - (w . n) n`` and that part's
+    length.  Coulomb friction (DESIGN §6) acts on the tangential part: the impulse at an
+    impact, the sticking force and the slip direction.
 
 Every kernel is a :class:`Kernel`: named inputs (flat arrays of given sizes) and named
 outputs (SymPy matrices of those inputs only).
@@ -172,11 +177,31 @@ def ground_kernel(d: int) -> Kernel:
     )
 
 
+def split_kernel(d: int) -> Kernel:
+    """Normal component, tangential part and its length of a vector w against unit normal n."""
+    N = ReferenceFrame("N")
+    w, n = _vector_symbols("w", d), _vector_symbols("n", d)
+    vector, normal = _frame_vector(N, w), _frame_vector(N, n)
+    along = vector.dot(normal)
+    tangential = vector - along * normal
+    components = sp.Matrix([tangential.dot(axis) for axis in (N.x, N.y, N.z)[:d]])
+    return Kernel(
+        f"split_{d}d", "Normal component w . n, tangential part w - (w . n) n and its length of a vector w "
+        "(a velocity or a force) at a ground with unit normal n.",
+        [("w", w), ("n", n)],
+        {
+            "normal": sp.Matrix([along]),
+            "tangential": components,
+            "tangential_norm": sp.Matrix([sp.sqrt(sum(c**2 for c in components))]),
+        },
+    )
+
+
 def all_kernels() -> list[Kernel]:
     """Every element kernel, in the order they are generated."""
     kernels: list[Kernel] = []
     for d in DIMENSIONS:
         for damper in DAMPERS:
             kernels += link_kernels(d, damper)
-        kernels += [particle_kernel(d), ground_kernel(d)]
+        kernels += [particle_kernel(d), ground_kernel(d), split_kernel(d)]
     return kernels

@@ -17,6 +17,7 @@ from flexbody.assembly import assembled_model
 from flexbody.dynamics import state_jacobian
 from flexbody.model import NumpyModel, load_derived_model
 from flexbody.paths import cache_root
+from flexbody.state import initial_coordinates
 
 from .conftest import BACKENDS, HAS_CC, body, make_scene
 
@@ -187,3 +188,73 @@ def test_a_400_particle_ring_lands_and_lifts_off_cleanly():
     assert result.positions[:, :, 1].min() >= -tolerance
     total = result.total_energy
     assert np.abs(total - total[0]).max() <= 1e-5 * abs(total[0])
+
+
+@pytest.mark.skipif(not HAS_CC, reason="no C compiler")
+@pytest.mark.parametrize("dim", [2, 3])
+@pytest.mark.parametrize("seed", [0, 1])
+def test_one_contact_alone_equals_the_whole_system_and_reads_only_its_stencil(seed, dim, rng):
+    """Event location and event instants evaluate one contact from its particle's stencil:
+    its gap, normal velocity and held force must equal contact_state's and rhs's bit for bit
+    (else a root and the step's end disagree), and every entry outside the stencil may be
+    garbage."""
+    scene = random_scene(seed, dim)
+    model = assembled_model(scene, "c")
+    p, nc, G = model.parameters(scene), model.n_contacts, model.n_grounds
+    links = np.asarray(model.links)
+    for _ in range(3):
+        y = random_state(model, rng, scene)
+        held = (rng.random(nc) < 0.5).astype(np.intc)
+        if G > 1:
+            held.reshape(-1, G)[:, 1:] &= rng.random((scene.n_particles, 1)) < 0.5
+        push = np.where(rng.random(nc) < 0.3, rng.uniform(0, 5, nc), 0.0) * (1 - held)
+        gaps, vn, lam = model.contact_state(y, p, held, push)
+        np.testing.assert_array_equal(lam, model.rhs(y, p, held, push)[1])
+        for c in range(nc):
+            i = c // G
+            gap, vn_c, lam_c, entries = model.contact(y, p, held, push, c)
+            assert (gap, vn_c, lam_c) == (gaps[c], vn[c], lam[c]), f"contact {c}"
+            neighbours = {i} | {int(j) for a, b in links for j in (a, b) if i in (a, b)}
+            expected = {k for j in neighbours for k in range(dim * j, dim * j + dim)}
+            expected |= {dim * scene.n_particles + k for k in expected}  # their velocities
+            assert set(entries.tolist()) == expected
+            assert entries[:dim].tolist() == list(range(dim * i, dim * i + dim))  # its position first
+            garbage = np.full_like(y, np.nan)
+            garbage[entries] = y[entries]
+            assert model.contact(garbage, p, held, push, c)[:3] == (gap, vn_c, lam_c)
+
+
+@pytest.mark.skipif(not HAS_CC, reason="no C compiler")
+def test_whole_scene_models_have_no_per_contact_evaluation():
+    """Contacts of the floating formulation couple through M: no per-contact shortcut."""
+    scene = flexbody.load_scene("dumbbell")
+    model = flexbody.load_model(scene, formulation="floating")
+    y = np.concatenate([*initial_coordinates(scene, model), [0.0, 0.0]])
+    nc = model.n_contacts
+    assert model.contact(y, model.parameters(scene), np.zeros(nc, np.intc), np.zeros(nc), 0) is None
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_settle_sets_a_stopped_particle_found_below_the_ground_onto_it(backend):
+    """Event location stops a particle up to the gap tolerance below the ground; settling
+    puts it on the ground (else every stop-release-stop cycle of a chattering particle starts
+    the next a tolerance lower), moving it along the normal only, and leaves particles not
+    stopped, or above the ground, where they are."""
+    scene = make_scene(body(particles=[[0.0, 0.0], [0.3, 0.0], [0.6, 0.0]], links=[[0, 1], [1, 2]], mass=0.1,
+                            position=[0.0, 0.0]),
+                       grounds=[{"point": [0.0, 0.0], "normal": [0.3, 1.0]}])
+    model = assembled_model(scene, backend)
+    p = model.parameters(scene)
+    normal = np.array([0.3, 1.0]) / np.hypot(0.3, 1.0)
+    x = np.array([[0.0, 0.0], [0.3, 0.0], [0.6, 0.0]])
+    x -= (x @ normal)[:, None] * normal  # all on the ground ...
+    x += np.array([-3e-12, -2e-12, 5e-13])[:, None] * normal  # ... then two below, one above
+    y = np.concatenate([x.ravel(), [0.1, -1.0, 0.2, -0.5, 0.0, -0.3], [0.0, 0.0]])
+    out = model.settle(y, p, np.array([1, 0, 1], np.intc))
+    gaps, before = model.gaps(out[: model.nq], p), model.gaps(y[: model.nq], p)
+    assert abs(gaps[0]) <= 1e-16  # stopped and below: set on the ground
+    assert gaps[1] == before[1]  # below but not stopped: not this instant's business
+    assert gaps[2] == before[2]  # stopped above the ground: not moved
+    np.testing.assert_array_equal(out[6:], y[6:])  # velocities untouched
+    moved = out[:2] - y[:2]
+    assert abs(moved @ np.array([-normal[1], normal[0]])) <= 1e-20  # along the normal only

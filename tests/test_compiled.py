@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 import flexbody
-from flexbody.compiled import IMPACT, CompiledPath
+from flexbody.compiled import IMPACT, SLIP, STICK, CompiledPath
+from flexbody.driver import EVENT_KINDS
 from flexbody.contact import PUSHED, Phases, resolve
 from flexbody.model import load_model
 
@@ -28,7 +29,9 @@ def compiled_instants(monkeypatch, scene, **options) -> list[dict]:
         instants.append(dict(before, after=dict(y=self.y.copy(), phases=self.phases.copy(), events=events,
                                                 not_held=not_held.astype(bool), loss=loss),
                              run=dict(p=self.p, gap_tolerance=self.gap_tolerance,
-                                      force_tolerance=self.force_tolerance, masses=self.masses)))
+                                      force_tolerance=self.force_tolerance, masses=self.masses,
+                                      restitution=self.restitution, min_rebound=self.min_rebound,
+                                      speed_tolerance=self.speed_tolerance)))
         return events, not_held, loss
 
     monkeypatch.setattr(CompiledPath, "resolve", spy)
@@ -41,19 +44,33 @@ def assert_same_as_reference(model, instant):
     run, after = instant["run"], instant["after"]
     ref = resolve(model, instant["t"], instant["y"], run["p"], instant["phases"], instant["touching"],
                   instant["leaving"], gap_tolerance=run["gap_tolerance"], force_tolerance=run["force_tolerance"],
-                  masses=run["masses"], impact=instant["impact"], impact_dt=instant["impact_dt"])
+                  masses=run["masses"], impact=instant["impact"], impact_dt=instant["impact_dt"],
+                  restitution=run["restitution"], min_rebound=run["min_rebound"],
+                  speed_tolerance=run["speed_tolerance"])
     # The same arithmetic (both call the generated fb_contact_state and fb_impact): exactly equal.
     np.testing.assert_array_equal(after["y"], ref.y)
     for name in Phases.__dataclass_fields__:
         np.testing.assert_array_equal(getattr(after["phases"], name), getattr(ref.phases, name), err_msg=name)
-    assert after["events"] == [(e.contact, IMPACT if e.kind == "impact" else 1, e.normal_velocity)
-                               for e in ref.events]
+    codes = {name: code for code, name in EVENT_KINDS.items()}
+    assert after["events"] == [(e.contact, codes[e.kind], e.normal_velocity) for e in ref.events]
     np.testing.assert_array_equal(after["not_held"], ref.not_held)
     assert after["loss"] == ref.impact_loss
 
 
-@pytest.mark.parametrize("case", ["thesis_ball", "thesis_ball, thesis impacts", "flat landing"])
+@pytest.mark.parametrize("case", ["thesis_ball", "thesis_ball, thesis impacts", "flat landing",
+                                  "ball_on_incline", "bouncing bar"])
 def test_compiled_fixed_point_equals_the_python_one(monkeypatch, case):
+    if case in ("ball_on_incline", "bouncing bar"):
+        scene, options = friction_case(case), {}
+        instants = compiled_instants(monkeypatch, scene, **options)
+        model = load_model(scene, backend="c")
+        for instant in instants:
+            assert_same_as_reference(model, instant)
+        kinds = [kind for i in instants for _, kind, _ in i["after"]["events"]]
+        assert STICK in kinds and SLIP in kinds
+        if case == "bouncing bar":
+            assert any(i["after"]["not_held"].any() for i in instants)  # rebounds
+        return
     if case == "flat landing":
         scene, options = level_ring(), {"rtol": 1e-10, "atol": 1e-13}
     else:
@@ -75,3 +92,17 @@ def test_compiled_fixed_point_equals_the_python_one(monkeypatch, case):
         assert any((i["after"]["phases"].phase == PUSHED).any() for i in instants)
     else:
         assert any(i["after"]["not_held"].any() for i in instants)
+
+
+def friction_case(name: str):
+    """A scene with friction (and restitution) at its ground."""
+    if name == "ball_on_incline":
+        return flexbody.load_scene("ball_on_incline")
+    points = [[x, 0.0] for x in np.linspace(-0.2, 0.2, 5)]
+    return flexbody.load_scene({
+        "name": "bar", "grounds": [{"point": [0.0, 0.0], "normal": [0.0, 1.0], "friction": 0.3, "restitution": 0.4}],
+        "bodies": [{"name": "bar", "particles": points, "links": [[k, k + 1] for k in range(4)] + [[0, 2], [2, 4]],
+                    "mass": 0.05, "stiffness": 3000.0, "damping": 0.2, "position": [0.0, 0.1], "angle": 0.05,
+                    "velocity": [1.5, 0.0]}],
+        "simulation": {"t_end": 0.6, "output_dt": 1e-3},
+    })

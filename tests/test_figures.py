@@ -172,3 +172,22 @@ def test_bench_charts_redraw_from_the_committed_json_with_every_axis_labelled():
     rows = [t.get_text() for t in bench.plot_stability(json.loads((folder / "stability_map.json").read_text()))
             .axes[0].get_yticklabels()]
     assert "dopri5 (compiled loop)" in rows and "RK45 (SciPy loop)" in rows
+
+
+def test_the_friction_figure_is_drawn_for_a_run_with_friction_only():
+    from flexbody.driver import simulate
+    from flexbody.figures import figure_friction, has_friction, render_all
+
+    scene = flexbody.load_scene({
+        "name": "slide", "grounds": [{"point": [0.0, 0.0], "normal": [0.0, 1.0], "friction": 0.5}],
+        "bodies": [{"name": "p", "particles": [[0.0, 0.0]], "links": [], "stiffness": [], "damping": [],
+                    "mass": 0.1, "position": [0.0, 0.0], "velocity": [1.0, 0.0]}],
+        "simulation": {"t_end": 0.3, "output_dt": 1e-3},
+    })
+    r = simulate(scene)
+    assert has_friction(r)
+    fig = figure_friction(r, scene.grounds)
+    bottom = fig.axes[1]
+    assert [t.get_text() for t in bottom.get_yticklabels()] == ["particle 0"]
+    assert "friction.png" in render_all(r, scene.grounds)
+    assert not has_friction(simulate("thesis_ball", t_end=0.3))

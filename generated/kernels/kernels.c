@@ -54,6 +54,12 @@ void fb_kb_ground_2d(long n_elements, const double *x, const double *P, const do
         fb_k_ground_2d(x + e * 2, P + e * 2, n + e * 2, gap + e * 1, gap_jacobian + e * 2, normal + e * 2, tangents + e * 2);
 }
 
+void fb_kb_split_2d(long n_elements, const double *w, const double *n, double *normal, double *tangential, double *tangential_norm)
+{
+    for (long e = 0; e < n_elements; ++e)
+        fb_k_split_2d(w + e * 2, n + e * 2, normal + e * 1, tangential + e * 2, tangential_norm + e * 1);
+}
+
 void fb_kb_link_relative_3d_force(long n_elements, const double *xi, const double *xj, const double *vi, const double *vj, const double *par, double *force, double *power)
 {
     for (long e = 0; e < n_elements; ++e)
@@ -100,4 +106,10 @@ void fb_kb_ground_3d(long n_elements, const double *x, const double *P, const do
 {
     for (long e = 0; e < n_elements; ++e)
         fb_k_ground_3d(x + e * 3, P + e * 3, n + e * 3, gap + e * 1, gap_jacobian + e * 3, normal + e * 3, tangents + e * 6);
+}
+
+void fb_kb_split_3d(long n_elements, const double *w, const double *n, double *normal, double *tangential, double *tangential_norm)
+{
+    for (long e = 0; e < n_elements; ++e)
+        fb_k_split_3d(w + e * 3, n + e * 3, normal + e * 1, tangential + e * 3, tangential_norm + e * 1);
 }

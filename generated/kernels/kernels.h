@@ -210,6 +210,20 @@ static inline void fb_k_ground_2d(const double *restrict x, const double *restri
     tangents[1] = n[0];
 }
 
+/* Normal component w . n, tangential part w - (w . n) n and its length of a vector w (a velocity or a force) at a ground with unit normal n.
+ * in: w[2], n[2]; out: normal[1], tangential[2], tangential_norm[1]. Operations after CSE: 12. */
+static inline void fb_k_split_2d(const double *restrict w, const double *restrict n, double *restrict normal, double *restrict tangential, double *restrict tangential_norm)
+{
+(void)w; (void)n; 
+    const double w0 = n[0]*w[0] + n[1]*w[1];
+    const double w1 = -n[0]*w0 + w[0];
+    const double w2 = -n[1]*w0 + w[1];
+    normal[0] = w0;
+    tangential[0] = w1;
+    tangential[1] = w2;
+    tangential_norm[0] = sqrt(w1*w1 + w2*w2);
+}
+
 /* Force on particle i of a spring (eq. 3.7) and relative (thesis eq. 3.8) damper, and the damping power (W, >= 0); par = [k, c, L]. The force on j is minus it.
  * in: xi[3], xj[3], vi[3], vj[3], par[3]; out: force[3], power[1]. Operations after CSE: 31. */
 static inline void fb_k_link_relative_3d_force(const double *restrict xi, const double *restrict xj, const double *restrict vi, const double *restrict vj, const double *restrict par, double *restrict force, double *restrict power)
@@ -506,6 +520,22 @@ static inline void fb_k_ground_3d(const double *restrict x, const double *restri
     tangents[3] = -n[0]*w3;
     tangents[4] = -n[1]*n[1]*w1 + w0;
     tangents[5] = -n[1];
+}
+
+/* Normal component w . n, tangential part w - (w . n) n and its length of a vector w (a velocity or a force) at a ground with unit normal n.
+ * in: w[3], n[3]; out: normal[1], tangential[3], tangential_norm[1]. Operations after CSE: 18. */
+static inline void fb_k_split_3d(const double *restrict w, const double *restrict n, double *restrict normal, double *restrict tangential, double *restrict tangential_norm)
+{
+(void)w; (void)n; 
+    const double w0 = n[0]*w[0] + n[1]*w[1] + n[2]*w[2];
+    const double w1 = -n[0]*w0 + w[0];
+    const double w2 = -n[1]*w0 + w[1];
+    const double w3 = -n[2]*w0 + w[2];
+    normal[0] = w0;
+    tangential[0] = w1;
+    tangential[1] = w2;
+    tangential[2] = w3;
+    tangential_norm[0] = sqrt(w1*w1 + w2*w2 + w3*w3);
 }
 
 #endif

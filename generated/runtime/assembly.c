@@ -25,13 +25,18 @@ typedef struct {
     double *link_par;  /* (n_links, 3): k, c, L per link, packed from p for the link kernel */
     double *inv_mass;  /* (n,) */
     const double *mass, *gravity, *grounds; /* views into p; grounds (n_grounds, 2, dim) */
-    double *scratch;   /* (2 nq + 2): a right-hand side for contact_state */
+    double *laws;      /* (n_grounds, 2): Coulomb mu and Newton e per ground (0: the thesis's ground) */
+    /* Each particle's links (CSR, ascending: the order the right-hand side sums them in) and
+     * its stencil, the state entries its force reads: its own q and u, then its neighbours'. */
+    int *adj_start, *adj, *stencil_start, *stencil;
 } Assembly;
 
 static int n_parameters(const Assembly *A)
 {
     return A->n + 3 * A->n_links + A->dim + 2 * A->dim * A->n_grounds;
 }
+
+void fb_asm_free(Assembly *A);
 
 /* A new assembly of n particles of dimension dim, links (n_links, 2) with their damper
  * laws, and n_grounds grounds; the index arrays are copied.  Bind parameters before use. */
@@ -48,22 +53,56 @@ Assembly *fb_asm_new(int dim, int n, int n_links, int n_grounds, const int *link
     A->p = malloc(sizeof(double) * ((size_t)n_parameters(A) + 1));
     A->link_par = malloc(sizeof(double) * (3 * (size_t)n_links + 1));
     A->inv_mass = malloc(sizeof(double) * ((size_t)n + 1));
-    A->scratch = malloc(sizeof(double) * (2 * (size_t)n * dim + 2));
-    if (!A->links || !A->axial || !A->p || !A->link_par || !A->inv_mass || !A->scratch) {
-        free(A->links); free(A->axial); free(A->p); free(A->link_par); free(A->inv_mass); free(A->scratch);
-        free(A);
+    A->adj_start = calloc((size_t)n + 1, sizeof(int));
+    A->adj = malloc(sizeof(int) * (2 * (size_t)n_links + 1));
+    A->stencil_start = malloc(sizeof(int) * ((size_t)n + 1));
+    A->stencil = malloc(sizeof(int) * (2 * (size_t)dim * ((size_t)n + 2 * (size_t)n_links) + 1));
+    A->laws = calloc(2 * (size_t)n_grounds + 1, sizeof(double));
+    if (!A->links || !A->axial || !A->p || !A->link_par || !A->inv_mass || !A->adj_start || !A->adj
+        || !A->stencil_start || !A->stencil || !A->laws) {
+        fb_asm_free(A);
         return 0;
     }
     memcpy(A->links, links, sizeof(int) * 2 * (size_t)n_links);
     memcpy(A->axial, axial, sizeof(int) * (size_t)n_links);
+    for (int l = 0; l < 2 * n_links; ++l) A->adj_start[links[l] + 1]++;
+    for (int i = 0; i < n; ++i) A->adj_start[i + 1] += A->adj_start[i];
+    int *cursor = A->stencil_start; /* borrowed as the fill cursor until the stencils are built */
+    memcpy(cursor, A->adj_start, sizeof(int) * (size_t)n);
+    for (int l = 0; l < n_links; ++l) {
+        A->adj[cursor[links[2 * l]]++] = l;
+        A->adj[cursor[links[2 * l + 1]]++] = l;
+    }
+    int k = 0;
+    for (int i = 0; i < n; ++i) {
+        A->stencil_start[i] = k;
+        const int start = A->adj_start[i], end = A->adj_start[i + 1];
+        for (int m = start - 1; m < end; ++m) { /* i itself, then its neighbours */
+            int p = i;
+            if (m >= start) {
+                const int *link = links + 2 * A->adj[m];
+                p = link[0] == i ? link[1] : link[0];
+            }
+            for (int a = 0; a < dim; ++a) A->stencil[k++] = dim * p + a;
+            for (int a = 0; a < dim; ++a) A->stencil[k++] = dim * (n + p) + a;
+        }
+    }
+    A->stencil_start[n] = k;
     return A;
 }
 
 void fb_asm_free(Assembly *A)
 {
     if (!A) return;
-    free(A->links); free(A->axial); free(A->p); free(A->link_par); free(A->inv_mass); free(A->scratch);
+    free(A->links); free(A->axial); free(A->p); free(A->link_par); free(A->inv_mass);
+    free(A->adj_start); free(A->adj); free(A->stencil_start); free(A->stencil); free(A->laws);
     free(A);
+}
+
+/* Take the grounds' contact laws (n_grounds, 2): Coulomb mu and Newton e (copied). */
+void fb_asm_laws(Assembly *A, const double *laws)
+{
+    memcpy(A->laws, laws, sizeof(double) * 2 * (size_t)A->n_grounds);
 }
 
 /* Take the parameter values p (copied). */
@@ -161,6 +200,119 @@ static int constrain_2d(const Assembly *A, const double *x, int i, const int *S,
     return 0;
 }
 
+/* Particle i's acceleration without its contacts' forces (its links, gravity and prescribed
+ * forces), from its stencil alone: the right-hand side's sums in its order, bit for bit. */
+static void free_acceleration_2d(const Assembly *A, const double *y, const double *push, int i, double *acc)
+{
+    const int G = A->n_grounds;
+    const double *x = y, *v = y + 2 * A->n;
+    for (int a = 0; a < 2; ++a) acc[a] = 0.0;
+    for (int m = A->adj_start[i]; m < A->adj_start[i + 1]; ++m) {
+        const int l = A->adj[m], first = A->links[2 * l], second = A->links[2 * l + 1];
+        const int a_i = 2 * first, a_j = 2 * second;
+        double f[2], pw;
+        if (A->axial[l]) fb_k_link_axial_2d_force(x + a_i, x + a_j, v + a_i, v + a_j, A->link_par + 3 * l, f, &pw);
+        else fb_k_link_relative_2d_force(x + a_i, x + a_j, v + a_i, v + a_j, A->link_par + 3 * l, f, &pw);
+        for (int a = 0; a < 2; ++a) {
+            if (first == i) acc[a] += f[a];
+            else acc[a] -= f[a];
+        }
+    }
+    double f[2], potential, kinetic;
+    fb_k_particle_2d(x + 2 * i, v + 2 * i, A->mass + i, A->gravity, f, &potential, &kinetic);
+    for (int a = 0; a < 2; ++a) acc[a] = (acc[a] + f[a]) * A->inv_mass[i];
+    for (int g = 0; g < G; ++g)
+        if (push[i * G + g] != 0.0) {
+            double gap, J[2];
+            ground_2d(A, x, i, g, &gap, J);
+            for (int a = 0; a < 2; ++a) acc[a] += J[a] * push[i * G + g] * A->inv_mass[i];
+        }
+}
+
+/* Coulomb friction on particle i held on ground g alone (DESIGN §6), after its normal
+ * constraint: acc (dim) is its acceleration with the normal force lam applied.  code FB_HELD
+ * sticks (the tangential force ft = -m a_t holds it: acc becomes 0), FB_SLIDING slips (ft =
+ * -mu lam v_t / |v_t|, or against the tangential pull a_t when v_t = 0).  Writes vt, ft
+ * (dim) and the sticking slack mu lam - |ft| (N; INFINITY without friction); returns the
+ * power friction dissipates (W, >= 0). */
+static double coulomb_2d(const Assembly *A, const double *x, const double *v, int i, int g, int code,
+                           double lam, double *acc, double *vt, double *ft, double *slack)
+{
+    const double mu = A->laws[2 * g], m = A->mass[i];
+    double gap, J[2], normal[2], tangents[2], vn, speed, an, at[2], pull;
+    const double *ground = A->grounds + 2 * 2 * g;
+    fb_k_ground_2d(x + 2 * i, ground, ground + 2, &gap, J, normal, tangents);
+    fb_k_split_2d(v + 2 * i, normal, &vn, vt, &speed);
+    for (int a = 0; a < 2; ++a) ft[a] = 0.0;
+    *slack = INFINITY;
+    if (mu == 0.0) return 0.0;
+    fb_k_split_2d(acc, normal, &an, at, &pull);
+    if (code != FB_SLIDING) { /* sticking: the tangential force cancels the tangential pull */
+        for (int a = 0; a < 2; ++a) {
+            ft[a] = -m * at[a];
+            acc[a] -= at[a];
+        }
+        *slack = mu * lam - m * pull;
+        return 0.0;
+    }
+    const double *along = speed > 0.0 ? vt : at, size = speed > 0.0 ? speed : pull;
+    const double force = mu * fmax(lam, 0.0);
+    if (!(size > 0.0)) return 0.0;
+    for (int a = 0; a < 2; ++a) {
+        ft[a] = -force * along[a] / size;
+        acc[a] += ft[a] / m;
+    }
+    *slack = 0.0;
+    return force * speed;
+}
+
+/* Contact c's friction (FbSystem.friction), O(its stencil): its tangential velocity vt and
+ * force ft (dim) and sticking slack (see coulomb), and its normal force lam_c if held. */
+static int friction_2d(const FbSystem *s, const double *y, const int *held, const double *push, int c,
+                      double *vt, double *ft, double *slack, double *lam_c)
+{
+    const Assembly *A = s->data;
+    const int G = A->n_grounds, i = c / G, g = c % G;
+    double acc[2], lam[G];
+    int n_held = 0;
+    for (int k = 0; k < G; ++k) n_held += held[i * G + k] != 0;
+    *lam_c = 0.0;
+    if (!held[c] || n_held != 1) { /* free, or a corner (refused with friction by the driver): no friction */
+        double normal[2], J[2], tangents[2], gap, vn, speed;
+        const double *ground = A->grounds + 2 * 2 * g;
+        fb_k_ground_2d(y + 2 * i, ground, ground + 2, &gap, J, normal, tangents);
+        fb_k_split_2d(y + s->nq + 2 * i, normal, &vn, vt, &speed);
+        for (int a = 0; a < 2; ++a) ft[a] = 0.0;
+        *slack = INFINITY;
+        if (!held[c]) return 0;
+    }
+    free_acceleration_2d(A, y, push, i, acc);
+    if (constrain_2d(A, y, i, held + i * G, acc, lam)) return -1;
+    *lam_c = lam[g];
+    if (n_held == 1) coulomb_2d(A, y, y + s->nq, i, g, held[c], lam[g], acc, vt, ft, slack);
+    return 0;
+}
+
+/* Contact c alone (FbSystem.contact): its gap and, if held, its force, O(its stencil). */
+static int contact_2d(const FbSystem *s, const double *y, const int *held, const double *push, int c,
+                     double *gap, double *vn, double *lam_c)
+{
+    const Assembly *A = s->data;
+    const int G = A->n_grounds, i = c / G;
+    double J[2], acc[2], lam[G];
+    ground_2d(A, y, i, c % G, gap, J);
+    if (vn) { /* as contact_state sums it */
+        *vn = 0.0;
+        for (int a = 0; a < 2; ++a) *vn += J[a] * y[s->nq + 2 * i + a];
+    }
+    *lam_c = 0.0;
+    if (!held[c]) return 0;
+    free_acceleration_2d(A, y, push, i, acc);
+    if (constrain_2d(A, y, i, held + i * G, acc, lam)) return -1;
+    *lam_c = lam[c % G];
+    return 0;
+}
+
 /* The right-hand side: springs and dampers over the links, gravity over the particles,
  * prescribed forces and held contacts over the contacts. */
 static int rhs_2d(const FbSystem *s, double t, const double *y, const int *held, const double *push,
@@ -207,9 +359,17 @@ static int rhs_2d(const FbSystem *s, double t, const double *y, const int *held,
             }
         }
         if (any_held && constrain_2d(A, x, i, h, acc + 2 * i, lam + i * G)) return -1;
+        int n_held = 0, g_held = 0;
+        for (int g = 0; g < G; ++g)
+            if (h[g]) { ++n_held; g_held = g; }
+        if (n_held == 1 && A->laws[2 * g_held] != 0.0) {
+            double vt[2], ft[2], slack;
+            impact_power += coulomb_2d(A, x, v, i, g_held, h[g_held], lam[i * G + g_held], acc + 2 * i,
+                                         vt, ft, &slack);
+        }
     }
     ydot[2 * nq] = power;
-    ydot[2 * nq + 1] = impact_power;
+    ydot[2 * nq + 1] = impact_power; /* friction needs instant impacts: never both in one run */
     return 0;
 }
 
@@ -221,20 +381,85 @@ static void gaps_2d(const FbSystem *s, const double *y, double *gaps)
         for (int g = 0; g < A->n_grounds; ++g) ground_2d(A, y, i, g, gaps + i * A->n_grounds + g, J);
 }
 
+/* Gaps and normal velocities of every contact, the forces of held ones particle by particle
+ * (the right-hand side's values, without its O(n) pass over the links). */
 static int contact_state_2d(const FbSystem *s, const double *y, const int *held, const double *push,
                              double *gaps, double *vn, double *lam)
 {
     const Assembly *A = s->data;
+    const int G = A->n_grounds;
     const double *v = y + s->nq;
-    double J[2];
-    for (int i = 0; i < A->n; ++i)
-        for (int g = 0; g < A->n_grounds; ++g) {
-            const int c = i * A->n_grounds + g;
+    double J[2], acc[2];
+    for (int i = 0; i < A->n; ++i) {
+        int any_held = 0;
+        for (int g = 0; g < G; ++g) {
+            const int c = i * G + g;
             ground_2d(A, y, i, g, gaps + c, J);
-            vn[c] = 0.0;
+            vn[c] = lam[c] = 0.0;
             for (int a = 0; a < 2; ++a) vn[c] += J[a] * v[2 * i + a];
+            any_held |= held[c];
         }
-    return rhs_2d(s, 0.0, y, held, push, A->scratch, lam);
+        if (!any_held) continue;
+        free_acceleration_2d(A, y, push, i, acc);
+        if (constrain_2d(A, y, i, held + i * G, acc, lam + i * G)) return -1;
+    }
+    return 0;
+}
+
+/* Set particle i, stopped on its grounds in S, onto those it is below (FbSystem.settle):
+ * the least move dx with J_S (x + dx) - P = max(gap, 0).  0 or -1. */
+static int settle_particle_2d(const Assembly *A, double *x, int i, const int *S)
+{
+    const int G = A->n_grounds;
+    int k = 0, below = 0;
+    double J[(G > 0 ? G : 1) * 2], b[G > 0 ? G : 1], M[(G > 0 ? G * G : 1)], gap;
+    for (int g = 0; g < G; ++g)
+        if (S[g]) {
+            ground_2d(A, x, i, g, &gap, J + 2 * k);
+            b[k] = gap < 0.0 ? -gap : 0.0;
+            below |= gap < 0.0;
+            ++k;
+        }
+    if (!below) return 0;
+    for (int r = 0; r < k; ++r)
+        for (int c = 0; c < k; ++c) {
+            M[r * k + c] = 0.0;
+            for (int a = 0; a < 2; ++a) M[r * k + c] += J[2 * r + a] * J[2 * c + a];
+        }
+    if (small_solve(M, k, b)) return -1;
+    for (int r = 0; r < k; ++r)
+        for (int a = 0; a < 2; ++a) x[2 * i + a] += J[2 * r + a] * b[r];
+    return 0;
+}
+
+/* After the plastic impulse P_n = lam (>= 0 pushing) that stopped particle i's velocity u
+ * along ground g's normal: the rebound -e v_n- (code FB_REBOUND), then Coulomb's tangential
+ * impulse min(m |v_t|, mu P_n) against v_t (DESIGN §6); FB_SETTLE zeroes v_t (it comes to rest).  One ground only: a particle stopped
+ * on two grounds at once with friction or restitution is refused by the driver. */
+static void contact_laws_2d(const Assembly *A, const double *x, int i, int g, int code, double *u, double lam)
+{
+    const double mu = A->laws[2 * g], e = code == FB_REBOUND ? A->laws[2 * g + 1] : 0.0;
+    if (mu == 0.0 && e == 0.0 && code != FB_SETTLE) return;
+    double gap, J[2], normal[2], tangents[2], vn, vt[2], speed;
+    const double *ground = A->grounds + 2 * 2 * g;
+    fb_k_ground_2d(x + 2 * i, ground, ground + 2, &gap, J, normal, tangents);
+    /* lam / m = -v_n-; a held contact's v_n- is 0 up to round-off, either sign: no impulse */
+    const double stopped = fmax(lam, 0.0) * A->inv_mass[i], rebound = e * stopped;
+    for (int a = 0; a < 2; ++a) u[a] += rebound * normal[a];
+    fb_k_split_2d(u, normal, &vn, vt, &speed);
+    const double impulse = mu * (stopped + rebound); /* mu P_n / m: the most friction can take */
+    if (!(speed > 0.0)) return;
+    const double keep = impulse >= speed || code == FB_SETTLE ? 0.0 : 1.0 - impulse / speed;
+    for (int a = 0; a < 2; ++a) u[a] -= (1.0 - keep) * vt[a];
+}
+
+static int settle_2d(const FbSystem *s, double *y, const int *stop)
+{
+    const Assembly *A = s->data;
+    const int G = A->n_grounds;
+    for (int i = 0; i < A->n; ++i)
+        if (settle_particle_2d(A, y, i, stop + i * G)) return -1;
+    return 0;
 }
 
 static int impact_2d(const FbSystem *s, const double *y, const int *stop, double *y_out, double *loss)
@@ -245,12 +470,14 @@ static int impact_2d(const FbSystem *s, const double *y, const int *stop, double
     memcpy(y_out, y, sizeof(double) * s->ny);
     *loss = 0.0;
     for (int i = 0; i < A->n; ++i) {
-        int any = 0;
-        for (int g = 0; g < G; ++g) any |= stop[i * G + g];
-        if (!any) continue;
+        int stopped = 0, g_stop = 0;
+        for (int g = 0; g < G; ++g)
+            if (stop[i * G + g]) { ++stopped; g_stop = g; }
+        if (!stopped) continue;
         double *u = y_out + s->nq + 2 * i, f[2], potential, before, after;
         fb_k_particle_2d(y + 2 * i, u, A->mass + i, A->gravity, f, &potential, &before);
         if (constrain_2d(A, y, i, stop + i * G, u, lam)) return -1;
+        if (stopped == 1) contact_laws_2d(A, y, i, g_stop, stop[i * G + g_stop], u, lam[g_stop]);
         fb_k_particle_2d(y + 2 * i, u, A->mass + i, A->gravity, f, &potential, &after);
         *loss += before - after;
     }
@@ -355,6 +582,119 @@ static int constrain_3d(const Assembly *A, const double *x, int i, const int *S,
     return 0;
 }
 
+/* Particle i's acceleration without its contacts' forces (its links, gravity and prescribed
+ * forces), from its stencil alone: the right-hand side's sums in its order, bit for bit. */
+static void free_acceleration_3d(const Assembly *A, const double *y, const double *push, int i, double *acc)
+{
+    const int G = A->n_grounds;
+    const double *x = y, *v = y + 3 * A->n;
+    for (int a = 0; a < 3; ++a) acc[a] = 0.0;
+    for (int m = A->adj_start[i]; m < A->adj_start[i + 1]; ++m) {
+        const int l = A->adj[m], first = A->links[2 * l], second = A->links[2 * l + 1];
+        const int a_i = 3 * first, a_j = 3 * second;
+        double f[3], pw;
+        if (A->axial[l]) fb_k_link_axial_3d_force(x + a_i, x + a_j, v + a_i, v + a_j, A->link_par + 3 * l, f, &pw);
+        else fb_k_link_relative_3d_force(x + a_i, x + a_j, v + a_i, v + a_j, A->link_par + 3 * l, f, &pw);
+        for (int a = 0; a < 3; ++a) {
+            if (first == i) acc[a] += f[a];
+            else acc[a] -= f[a];
+        }
+    }
+    double f[3], potential, kinetic;
+    fb_k_particle_3d(x + 3 * i, v + 3 * i, A->mass + i, A->gravity, f, &potential, &kinetic);
+    for (int a = 0; a < 3; ++a) acc[a] = (acc[a] + f[a]) * A->inv_mass[i];
+    for (int g = 0; g < G; ++g)
+        if (push[i * G + g] != 0.0) {
+            double gap, J[3];
+            ground_3d(A, x, i, g, &gap, J);
+            for (int a = 0; a < 3; ++a) acc[a] += J[a] * push[i * G + g] * A->inv_mass[i];
+        }
+}
+
+/* Coulomb friction on particle i held on ground g alone (DESIGN §6), after its normal
+ * constraint: acc (dim) is its acceleration with the normal force lam applied.  code FB_HELD
+ * sticks (the tangential force ft = -m a_t holds it: acc becomes 0), FB_SLIDING slips (ft =
+ * -mu lam v_t / |v_t|, or against the tangential pull a_t when v_t = 0).  Writes vt, ft
+ * (dim) and the sticking slack mu lam - |ft| (N; INFINITY without friction); returns the
+ * power friction dissipates (W, >= 0). */
+static double coulomb_3d(const Assembly *A, const double *x, const double *v, int i, int g, int code,
+                           double lam, double *acc, double *vt, double *ft, double *slack)
+{
+    const double mu = A->laws[2 * g], m = A->mass[i];
+    double gap, J[3], normal[3], tangents[6], vn, speed, an, at[3], pull;
+    const double *ground = A->grounds + 2 * 3 * g;
+    fb_k_ground_3d(x + 3 * i, ground, ground + 3, &gap, J, normal, tangents);
+    fb_k_split_3d(v + 3 * i, normal, &vn, vt, &speed);
+    for (int a = 0; a < 3; ++a) ft[a] = 0.0;
+    *slack = INFINITY;
+    if (mu == 0.0) return 0.0;
+    fb_k_split_3d(acc, normal, &an, at, &pull);
+    if (code != FB_SLIDING) { /* sticking: the tangential force cancels the tangential pull */
+        for (int a = 0; a < 3; ++a) {
+            ft[a] = -m * at[a];
+            acc[a] -= at[a];
+        }
+        *slack = mu * lam - m * pull;
+        return 0.0;
+    }
+    const double *along = speed > 0.0 ? vt : at, size = speed > 0.0 ? speed : pull;
+    const double force = mu * fmax(lam, 0.0);
+    if (!(size > 0.0)) return 0.0;
+    for (int a = 0; a < 3; ++a) {
+        ft[a] = -force * along[a] / size;
+        acc[a] += ft[a] / m;
+    }
+    *slack = 0.0;
+    return force * speed;
+}
+
+/* Contact c's friction (FbSystem.friction), O(its stencil): its tangential velocity vt and
+ * force ft (dim) and sticking slack (see coulomb), and its normal force lam_c if held. */
+static int friction_3d(const FbSystem *s, const double *y, const int *held, const double *push, int c,
+                      double *vt, double *ft, double *slack, double *lam_c)
+{
+    const Assembly *A = s->data;
+    const int G = A->n_grounds, i = c / G, g = c % G;
+    double acc[3], lam[G];
+    int n_held = 0;
+    for (int k = 0; k < G; ++k) n_held += held[i * G + k] != 0;
+    *lam_c = 0.0;
+    if (!held[c] || n_held != 1) { /* free, or a corner (refused with friction by the driver): no friction */
+        double normal[3], J[3], tangents[6], gap, vn, speed;
+        const double *ground = A->grounds + 2 * 3 * g;
+        fb_k_ground_3d(y + 3 * i, ground, ground + 3, &gap, J, normal, tangents);
+        fb_k_split_3d(y + s->nq + 3 * i, normal, &vn, vt, &speed);
+        for (int a = 0; a < 3; ++a) ft[a] = 0.0;
+        *slack = INFINITY;
+        if (!held[c]) return 0;
+    }
+    free_acceleration_3d(A, y, push, i, acc);
+    if (constrain_3d(A, y, i, held + i * G, acc, lam)) return -1;
+    *lam_c = lam[g];
+    if (n_held == 1) coulomb_3d(A, y, y + s->nq, i, g, held[c], lam[g], acc, vt, ft, slack);
+    return 0;
+}
+
+/* Contact c alone (FbSystem.contact): its gap and, if held, its force, O(its stencil). */
+static int contact_3d(const FbSystem *s, const double *y, const int *held, const double *push, int c,
+                     double *gap, double *vn, double *lam_c)
+{
+    const Assembly *A = s->data;
+    const int G = A->n_grounds, i = c / G;
+    double J[3], acc[3], lam[G];
+    ground_3d(A, y, i, c % G, gap, J);
+    if (vn) { /* as contact_state sums it */
+        *vn = 0.0;
+        for (int a = 0; a < 3; ++a) *vn += J[a] * y[s->nq + 3 * i + a];
+    }
+    *lam_c = 0.0;
+    if (!held[c]) return 0;
+    free_acceleration_3d(A, y, push, i, acc);
+    if (constrain_3d(A, y, i, held + i * G, acc, lam)) return -1;
+    *lam_c = lam[c % G];
+    return 0;
+}
+
 /* The right-hand side: springs and dampers over the links, gravity over the particles,
  * prescribed forces and held contacts over the contacts. */
 static int rhs_3d(const FbSystem *s, double t, const double *y, const int *held, const double *push,
@@ -401,9 +741,17 @@ static int rhs_3d(const FbSystem *s, double t, const double *y, const int *held,
             }
         }
         if (any_held && constrain_3d(A, x, i, h, acc + 3 * i, lam + i * G)) return -1;
+        int n_held = 0, g_held = 0;
+        for (int g = 0; g < G; ++g)
+            if (h[g]) { ++n_held; g_held = g; }
+        if (n_held == 1 && A->laws[2 * g_held] != 0.0) {
+            double vt[3], ft[3], slack;
+            impact_power += coulomb_3d(A, x, v, i, g_held, h[g_held], lam[i * G + g_held], acc + 3 * i,
+                                         vt, ft, &slack);
+        }
     }
     ydot[2 * nq] = power;
-    ydot[2 * nq + 1] = impact_power;
+    ydot[2 * nq + 1] = impact_power; /* friction needs instant impacts: never both in one run */
     return 0;
 }
 
@@ -415,20 +763,85 @@ static void gaps_3d(const FbSystem *s, const double *y, double *gaps)
         for (int g = 0; g < A->n_grounds; ++g) ground_3d(A, y, i, g, gaps + i * A->n_grounds + g, J);
 }
 
+/* Gaps and normal velocities of every contact, the forces of held ones particle by particle
+ * (the right-hand side's values, without its O(n) pass over the links). */
 static int contact_state_3d(const FbSystem *s, const double *y, const int *held, const double *push,
                              double *gaps, double *vn, double *lam)
 {
     const Assembly *A = s->data;
+    const int G = A->n_grounds;
     const double *v = y + s->nq;
-    double J[3];
-    for (int i = 0; i < A->n; ++i)
-        for (int g = 0; g < A->n_grounds; ++g) {
-            const int c = i * A->n_grounds + g;
+    double J[3], acc[3];
+    for (int i = 0; i < A->n; ++i) {
+        int any_held = 0;
+        for (int g = 0; g < G; ++g) {
+            const int c = i * G + g;
             ground_3d(A, y, i, g, gaps + c, J);
-            vn[c] = 0.0;
+            vn[c] = lam[c] = 0.0;
             for (int a = 0; a < 3; ++a) vn[c] += J[a] * v[3 * i + a];
+            any_held |= held[c];
         }
-    return rhs_3d(s, 0.0, y, held, push, A->scratch, lam);
+        if (!any_held) continue;
+        free_acceleration_3d(A, y, push, i, acc);
+        if (constrain_3d(A, y, i, held + i * G, acc, lam + i * G)) return -1;
+    }
+    return 0;
+}
+
+/* Set particle i, stopped on its grounds in S, onto those it is below (FbSystem.settle):
+ * the least move dx with J_S (x + dx) - P = max(gap, 0).  0 or -1. */
+static int settle_particle_3d(const Assembly *A, double *x, int i, const int *S)
+{
+    const int G = A->n_grounds;
+    int k = 0, below = 0;
+    double J[(G > 0 ? G : 1) * 3], b[G > 0 ? G : 1], M[(G > 0 ? G * G : 1)], gap;
+    for (int g = 0; g < G; ++g)
+        if (S[g]) {
+            ground_3d(A, x, i, g, &gap, J + 3 * k);
+            b[k] = gap < 0.0 ? -gap : 0.0;
+            below |= gap < 0.0;
+            ++k;
+        }
+    if (!below) return 0;
+    for (int r = 0; r < k; ++r)
+        for (int c = 0; c < k; ++c) {
+            M[r * k + c] = 0.0;
+            for (int a = 0; a < 3; ++a) M[r * k + c] += J[3 * r + a] * J[3 * c + a];
+        }
+    if (small_solve(M, k, b)) return -1;
+    for (int r = 0; r < k; ++r)
+        for (int a = 0; a < 3; ++a) x[3 * i + a] += J[3 * r + a] * b[r];
+    return 0;
+}
+
+/* After the plastic impulse P_n = lam (>= 0 pushing) that stopped particle i's velocity u
+ * along ground g's normal: the rebound -e v_n- (code FB_REBOUND), then Coulomb's tangential
+ * impulse min(m |v_t|, mu P_n) against v_t (DESIGN §6); FB_SETTLE zeroes v_t (it comes to rest).  One ground only: a particle stopped
+ * on two grounds at once with friction or restitution is refused by the driver. */
+static void contact_laws_3d(const Assembly *A, const double *x, int i, int g, int code, double *u, double lam)
+{
+    const double mu = A->laws[2 * g], e = code == FB_REBOUND ? A->laws[2 * g + 1] : 0.0;
+    if (mu == 0.0 && e == 0.0 && code != FB_SETTLE) return;
+    double gap, J[3], normal[3], tangents[6], vn, vt[3], speed;
+    const double *ground = A->grounds + 2 * 3 * g;
+    fb_k_ground_3d(x + 3 * i, ground, ground + 3, &gap, J, normal, tangents);
+    /* lam / m = -v_n-; a held contact's v_n- is 0 up to round-off, either sign: no impulse */
+    const double stopped = fmax(lam, 0.0) * A->inv_mass[i], rebound = e * stopped;
+    for (int a = 0; a < 3; ++a) u[a] += rebound * normal[a];
+    fb_k_split_3d(u, normal, &vn, vt, &speed);
+    const double impulse = mu * (stopped + rebound); /* mu P_n / m: the most friction can take */
+    if (!(speed > 0.0)) return;
+    const double keep = impulse >= speed || code == FB_SETTLE ? 0.0 : 1.0 - impulse / speed;
+    for (int a = 0; a < 3; ++a) u[a] -= (1.0 - keep) * vt[a];
+}
+
+static int settle_3d(const FbSystem *s, double *y, const int *stop)
+{
+    const Assembly *A = s->data;
+    const int G = A->n_grounds;
+    for (int i = 0; i < A->n; ++i)
+        if (settle_particle_3d(A, y, i, stop + i * G)) return -1;
+    return 0;
 }
 
 static int impact_3d(const FbSystem *s, const double *y, const int *stop, double *y_out, double *loss)
@@ -439,12 +852,14 @@ static int impact_3d(const FbSystem *s, const double *y, const int *stop, double
     memcpy(y_out, y, sizeof(double) * s->ny);
     *loss = 0.0;
     for (int i = 0; i < A->n; ++i) {
-        int any = 0;
-        for (int g = 0; g < G; ++g) any |= stop[i * G + g];
-        if (!any) continue;
+        int stopped = 0, g_stop = 0;
+        for (int g = 0; g < G; ++g)
+            if (stop[i * G + g]) { ++stopped; g_stop = g; }
+        if (!stopped) continue;
         double *u = y_out + s->nq + 3 * i, f[3], potential, before, after;
         fb_k_particle_3d(y + 3 * i, u, A->mass + i, A->gravity, f, &potential, &before);
         if (constrain_3d(A, y, i, stop + i * G, u, lam)) return -1;
+        if (stopped == 1) contact_laws_3d(A, y, i, g_stop, stop[i * G + g_stop], u, lam[g_stop]);
         fb_k_particle_3d(y + 3 * i, u, A->mass + i, A->gravity, f, &potential, &after);
         *loss += before - after;
     }
@@ -495,6 +910,15 @@ static void link_jacobians_3d(const Assembly *A, const double *y, double *out)
     }
 }
 
+/* The state entries contact c's gap and force read (FbSystem.stencil): its particle's stencil. */
+static int stencil(const FbSystem *s, int c, const int **entries)
+{
+    const Assembly *A = s->data;
+    const int i = c / A->n_grounds;
+    *entries = A->stencil + A->stencil_start[i];
+    return A->stencil_start[i + 1] - A->stencil_start[i];
+}
+
 /* Fill s with this assembly as a system (sizes, data and functions of its dimension). */
 void fb_asm_system(Assembly *A, FbSystem *s)
 {
@@ -511,6 +935,9 @@ void fb_asm_system(Assembly *A, FbSystem *s)
         s->contact_state = contact_state_2d;
         s->impact = impact_2d;
         s->outputs = outputs_2d;
+        s->contact = contact_2d;
+        s->friction = friction_2d;
+        s->settle = settle_2d;
     }
     if (A->dim == 3) {
         s->rhs = rhs_3d;
@@ -518,7 +945,11 @@ void fb_asm_system(Assembly *A, FbSystem *s)
         s->contact_state = contact_state_3d;
         s->impact = impact_3d;
         s->outputs = outputs_3d;
+        s->contact = contact_3d;
+        s->friction = friction_3d;
+        s->settle = settle_3d;
     }
+    s->stencil = stencil;
 }
 
 /* d(force on i)/d[x_i, x_j, v_i, v_j] of every link at y: out (n_links, dim, 4 dim). */
@@ -547,7 +978,33 @@ int fb_sys_impact(const FbSystem *s, const double *y, const int *stop, double *y
     return s->impact(s, y, stop, y_out, loss);
 }
 
+int fb_sys_friction(const FbSystem *s, const double *y, const int *held, const double *push, int c, double *vt,
+                    double *ft, double *slack, double *lam_c)
+{
+    return s->friction ? s->friction(s, y, held, push, c, vt, ft, slack, lam_c) : -2;
+}
+
 void fb_sys_outputs(const FbSystem *s, const double *y, double *x, double *v, double *energies)
 {
     s->outputs(s, y, x, v, energies);
+}
+
+/* FbSystem.settle on y (in place): 0, -1, or -2 if the system has none. */
+int fb_sys_settle(const FbSystem *s, double *y, const int *stop)
+{
+    return s->settle ? s->settle(s, y, stop) : -2;
+}
+
+/* Contact c alone (FbSystem.contact): *gap, *vn, *lam_c and, in entries (capacity), the
+ * state entries it reads, *k of them.  0, -1 as rhs, -2 if the system has no per-contact
+ * evaluation, -3 if more than capacity entries. */
+int fb_sys_contact(const FbSystem *s, const double *y, const int *held, const double *push, int c, double *gap,
+                   double *vn, double *lam_c, int *entries, int capacity, int *k)
+{
+    if (!s->contact || !s->stencil) return -2;
+    const int *listed;
+    *k = s->stencil(s, c, &listed);
+    if (*k > capacity) return -3;
+    memcpy(entries, listed, sizeof(int) * (size_t)*k);
+    return s->contact(s, y, held, push, c, gap, vn, lam_c);
 }

@@ -4,8 +4,9 @@
  * The interface between the model-independent runtime (integrator.c, phases.c: compiled
  * once) and a model: the assembled particles formulation (assembly.c, over the element
  * kernels) or a whole-scene derived model (generated/<scene>_<formulation>/model.c).
- * A model is an FbSystem: its sizes, its data and five functions.  State y (ny,) =
- * [q (nq), u (nu), damping work, impact work]; contacts c = particle * n_grounds + ground.
+ * A model is an FbSystem: its sizes, its data, five functions and three optional ones.
+ * State y (ny,) = [q (nq), u (nu), damping work, impact work]; contacts c = particle *
+ * n_grounds + ground.  With friction (instant impacts only) the last entry is friction's work.
  */
 #ifndef FLEXBODY_RUNTIME_H
 #define FLEXBODY_RUNTIME_H
@@ -14,8 +15,15 @@
 #define FB_FREE 0
 #define FB_HELD 1
 #define FB_PUSHED 2
+#define FB_SLIDING 3
 #define FB_IMPACT 0
 #define FB_LIFTOFF 1
+#define FB_STICK 2
+#define FB_SLIP 3
+#define FB_KEEP 0
+#define FB_STOP 1
+#define FB_REBOUND 2
+#define FB_SETTLE 3
 #define FB_GROUP_TIME 1e-12
 #define FB_REACHED 0
 #define FB_EVENT 1
@@ -39,8 +47,10 @@ struct FbSystem {
     /* gaps, normal velocities vn and the held contacts' forces lam (each nc).  0 or -1. */
     int (*contact_state)(const FbSystem *s, const double *y, const int *held, const double *push,
                          double *gaps, double *vn, double *lam);
-    /* Plastic impulses zeroing the normal velocity of every contact with stop[c]: y_out (ny)
-     * and the kinetic energy removed.  0 or -1. */
+    /* Impulses on every contact with stop[c] != FB_KEEP: its normal velocity zeroed (FB_STOP)
+     * or reversed by its ground's restitution (FB_REBOUND; models without contact laws treat
+     * it as FB_STOP), and its ground's Coulomb friction impulse: y_out (ny) and the kinetic
+     * energy removed.  0 or -1. */
     int (*impact)(const FbSystem *s, const double *y, const int *stop, double *y_out, double *loss);
     /* Particle positions x and velocities v (n_particles, dim) and energies (4): kinetic,
      * spring, gravity, damping power. */
@@ -49,6 +59,27 @@ struct FbSystem {
      * velocity 0 (the least correction in the mass metric), against integration drift
      * where the gaps are nonlinear in q.  0, or -1 if a matrix is not positive definite. */
     int (*project)(const FbSystem *s, double *y, const int *held);
+    /* Optional (both NULL where contacts couple, as in whole-scene models): contact c alone,
+     * where each particle's contacts decouple from the others'.  contact gives its gap, its
+     * normal velocity (if vn is not NULL) and, if held[c], its force lam_c (the values
+     * contact_state gives, bit for bit), reading only the state entries stencil lists (its
+     * particle's position first, dim entries): locating an event or resolving an instant
+     * costs O(contacts involved), not a right-hand side.  0, or -1 as rhs. */
+    int (*contact)(const FbSystem *s, const double *y, const int *held, const double *push, int c,
+                   double *gap, double *vn, double *lam_c);
+    int (*stencil)(const FbSystem *s, int c, const int **entries);
+    /* Optional (NULL without contact laws): contact c's Coulomb friction, from its stencil as
+     * contact.  held[c] is FB_HELD (sticking where its ground has friction) or FB_SLIDING; vt and
+     * ft (dim): its tangential velocity and tangential contact force; *slack: mu lam - |ft| of
+     * a sticking contact (INFINITY where there is no friction); *lam_c: its normal force (0
+     * if free).  0, or -1 as rhs. */
+    int (*friction)(const FbSystem *s, const double *y, const int *held, const double *push, int c,
+                    double *vt, double *ft, double *slack, double *lam_c);
+    /* Optional (NULL: nothing to do): set each particle with stop[c] onto the grounds it is
+     * below, the least move.  Instant impacts find a particle up to the gap tolerance under
+     * the ground; without this each stop-release-stop cycle of a chattering particle would
+     * start the next a tolerance lower.  0, or -1 as rhs. */
+    int (*settle)(const FbSystem *s, double *y, const int *stop);
 };
 
 /* Work buffers of one run, sized once (integrator.c). */
@@ -64,8 +95,8 @@ int fb_integrate(FbWork *w, const FbSystem *s, int method, double t0, const doub
 
 int fb_resolve(FbWork *w, const FbSystem *s, double t, double *y, int *phase, double *floor, double *push,
                double *push_until, const int *touching_in, const int *leaving, double gap_tol,
-               const double *force_tol, const double *masses, int thesis, double impact_dt,
-               int *ev_contact, int *ev_kind, double *ev_vn, int *n_events, int *not_held,
+               const double *force_tol, const double *masses, const double *restitution,
+               const double *min_rebound, double speed_tol, int thesis, double impact_dt, int *ev_contact, int *ev_kind, double *ev_vn, int *n_events, int *not_held,
                double *loss, int *iterations);
 
 int fb_trajectory(FbWork *w, const FbSystem *s, long n, const double *Y, const int *held, const double *push,

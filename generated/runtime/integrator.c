@@ -49,11 +49,13 @@ static void layout(FbWork *w, char *base, size_t *size)
     double **vectors[] = {&w->y_old, &w->y, &w->ys, &w->tmp, &w->f1, &w->scale, &w->e5, &w->e3, &w->zero,
                           &w->dy, &w->mid_y, &w->root_y, &w->ev_dy, &w->r_y_new};
     for (size_t k = 0; k < sizeof vectors / sizeof *vectors; ++k) *vectors[k] = carve(&next, v);
+    w->fr_dir = carve(&next, 3 * c); /* (nc, dim <= 3): sliding contacts' directions */
     double **contacts[] = {&w->lam, &w->g_old, &w->g_new, &w->gaps, &w->ev_lam, &w->ev_gaps, &w->g_mid,
                            &w->roots, &w->root_g, &w->r_gaps, &w->r_vn, &w->r_lam};
     for (size_t k = 0; k < sizeof contacts / sizeof *contacts; ++k) *contacts[k] = carve(&next, c);
     int **flags[] = {&w->held, &w->phase, &w->fired, &w->r_touching, &w->r_impacted, &w->r_settled,
-                     &w->r_was_held, &w->r_held, &w->r_hit, &w->r_ending, &w->r_instant, &w->r_stop};
+                     &w->r_was_held, &w->r_held, &w->r_hit, &w->r_ending, &w->r_instant, &w->r_stop,
+                     &w->r_visit};
     for (size_t k = 0; k < sizeof flags / sizeof *flags; ++k) *flags[k] = carve(&next, ci);
     *size = (size_t)(next - base);
 }
@@ -90,6 +92,8 @@ typedef struct {
     double gap_tol;
     long nfev, nevent;
     int failed;
+    int any_friction; /* held contacts and a system with friction (FbSystem.friction) */
+    double *dir;      /* (nc, 3): each sliding contact's direction at the start of the step */
 } Problem;
 
 typedef struct {
@@ -110,23 +114,60 @@ static double rms(const double *x, const double *scale, int n)
     return sqrt(s / n);
 }
 
-/* Event functions, positive while nothing happens: gap - floor (free), lam + tol (held);
- * the gaps themselves go to gaps. */
+/* A held contact's friction event, positive while nothing happens: a sticking contact's
+ * slack mu lam - |ft| (+ tol; it slips at 0), a sliding one's tangential velocity along its
+ * direction at the start of the step (it stops at 0).  In 3D the slip direction turns (the
+ * tangential pull bends it), so |v_t| never changes sign and a fixed direction may never be
+ * crossed: the direction is renewed at every accepted step (renew), where the value is
+ * |v_t| > 0, and within one step it turns little.  From rest the contact slides along its
+ * pull (-ft): that is its direction then. */
+static double friction_event(Problem *P, const double *y, int c, int renew)
+{
+    double vt[3], ft[3], slack, lam, along = 0.0;
+    const int d = P->s->dim;
+    double *dir = P->dir + 3 * c;
+    if (P->s->friction(P->s, y, P->held, P->push, c, vt, ft, &slack, &lam)) {
+        P->failed = 1;
+        return INFINITY;
+    }
+    if (P->held[c] != FB_SLIDING) return slack + P->force_tol[c];
+    if (renew) {
+        double speed = 0.0, pull = 0.0;
+        for (int a = 0; a < d; ++a) {
+            speed += vt[a] * vt[a];
+            pull += ft[a] * ft[a];
+        }
+        for (int a = 0; a < d; ++a)
+            dir[a] = speed > 0.0 ? vt[a] / sqrt(speed) : (pull > 0.0 ? -ft[a] / sqrt(pull) : 0.0);
+    }
+    for (int a = 0; a < d; ++a) along += vt[a] * dir[a];
+    return along;
+}
+
+/* Event functions, positive while nothing happens: gap - floor (free), lam + tol (held),
+ * and with friction the smaller of that and the friction event; the gaps go to gaps. */
 static void events_from(Problem *P, const double *y, const double *lam, double *g, double *gaps)
 {
     P->s->gaps(P->s, y, gaps);
     for (int c = 0; c < P->nc; ++c) {
         if (P->phase[c] == FB_FREE) g[c] = gaps[c] - P->floor[c];
-        else if (P->phase[c] == FB_HELD) g[c] = lam[c] + P->force_tol[c];
-        else g[c] = INFINITY;
+        else if (P->held[c]) {
+            g[c] = lam[c] + P->force_tol[c];
+            if (P->any_friction) g[c] = fmin(g[c], friction_event(P, y, c, 0));
+        } else g[c] = INFINITY;
     }
 }
 
 static void events_at(Problem *P, double t, const double *y, double *g)
 {
     FbWork *w = P->w;
-    if (P->any_held) {
-        if (P->s->rhs(P->s, t, y, P->held, P->push, w->ev_dy, w->ev_lam)) P->failed = 1;
+    const FbSystem *s = P->s;
+    if (P->any_held && s->contact) { /* held contacts one by one: O(held), not a right-hand side */
+        double gap;
+        for (int c = 0; c < P->nc; ++c)
+            if (P->held[c] && s->contact(s, y, P->held, P->push, c, &gap, 0, w->ev_lam + c)) P->failed = 1;
+    } else if (P->any_held) {
+        if (s->rhs(s, t, y, P->held, P->push, w->ev_dy, w->ev_lam)) P->failed = 1;
         P->nevent++;
     }
     events_from(P, y, w->ev_lam, g, w->ev_gaps);
@@ -268,10 +309,10 @@ static void prepare_dense(Problem *P, Stepper *S)
     }
 }
 
-/* The accepted step's interpolant at t, its first n entries.  dopri5: straight from the
- * stages with the weights w_j(x) = h sum_r P_jr x^(r+1); dop853: from its coefficients,
- * built on first use (they need three more stages). */
-static void dense(Problem *P, Stepper *S, double t, double *out, int n)
+/* The accepted step's interpolant at t: its first n entries, or (idx not NULL) the n entries
+ * idx lists.  dopri5: straight from the stages with the weights w_j(x) = h sum_r P_jr
+ * x^(r+1); dop853: from its coefficients, built on first use (they need three more stages). */
+static void dense(Problem *P, Stepper *S, double t, double *out, int n, const int *idx)
 {
     const double x = (t - S->t_old) / S->h;
     if (S->method == 0) {
@@ -282,12 +323,15 @@ static void dense(Problem *P, Stepper *S, double t, double *out, int n)
             for (int r = 0; r < 4; ++r, power *= x) sum += D5_P[j][r] * power;
             w[j] = S->h * sum;
         }
-        for (int i = 0; i < n; ++i)
-            out[i] = S->y_old[i] + w[0] * K[0][i] + w[2] * K[2][i] + w[3] * K[3][i] + w[4] * K[4][i] + w[5] * K[5][i] + w[6] * K[6][i];
+#define D5_ENTRY(i) out[i] = S->y_old[i] + w[0] * K[0][i] + w[2] * K[2][i] + w[3] * K[3][i] + w[4] * K[4][i] + w[5] * K[5][i] + w[6] * K[6][i]
+        if (idx) for (int m = 0; m < n; ++m) D5_ENTRY(idx[m]);
+        else for (int i = 0; i < n; ++i) D5_ENTRY(i);
+#undef D5_ENTRY
         return;
     }
     if (!S->dense_ready) prepare_dense(P, S);
-    for (int i = 0; i < n; ++i) {
+    for (int m = 0; m < n; ++m) {
+        const int i = idx ? idx[m] : m;
         double v = 0.0;
         for (int r = 6; r >= 0; --r) {
             v += S->Q[r][i];
@@ -325,12 +369,20 @@ static double root(Problem *P, Stepper *S, int c, double a, double fa, double b,
         } else { d = m; e = m; }
         a = b; fa = fb;
         b += fabs(d) > tol ? d : (m > 0.0 ? tol : -tol);
-        if (free_contact) { /* the same value events_from gives: gap - floor */
-            dense(P, S, b, y, P->s->nq);
+        if (P->s->contact) { /* contact c alone, from the entries of the state it reads */
+            const int *entries;
+            const int k = P->s->stencil(P->s, c, &entries);
+            double gap, lam;
+            dense(P, S, b, y, free_contact ? P->s->dim : k, entries);
+            if (P->s->contact(P->s, y, P->held, P->push, c, &gap, 0, &lam)) P->failed = 1;
+            fb = free_contact ? gap - P->floor[c] : lam + P->force_tol[c];
+            if (!free_contact && P->any_friction) fb = fmin(fb, friction_event(P, y, c, 0));
+        } else if (free_contact) { /* the same value events_from gives: gap - floor */
+            dense(P, S, b, y, P->s->nq, 0);
             P->s->gaps(P->s, y, g);
             fb = g[c] - P->floor[c];
         } else {
-            dense(P, S, b, y, P->n_event);
+            dense(P, S, b, y, P->n_event, 0);
             events_at(P, b, y, g);
             fb = g[c];
         }
@@ -339,14 +391,23 @@ static double root(Problem *P, Stepper *S, int c, double a, double fa, double b,
 }
 
 /* Earliest sign change (+ to <= 0) in the step, checking its midpoint too; 1 if found. */
-static int locate(Problem *P, Stepper *S, const double *g_old, const double *g_new, double *t_hit, int *fired)
+static int locate(Problem *P, Stepper *S, const double *g_old, double *g_new, double *t_hit, int *fired)
 {
     FbWork *w = P->w;
     double *y = w->mid_y, *g_mid = w->g_mid, *roots = w->roots;
     double t_mid = S->t_old + 0.5 * S->h;
     const int nc = P->nc;
-    dense(P, S, t_mid, y, P->n_event);
+    dense(P, S, t_mid, y, P->n_event, 0);
     events_at(P, t_mid, y, g_mid);
+    /* A free contact armed a hair below the ground (just released or rebounded) and 2 gap
+     * tolerances above it at the midpoint is armed at the ground for the second half, as at
+     * a step's end: else a bounce within one step would be caught only at the lower floor. */
+    for (int c = 0; c < nc; ++c)
+        if (P->phase[c] == FB_FREE && P->floor[c] < 0.0 && g_mid[c] + P->floor[c] >= 2.0 * P->gap_tol) {
+            g_mid[c] += P->floor[c];
+            g_new[c] += P->floor[c];
+            P->floor[c] = 0.0;
+        }
     int crossed = 0;
     for (int c = 0; c < nc; ++c)
         crossed |= ((g_old[c] > 0.0) & (g_mid[c] <= 0.0)) | ((g_mid[c] > 0.0) & (g_new[c] <= 0.0));
@@ -380,7 +441,10 @@ static int locate(Problem *P, Stepper *S, const double *g_old, const double *g_n
  *     of those reached, *n_sampled how many;
  *   on return: *t_stop, y_stop[ny], touching[nc] and leaving[nc] (the gap events of free
  *     contacts and the force events of held ones that fired), counters = {nfev, steps,
- *     rejected, event evaluations}, *min_gap (lowest gap at step ends, in/out), *h_next.
+ *     rejected, event evaluations}, *min_gap (lowest gap at step ends, in/out);
+ *   *h_next (in/out): the first step to try if > 0 (else it is estimated, costing a right-
+ *     hand side), and on return the step the controller proposes next: carried across
+ *     segments, a restart after an event does not guess the step size again.
  * Returns FB_REACHED at t_bound, FB_EVENT at an event, FB_STEP_COLLAPSE if the step size
  * collapsed, FB_NON_FINITE if the state became non-finite, FB_SINGULAR if the mass or
  * contact matrix was not positive definite, FB_TOO_SLOW after max_seconds of wall time. */
@@ -397,11 +461,13 @@ int fb_integrate(FbWork *w, const FbSystem *s, int method, double t0, const doub
     Problem P = {s, w, push, force_tol, floor, w->held, w->phase, 0, s->nq, ny, nc, gap_tol, 0, 0, 0};
     for (int c = 0; c < nc; ++c) {
         P.phase[c] = phase[c];
-        P.held[c] = phase[c] == FB_HELD;
-        P.any_held |= P.held[c];
+        P.held[c] = phase[c] == FB_HELD || phase[c] == FB_SLIDING ? phase[c] : 0; /* the rhs's contact laws */
+        P.any_held |= P.held[c] != 0;
         touching[c] = leaving[c] = 0;
     }
     if (P.any_held) P.n_event = ny;
+    P.any_friction = P.any_held && s->friction;
+    P.dir = w->fr_dir;
     S.method = method;
     S.stages = method == 0 ? 6 : 12;
     S.order = method == 0 ? 4 : 7;
@@ -419,18 +485,24 @@ int fb_integrate(FbWork *w, const FbSystem *s, int method, double t0, const doub
     memcpy(S.y, y0, sizeof(double) * ny);
     double *f0 = S.K[S.stages];
     rhs(&P, t, S.y, f0, lam);
+    for (int c = 0; c < nc; ++c)
+        if (P.any_friction && P.held[c] == FB_SLIDING) friction_event(&P, S.y, c, 1);
     events_from(&P, S.y, lam, g_old, gaps);
-    /* Initial step: Hairer, Norsett & Wanner, sec. II.4 (as SciPy's select_initial_step). */
-    for (int i = 0; i < ny; ++i) scale[i] = atol + fabs(S.y[i]) * rtol;
-    double d0 = rms(S.y, scale, ny), d1 = rms(f0, scale, ny), interval = t_bound - t0;
-    double h0 = (d0 < 1e-5 || d1 < 1e-5) ? 1e-6 : 0.01 * d0 / d1;
-    h0 = fmin(h0, interval);
-    for (int i = 0; i < ny; ++i) tmp[i] = S.y[i] + h0 * f0[i];
-    rhs(&P, t + h0, tmp, f1, 0);
-    for (int i = 0; i < ny; ++i) tmp[i] = f1[i] - f0[i];
-    double d2 = rms(tmp, scale, ny) / h0;
-    double h1 = (d1 <= 1e-15 && d2 <= 1e-15) ? fmax(1e-6, h0 * 1e-3) : pow(0.01 / fmax(d1, d2), 1.0 / (S.order + 1));
-    double h_abs = fmin(fmin(100.0 * h0, h1), interval);
+    double h_abs, interval = t_bound - t0;
+    if (*h_next > 0.0) { /* the step the controller proposed where the last segment ended */
+        h_abs = fmin(*h_next, interval);
+    } else { /* Hairer, Norsett & Wanner, sec. II.4 (as SciPy's select_initial_step) */
+        for (int i = 0; i < ny; ++i) scale[i] = atol + fabs(S.y[i]) * rtol;
+        double d0 = rms(S.y, scale, ny), d1 = rms(f0, scale, ny);
+        double h0 = (d0 < 1e-5 || d1 < 1e-5) ? 1e-6 : 0.01 * d0 / d1;
+        h0 = fmin(h0, interval);
+        for (int i = 0; i < ny; ++i) tmp[i] = S.y[i] + h0 * f0[i];
+        rhs(&P, t + h0, tmp, f1, 0);
+        for (int i = 0; i < ny; ++i) tmp[i] = f1[i] - f0[i];
+        double d2 = rms(tmp, scale, ny) / h0;
+        double h1 = (d1 <= 1e-15 && d2 <= 1e-15) ? fmax(1e-6, h0 * 1e-3) : pow(0.01 / fmax(d1, d2), 1.0 / (S.order + 1));
+        h_abs = fmin(fmin(100.0 * h0, h1), interval);
+    }
     const double exponent = -1.0 / (S.order + 1);
     /* Step ends, output samples and the event state are moved onto the held constraints
      * (where the model can: its gaps are nonlinear in q); the interpolant between is not. */
@@ -483,26 +555,28 @@ int fb_integrate(FbWork *w, const FbSystem *s, int method, double t0, const doub
         if (P.failed) { status = FB_SINGULAR; goto done; }
         double t_end_step = hit ? t_hit : t_new;
         while (next < n_grid && grid[next] <= t_end_step) {
-            dense(&P, &S, grid[next], samples + (long)next * ny, ny);
+            dense(&P, &S, grid[next], samples + (long)next * ny, ny, 0);
             if (project && s->project(s, samples + (long)next * ny, P.held)) { status = FB_SINGULAR; goto done; }
             ++next;
         }
         if (hit) { /* the step is cut at the event: its end beyond it is not part of the solution */
             t = t_hit;
-            dense(&P, &S, t_hit, y_stop, ny);
+            dense(&P, &S, t_hit, y_stop, ny, 0);
             if (project && s->project(s, y_stop, P.held)) { status = FB_SINGULAR; goto done; }
             s->gaps(s, y_stop, gaps);
             for (int c = 0; c < nc; ++c)
                 if (gaps[c] < *min_gap) *min_gap = gaps[c];
             for (int c = 0; c < nc; ++c) {
                 touching[c] = fired[c] && P.phase[c] == FB_FREE;
-                leaving[c] = fired[c] && P.phase[c] == FB_HELD;
+                leaving[c] = fired[c] && P.held[c];
             }
             status = FB_EVENT;
             goto finish;
         }
         for (int c = 0; c < nc; ++c) { /* gaps: at S.y, from events_from */
             if (gaps[c] < *min_gap) *min_gap = gaps[c];
+            if (P.any_friction && P.held[c] == FB_SLIDING) /* the next step's slip direction */
+                g_new[c] = fmin(lam[c] + force_tol[c], friction_event(&P, S.y, c, 1));
             if (P.phase[c] == FB_FREE && floor[c] < 0.0 && gaps[c] >= 2.0 * gap_tol) {
                 floor[c] = 0.0;
                 g_new[c] = gaps[c];

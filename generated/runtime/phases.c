@@ -19,39 +19,123 @@ static void add_event(int *contact, int *kind, double *vn, int *n, int c, int k,
     ++*n;
 }
 
+/* Coulomb friction of the held contacts once their normal forces are settled (for point
+ * masses on flat grounds the tangential problem of each particle is its own, so any order
+ * gives the same result).  A sliding contact slower than speed_tol comes to rest (its last
+ * tangential velocity zeroed, FB_SETTLE) and sticks if its ground can hold it ("stick"), or
+ * keeps sliding along its pull; a sticking contact whose slack mu lam - |ft| is negative, or
+ * within its tolerance where its event fired, slides ("slip"); a contact that landed with
+ * tangential velocity left slides.  Returns 0, or -1 as rhs. */
+static int friction_phases(FbWork *w, const FbSystem *s, double *y, int *phase, const double *push,
+                           const int *leaving, const int *was_held, const double *force_tol, double speed_tol,
+                           int *ev_contact, int *ev_kind, double *ev_vn, int *n_events, double *loss)
+{
+    const int nc = s->nc, d = s->dim;
+    int *held = w->r_held, *stop = w->r_stop, settle = 0;
+    double vt[3], ft[3], slack, lam, speed;
+    for (int c = 0; c < nc; ++c) held[c] = phase[c] == FB_HELD || phase[c] == FB_SLIDING ? phase[c] : 0;
+    for (int c = 0; c < nc; ++c) {
+        stop[c] = FB_KEEP;
+        if (!held[c]) continue;
+        if (s->friction(s, y, held, push, c, vt, ft, &slack, &lam)) return -1;
+        speed = 0.0;
+        for (int a = 0; a < d; ++a) speed += vt[a] * vt[a];
+        speed = sqrt(speed);
+        if (phase[c] == FB_SLIDING && speed <= speed_tol) {
+            stop[c] = FB_SETTLE;
+            settle = 1;
+        } else if (phase[c] == FB_HELD && slack < INFINITY) {
+            if (speed > speed_tol) phase[c] = FB_SLIDING; /* landed sliding */
+            else if (slack < 0.0 || (leaving[c] && slack <= force_tol[c])) {
+                phase[c] = FB_SLIDING;
+                if (was_held[c]) add_event(ev_contact, ev_kind, ev_vn, n_events, c, FB_SLIP, 0.0);
+            } else if (speed > 0.0) { /* sticking holds the acceleration: zero what velocity is left */
+                stop[c] = FB_SETTLE;
+                settle = 1;
+            }
+        }
+    }
+    if (!settle) return 0;
+    double lost, *y_new = w->r_y_new;
+    if (s->impact(s, y, stop, y_new, &lost)) return -1;
+    memcpy(y, y_new, sizeof(double) * s->ny);
+    *loss += lost;
+    for (int c = 0; c < nc; ++c)
+        if (stop[c] == FB_SETTLE) held[c] = FB_HELD;
+    for (int c = 0; c < nc; ++c) {
+        if (stop[c] != FB_SETTLE) continue;
+        if (s->friction(s, y, held, push, c, vt, ft, &slack, &lam)) return -1;
+        if (slack >= 0.0 && phase[c] == FB_SLIDING) add_event(ev_contact, ev_kind, ev_vn, n_events, c, FB_STICK, 0.0);
+        phase[c] = slack >= 0.0 ? FB_HELD : FB_SLIDING;
+    }
+    return 0;
+}
+
 /* Apply the fixed point at instant t to y[ny] and the phases (all updated in place).
- *   phase[c]: FB_FREE, FB_HELD or FB_PUSHED; floor[c]: a free contact's gap event level;
+ *   phase[c]: FB_FREE, FB_HELD, FB_SLIDING or FB_PUSHED; floor[c]: a free contact's gap event level;
  *   push[c], push_until[c]: a pushed contact's force and window end (0 and INFINITY elsewhere);
  *   touching[c], leaving[c]: the gap and force events that fired at t;
- *   thesis: 0 for instant impacts, 1 for the thesis mode's force -m v_n / impact_dt;
- *   events (at most 2 nc): contact, kind (FB_IMPACT, FB_LIFTOFF), normal velocity before;
- *   not_held[c]: stopped at t, then released at once; *loss: kinetic energy of the impacts.
+ *   restitution[c]: Newton's e of the contact's ground; min_rebound[c]: a slower rebound
+ *     (e |v_n|) is plastic (it would not rise 1e-9 of the scene's size: no Zeno cascade);
+ *   speed_tol: a sliding contact slower than this (m/s) has come to rest;
+ *   thesis: 0 for instant impacts, 1 for the thesis mode's force -(1 + e) m v_n / impact_dt;
+ *   events (at most 3 nc): contact, kind (FB_IMPACT, FB_LIFTOFF, FB_STICK, FB_SLIP), normal
+ *     velocity before (impacts);
+ *   not_held[c]: stopped at t, then released at once, or rebounded; *loss: kinetic energy of the impacts.
  * Returns 0, -1 if a mass or contact matrix was not positive definite, -2 if the fixed point
  * did not settle. */
 int fb_resolve(FbWork *w, const FbSystem *s, double t, double *y, int *phase, double *floor, double *push,
                double *push_until, const int *touching_in, const int *leaving, double gap_tol,
-               const double *force_tol, const double *masses, int thesis, double impact_dt,
-               int *ev_contact, int *ev_kind, double *ev_vn, int *n_events, int *not_held,
+               const double *force_tol, const double *masses, const double *restitution,
+               const double *min_rebound, double speed_tol, int thesis, double impact_dt, int *ev_contact, int *ev_kind, double *ev_vn, int *n_events, int *not_held,
                double *loss, int *iterations)
 {
     const int nc = s->nc, ny = s->ny;
     int *touching = w->r_touching, *impacted = w->r_impacted, *settled = w->r_settled;
     int *was_held = w->r_was_held, *held = w->r_held, *hit = w->r_hit, *ending = w->r_ending;
-    int *instant = w->r_instant, *stop = w->r_stop;
+    int *instant = w->r_instant, *stop = w->r_stop, *visit = w->r_visit, n_visit = 0;
     double *gaps = w->r_gaps, *vn = w->r_vn, *lam = w->r_lam, *y_new = w->r_y_new;
     int done = 0;
     *n_events = 0;
     *loss = 0.0;
+    if (s->contact) s->gaps(s, y, gaps);
+    /* Where contacts decouple (s->contact), only the particles this instant can change are
+     * visited, with all their contacts: those with a contact touched, leaving, held, pushed,
+     * or free within gap_tol of its floor.  An instant changes only the velocities (and, by
+     * at most the gap tolerance, the positions) of the particles it stops, so the others
+     * stay free and far: O(contacts involved).  Where contacts couple, all are visited. */
+    const int per_particle = nc / (s->n_particles > 0 ? s->n_particles : 1);
     for (int c = 0; c < nc; ++c) {
         touching[c] = touching_in[c] != 0;
-        was_held[c] = phase[c] == FB_HELD; /* on the ground before this instant, so v_n = 0 */
-        impacted[c] = settled[c] = not_held[c] = 0;
+        was_held[c] = phase[c] == FB_HELD || phase[c] == FB_SLIDING; /* on the ground: v_n = 0 */
+        held[c] = was_held[c] ? phase[c] : 0;
+        impacted[c] = settled[c] = not_held[c] = hit[c] = ending[c] = instant[c] = 0;
+        stop[c] = FB_KEEP;
+        vn[c] = lam[c] = 0.0;
+    }
+    for (int first = 0; first < nc; first += per_particle) {
+        int involved = !s->contact;
+        for (int c = first; c < first + per_particle; ++c)
+            involved |= touching[c] || leaving[c] || phase[c] != FB_FREE || gaps[c] <= floor[c] + gap_tol;
+        if (involved)
+            for (int c = first; c < first + per_particle; ++c) visit[n_visit++] = c;
     }
     for (*iterations = 1; *iterations < 2 * nc + 3; ++*iterations) {
-        for (int c = 0; c < nc; ++c) held[c] = phase[c] == FB_HELD;
-        if (s->contact_state(s, y, held, push, gaps, vn, lam)) return -1;
+        for (int m = 0; m < n_visit; ++m) {
+            const int c = visit[m];
+            held[c] = phase[c] == FB_HELD || phase[c] == FB_SLIDING ? phase[c] : 0;
+        }
+        if (s->contact) {
+            for (int m = 0; m < n_visit; ++m) {
+                const int c = visit[m];
+                if (s->contact(s, y, held, push, c, gaps + c, vn + c, lam + c)) return -1;
+            }
+        } else if (s->contact_state(s, y, held, push, gaps, vn, lam)) {
+            return -1;
+        }
         int changed = 0, any_instant = 0;
-        for (int c = 0; c < nc; ++c) {
+        for (int m = 0; m < n_visit; ++m) {
+            const int c = visit[m];
             const int near = phase[c] == FB_FREE && (touching[c] || gaps[c] <= floor[c] + gap_tol);
             /* strictly approaching: <= 0 would flip-flop forever */
             hit[c] = near && vn[c] < 0.0 && !impacted[c] && !was_held[c];
@@ -60,41 +144,61 @@ int fb_resolve(FbWork *w, const FbSystem *s, double t, double *y, int *phase, do
             if (hit[c]) add_event(ev_contact, ev_kind, ev_vn, n_events, c, FB_IMPACT, vn[c]);
             impacted[c] |= hit[c];
             settled[c] |= ending[c] || (hit[c] && !thesis);
+            const int rebounds = hit[c] && restitution[c] > 0.0 && -restitution[c] * vn[c] >= min_rebound[c];
             if (hit[c] && thesis) { /* eq. 4.6: the impulse spread as a force over impact_dt */
                 phase[c] = FB_PUSHED;
-                push[c] = -masses[c] * vn[c] / impact_dt;
+                push[c] = -masses[c] * vn[c] * (1.0 + (rebounds ? restitution[c] : 0.0)) / impact_dt;
                 push_until[c] = t + impact_dt;
                 hit[c] = 0;
                 changed = 1;
             }
+            stop[c] = hit[c] ? (rebounds ? FB_REBOUND : FB_STOP) : FB_KEEP;
         }
         /* after a window, what velocity is left towards the ground is stopped instantly */
-        for (int c = 0; c < nc; ++c) {
+        for (int m = 0; m < n_visit; ++m) {
+            const int c = visit[m];
             instant[c] = hit[c] || (ending[c] && vn[c] < 0.0);
             any_instant |= instant[c];
-            stop[c] = instant[c] || phase[c] == FB_HELD;
+            if (!hit[c]) stop[c] = instant[c] || held[c] ? FB_STOP : FB_KEEP;
         }
         if (any_instant) {
             double lost;
             if (s->impact(s, y, stop, y_new, &lost)) return -1;
             memcpy(y, y_new, sizeof(double) * ny);
             *loss += lost;
-            for (int c = 0; c < nc; ++c)
-                if (instant[c]) phase[c] = FB_HELD;
+            /* found by event location up to the gap tolerance below the ground: set onto it (not
+             * the thesis mode's windows, whose penetration is the model's) */
+            if (!thesis && s->settle && s->settle(s, y, stop)) return -1;
+            if (!s->contact) s->gaps(s, y, gaps);
+            for (int m = 0; m < n_visit; ++m) {
+                const int c = visit[m];
+                if (stop[c] == FB_REBOUND) { /* it leaves the ground at once */
+                    /* armed a hair below where the impact left it: below where it was found,
+                     * each bounce within one step would arm the next a hair lower */
+                    if (s->contact) s->contact(s, y, held, push, c, gaps + c, 0, lam + c);
+                    phase[c] = FB_FREE;
+                    floor[c] = fmin(0.0, gaps[c]) - gap_tol;
+                    not_held[c] = 1;
+                } else if (instant[c]) phase[c] = FB_HELD;
+            }
             changed = 1;
         }
-        for (int c = 0; c < nc; ++c)
+        for (int m = 0; m < n_visit; ++m) {
+            const int c = visit[m];
             if (ending[c] && vn[c] >= 0.0) {
                 phase[c] = FB_FREE;
                 floor[c] = fmin(0.0, gaps[c]) - gap_tol;
                 changed = 1;
             }
+        }
         if (changed) continue; /* the dampers saw the velocity jump: recompute the forces */
         /* release the most pulling held contact (the first of equals), then recompute */
         int release = -1;
-        for (int c = 0; c < nc; ++c)
-            if (phase[c] == FB_HELD && (lam[c] < 0.0 || (leaving[c] && lam[c] <= force_tol[c])))
+        for (int m = 0; m < n_visit; ++m) {
+            const int c = visit[m];
+            if (held[c] && (lam[c] < 0.0 || (leaving[c] && lam[c] <= force_tol[c])))
                 if (release < 0 || lam[c] < lam[release]) release = c;
+        }
         if (release < 0) {
             done = 1;
             break;
@@ -105,8 +209,14 @@ int fb_resolve(FbWork *w, const FbSystem *s, double t, double *y, int *phase, do
         else add_event(ev_contact, ev_kind, ev_vn, n_events, release, FB_LIFTOFF, 0.0);
     }
     if (!done) return -2;
-    /* a free contact too close to its floor to be armed gets a floor a hair below */
-    s->gaps(s, y, gaps);
+    if (s->friction && friction_phases(w, s, y, phase, push, leaving, was_held, force_tol, speed_tol, ev_contact,
+                                       ev_kind, ev_vn, n_events, loss)) return -1;
+    /* a free contact too close to its floor to be armed gets a floor a hair below (the
+     * gaps of particles not visited did not change, where contacts decouple) */
+    if (s->contact)
+        for (int m = 0; m < n_visit; ++m) s->contact(s, y, held, push, visit[m], gaps + visit[m], 0, lam + visit[m]);
+    else
+        s->gaps(s, y, gaps);
     for (int c = 0; c < nc; ++c) {
         if (phase[c] == FB_FREE && gaps[c] - floor[c] <= gap_tol) floor[c] = fmin(0.0, gaps[c]) - gap_tol;
         if (phase[c] != FB_PUSHED) {

@@ -24,6 +24,7 @@ import numpy as np
 
 from . import runtime
 from .cbuild import kernels_dir
+from .constants import REBOUND, SETTLE, SLIDING
 from .model import Model, singular_matrix_error
 from .scene import Scene
 
@@ -65,6 +66,8 @@ class AssembledModel(Model):
         self.links = np.ascontiguousarray(scene.links(), dtype=np.intc).reshape(-1, 2)
         self.axial = np.concatenate([np.full(len(b.links), b.damper == "axial") for b in scene.bodies])
         self.masses = scene.masses.copy()
+        # Contact laws per ground (mu, e): runtime data, not parameters of the derived equations.
+        self.laws = np.array([[g.friction, g.restitution] for g in scene.grounds], float).reshape(-1, 2)
         self.nq = self.nu = n * self.dim
         self.ny = 2 * self.nq + 2
         self.n_contacts = n * self.n_grounds
@@ -163,8 +166,11 @@ class AssembledC(runtime.SystemModel, AssembledModel):
         if not handle:
             raise MemoryError(f"cannot allocate the assembly of {self.n_particles} particles")
         lib.fb_asm_bind(handle, p.ctypes.data)
+        lib.fb_asm_laws(handle, np.ascontiguousarray(self.laws).ctypes.data)
         system = runtime.FbSystem()
         lib.fb_asm_system(handle, ctypes.addressof(system))
+        if not (self.laws[:, 0] > 0.0).any():
+            system.friction = None  # no friction anywhere: event location skips it
         system.owner = _AssemblyHandle(lib, handle)
         self._system_cache = (key, system)
         return system
@@ -226,6 +232,7 @@ class AssembledNumpy(AssembledModel):
                                True: getattr(self.k, f"link_axial_{tag}_jacobian")}
         self._particle = getattr(self.k, f"particle_{tag}")
         self._ground = getattr(self.k, f"ground_{tag}")
+        self._split_kernel = getattr(self.k, f"split_{tag}")
         self._groups = [(law, np.flatnonzero(self.axial == law)) for law in (False, True) if (self.axial == law).any()]
 
     def _link_inputs(self, x, v, link_par, index):
@@ -290,7 +297,56 @@ class AssembledNumpy(AssembledModel):
         x, v = self._split(np.asarray(y, float))
         acc, power, impact_power = self._accelerations(x, v, p, push)
         lam = self._constrain(x, acc, p, held)
+        if (self.laws[:, 0] > 0.0).any():
+            impact_power += self._coulomb(x, v, acc, lam, p, held)[3]
         return np.concatenate([v.ravel(), acc.ravel(), [power, impact_power]]), lam.ravel()
+
+    def _coulomb(self, x, v, acc, lam, p, held):
+        """Coulomb friction on the particles held on one ground (the twin of ``coulomb`` in
+        assembly.c): updates ``acc (n, dim)``; returns each contact's tangential velocity and
+        force (n, G, dim), sticking slack (n, G; inf without friction) and the power friction
+        dissipates (W)."""
+        masses, _, _, grounds = self._views(p)
+        n, G, d = self.n_particles, self.n_grounds, self.dim
+        held = np.asarray(held).reshape(n, G)
+        normals = np.broadcast_to(grounds[None, :, 1, :], (n, G, d)).reshape(-1, d).T
+        _, vt, _ = self._split_kernel(np.repeat(v, G, axis=0).T, normals)
+        vt = vt.T.reshape(n, G, d)
+        ft, slack, power = np.zeros((n, G, d)), np.full((n, G), np.inf), 0.0
+        single = np.count_nonzero(held, axis=1) == 1
+        i = np.flatnonzero(single)
+        g = np.argmax(held[i] != 0, axis=1)
+        mu = self.laws[g, 0]
+        i, g, mu = i[mu > 0.0], g[mu > 0.0], mu[mu > 0.0]
+        if not len(i):
+            return vt, ft, slack, power
+        m, normal = masses[i], grounds[g, 1, :]
+        _, at, pull = self._split_kernel(acc[i].T, normal.T)
+        at, pull = at.T, pull[0]
+        sticking = held[i, g] != SLIDING
+        # Sticking: the tangential force cancels the tangential pull.
+        ft[i, g] = np.where(sticking[:, None], -m[:, None] * at, 0.0)
+        slack[i, g] = np.where(sticking, mu * lam[i, g] - m * pull, 0.0)
+        # Sliding: mu lam against v_t, or against the pull from rest.
+        speed = np.linalg.norm(vt[i, g], axis=1)
+        along, size = np.where((speed > 0.0)[:, None], vt[i, g], at), np.where(speed > 0.0, speed, pull)
+        force = mu * np.maximum(lam[i, g], 0.0)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            slide = np.where(((~sticking) & (size > 0.0))[:, None], -force[:, None] * along / size[:, None], 0.0)
+        ft[i, g] += slide
+        acc[i] += np.where(sticking[:, None], -at, slide / m[:, None])
+        power = float(np.sum(np.where(~sticking & (size > 0.0), force * speed, 0.0)))
+        return vt, ft, slack, power
+
+    def friction(self, y, p, held, push):
+        """Each contact's tangential velocity and force (nc, dim) and sticking slack (nc,), as
+        :meth:`flexbody.runtime.SystemModel.friction`."""
+        p = np.asarray(p, float)
+        x, v = self._split(np.asarray(y, float))
+        acc, _, _ = self._accelerations(x, v, p, push)
+        lam = self._constrain(x, acc, p, held)
+        vt, ft, slack, _ = self._coulomb(x, v, acc, lam, p, held)
+        return vt.reshape(-1, self.dim), ft.reshape(-1, self.dim), slack.ravel()
 
     def contact_state(self, y, p, held, push):
         p = np.asarray(p, float)
@@ -303,10 +359,46 @@ class AssembledNumpy(AssembledModel):
         out = np.array(y, float)
         x, v = self._split(out)
         v_before = v.copy()
-        self._constrain(x, v, p, stop)  # v is a view into out
-        masses = self._views(p)[0]
+        lam = self._constrain(x, v, p, stop)  # v is a view into out
+        masses, _, _, grounds = self._views(p)
+        self._contact_laws(v, lam, masses, grounds, np.asarray(stop).reshape(lam.shape))
         loss = 0.5 * float(np.sum(masses * (np.sum(v_before**2, axis=1) - np.sum(v**2, axis=1))))
         return out, loss
+
+    def settle(self, y, p, stop) -> np.ndarray:
+        """``y`` with each particle with ``stop[c]`` set onto the grounds it is below: the
+        least move with J_S (x + dx) - P = max(gap, 0) (the twin of ``settle`` in assembly.c)."""
+        out = np.array(y, float)
+        x, _ = self._split(out)
+        _, _, _, grounds = self._views(np.asarray(p, float))
+        stop = np.asarray(stop, bool).reshape(self.n_particles, self.n_grounds)
+        gaps, J = self._contacts(x, grounds)
+        for i in np.flatnonzero((stop & (gaps < 0.0)).any(axis=1)):
+            Js, below = J[i, stop[i]], np.maximum(-gaps[i, stop[i]], 0.0)
+            x[i] += Js.T @ np.linalg.solve(Js @ Js.T, below)
+        return out
+
+    def _contact_laws(self, v, lam, masses, grounds, stop):
+        """Restitution and the friction impulse after the plastic impulses ``lam (n, G)``, on
+        particles stopped on one ground (the twin of ``contact_laws`` in assembly.c)."""
+        single = np.count_nonzero(stop, axis=1) == 1
+        particles = np.flatnonzero(single)
+        g = np.argmax(stop[particles] != 0, axis=1)
+        mu, e = self.laws[g, 0], np.where(stop[particles, g] == REBOUND, self.laws[g, 1], 0.0)
+        settle = stop[particles, g] == SETTLE
+        active = (mu != 0.0) | (e != 0.0) | settle
+        particles, g, mu, e, settle = particles[active], g[active], mu[active], e[active], settle[active]
+        if not len(particles):
+            return
+        normal = grounds[g, 1, :]  # (k, d): the ground kernel's normal is the unit normal itself
+        stopped = np.maximum(lam[particles, g], 0.0) / masses[particles]  # -v_n-; held: 0 up to round-off
+        v[particles] += (e * stopped)[:, None] * normal
+        _, vt, speed = self._split_kernel(v[particles].T, normal.T)
+        impulse, speed = mu * (1.0 + e) * stopped, speed[0]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            keep = np.where((impulse >= speed) | settle, 0.0, 1.0 - impulse / speed)
+        moving = speed > 0.0
+        v[particles[moving]] -= ((1.0 - keep[moving]) * vt[:, moving]).T
 
     def outputs(self, y, p):
         """Positions and velocities (n, dim) and energies (4,) at one state."""

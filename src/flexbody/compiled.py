@@ -17,7 +17,7 @@ import ctypes
 import numpy as np
 
 from . import runtime
-from .constants import IMPACT, LIFTOFF  # noqa: F401  (event kinds as fb_resolve reports them)
+from .constants import IMPACT, LIFTOFF, SLIP, STICK  # noqa: F401  (event kinds as fb_resolve reports them)
 from .contact import Phases, UnsettledInstant
 from .model import Model, singular_matrix_error
 
@@ -49,10 +49,16 @@ class CompiledPath:
         Receives the states at the grid times.
     force_tolerance, masses : ndarray, shape (nc,)
     gap_tolerance : float
+    restitution, min_rebound : ndarray, shape (nc,), optional
+        Each contact's Newton e and slowest rebound (see :func:`flexbody.contact.resolve`); 0 by default.
+    speed_tolerance : float
+        A sliding contact slower than this (m/s) has come to rest.
     """
 
     def __init__(self, model: Model, p: np.ndarray, y: np.ndarray, phases: Phases, grid: np.ndarray,
-                 samples: np.ndarray, force_tolerance: np.ndarray, masses: np.ndarray, gap_tolerance: float) -> None:
+                 samples: np.ndarray, force_tolerance: np.ndarray, masses: np.ndarray, gap_tolerance: float,
+                 restitution: np.ndarray | None = None, min_rebound: np.ndarray | None = None,
+                 speed_tolerance: float = 0.0) -> None:
         nc = model.n_contacts
         self.model, self.gap_tolerance, self.n_grid = model, gap_tolerance, len(grid)
         self.lib = runtime.library()
@@ -61,8 +67,10 @@ class CompiledPath:
         self._system, self._work = ctypes.addressof(self.system), self.work.address
         self.touching, self.leaving = np.zeros(nc, np.intc), np.zeros(nc, np.intc)  # events at a stop
         self.not_held = np.zeros(nc, np.intc)
-        self.event_contact, self.event_kind = np.zeros(2 * nc, np.intc), np.zeros(2 * nc, np.intc)
-        self.event_speed = np.zeros(2 * nc)
+        # At most an impact or lift-off, and a stick or slip, per contact and instant (and a lift-off after its impact).
+        self.event_contact, self.event_kind = np.zeros(3 * nc, np.intc), np.zeros(3 * nc, np.intc)
+        self.event_speed = np.zeros(3 * nc)
+        self.speed_tolerance = speed_tolerance
         self.counters = np.zeros(4, ctypes.c_long)  # C long: nfev, steps, rejected steps, event evaluations
         self.n_sampled, self.n_events, self.iterations = ctypes.c_int(0), ctypes.c_int(0), ctypes.c_int(0)
         self.t_stop, self.loss, self.h_next = ctypes.c_double(0.0), ctypes.c_double(0.0), ctypes.c_double(0.0)
@@ -70,6 +78,9 @@ class CompiledPath:
         # The buffers (kept alive as long as C holds their addresses):
         self.p, self.y, self.phases, self.grid, self.samples = p, y, phases, grid, samples
         self.force_tolerance, self.masses = force_tolerance, masses
+        self.restitution = np.zeros(nc) if restitution is None else np.ascontiguousarray(restitution, float)
+        self.min_rebound = np.zeros(nc) if min_rebound is None else np.ascontiguousarray(min_rebound, float)
+        self._laws = (_address(self.restitution), _address(self.min_rebound))
         self._y = _address(y)
         self._phase, self._floor = _address(phases.phase, np.intc), _address(phases.floor)
         self._push, self._push_until = _address(phases.push), _address(phases.push_until)
@@ -119,7 +130,7 @@ class CompiledPath:
         Returns
         -------
         events : list of (contact, kind, normal velocity)
-            kind is IMPACT or LIFTOFF, in the order :func:`flexbody.contact.resolve` gives.
+            kind is IMPACT, LIFTOFF, STICK or SLIP, in the order :func:`flexbody.contact.resolve` gives.
         not_held : ndarray of int, shape (nc,)
         loss : float
             Kinetic energy removed by instant impacts (J).
@@ -130,7 +141,8 @@ class CompiledPath:
             self.leaving[:] = leaving
         status = self.lib.fb_resolve(
             self._work, self._system, t, self._y, self._phase, self._floor, self._push, self._push_until, self._touching,
-            self._leaving, self.gap_tolerance, self._force_tol, self._masses, int(thesis), impact_dt or 0.0,
+            self._leaving, self.gap_tolerance, self._force_tol, self._masses, *self._laws, self.speed_tolerance, int(thesis),
+            impact_dt or 0.0,
             *self._events, *self._resolve_out,
         )
         if status == -1:

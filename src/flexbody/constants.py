@@ -5,10 +5,19 @@ modules import them from here, so a phase code or a tolerance cannot differ betw
 two paths.
 """
 
-#: Contact phases (see :mod:`flexbody.contact`).
-FREE, HELD, PUSHED = 0, 1, 2
+#: Contact phases (see :mod:`flexbody.contact`).  HELD sticks where the ground has friction;
+#: SLIDING is held along the normal and slips along the ground against Coulomb friction.
+FREE, HELD, PUSHED, SLIDING = 0, 1, 2, 3
 #: Event kinds as the compiled fixed point reports them.
-IMPACT, LIFTOFF = 0, 1
+IMPACT, LIFTOFF, STICK, SLIP = 0, 1, 2, 3
+#: What an impulse does to a contact (``stop[c]`` of ``FbSystem.impact``): nothing, stop its
+#: normal velocity (plastic), or reverse it by the ground's restitution ``v_n+ = -e v_n-``.
+#: Both apply the ground's Coulomb friction impulse, ``min(m |v_t|, mu P_n)`` against ``v_t``.
+#: SETTLE also zeroes the tangential velocity (a sliding contact that comes to rest).
+KEEP, STOP, REBOUND, SETTLE = 0, 1, 2, 3
+#: A rebound that would rise less than this fraction of the scene's size is plastic: it
+#: ends the Zeno accumulation of ever smaller bounces (DESIGN §6).
+ZENO_RISE = 1e-9
 #: Event roots closer than this (s) are one instant.
 GROUP_TIME = 1e-12
 #: Status codes of the compiled integrator (``fb_integrate``).
@@ -16,7 +25,9 @@ REACHED, EVENT, STEP_COLLAPSE, NON_FINITE, SINGULAR, TOO_SLOW = 0, 1, -1, -2, -3
 
 #: Rendered into C as ``#define FB_<NAME> <value>``.
 C_DEFINES = {
-    "FREE": FREE, "HELD": HELD, "PUSHED": PUSHED, "IMPACT": IMPACT, "LIFTOFF": LIFTOFF,
+    "FREE": FREE, "HELD": HELD, "PUSHED": PUSHED, "SLIDING": SLIDING,
+    "IMPACT": IMPACT, "LIFTOFF": LIFTOFF, "STICK": STICK, "SLIP": SLIP,
+    "KEEP": KEEP, "STOP": STOP, "REBOUND": REBOUND, "SETTLE": SETTLE,
     "GROUP_TIME": repr(GROUP_TIME), "REACHED": REACHED, "EVENT": EVENT, "STEP_COLLAPSE": STEP_COLLAPSE,
     "NON_FINITE": NON_FINITE, "SINGULAR": SINGULAR, "TOO_SLOW": TOO_SLOW,
 }  # fmt: skip

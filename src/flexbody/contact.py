@@ -4,7 +4,12 @@ Each contact (a particle against a ground) is in one phase:
 
 * ``FREE``: no constraint force; its event is the gap reaching the ground while approaching.
 * ``HELD`` (contact): the constraint force ``lam >= 0`` keeps its gap acceleration zero
-  (eq. 4.8-4.9); its event is ``lam`` turning negative (it would pull): lift-off.
+  (eq. 4.8-4.9); its event is ``lam`` turning negative (it would pull): lift-off.  On a
+  ground with friction it also sticks: the tangential force ``ft = -(tangential pull)``
+  holds it while ``|ft| <= mu lam``; its event "slip" is that slack reaching 0.
+* ``SLIDING`` (ground with friction): held along the normal, slipping along the ground
+  against ``ft = -mu lam v_t / |v_t|``; its event "stick" is ``v_t`` reaching 0 (located
+  along the slip direction of the step's start, renewed every step: in 3D it turns).
 * ``PUSHED`` (thesis impact mode only): the estimated impact force ``-m v_n / dT``
   (eq. 4.6) acts for ``dT``; then the contact is resolved like a fresh touch.
 
@@ -13,6 +18,13 @@ strictly), then the constraint forces are recomputed (the dampers see the veloci
 contacts whose force would pull are released, and this repeats until nothing changes.
 Contact forces of point masses on flat grounds decouple (``J M^-1 J^T`` is diagonal), so
 this is the exact solution of the contact complementarity problem, in any order.
+
+Impacts follow the ground's laws (DESIGN §6): ``v_n+ = -e v_n-`` (a rebound that would not
+rise ``ZENO_RISE`` of the scene is plastic, which ends Zeno's accumulation of bounces) and a
+tangential impulse ``min(m |v_t|, mu P_n)`` against ``v_t``.  Once the normal forces are
+settled, :func:`friction_phases` decides stick and slip, per particle (exact for point
+masses on flat grounds).  A particle held on two grounds at once where one has friction (a
+frictional corner) is refused by the driver (status ``unsupported``), not approximated.
 """
 
 from __future__ import annotations
@@ -21,10 +33,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .constants import FREE, HELD, PUSHED
+from .constants import FREE, HELD, KEEP, PUSHED, REBOUND, SETTLE, SLIDING, STOP
 from .model import Model
 
-__all__ = ["FREE", "HELD", "PUSHED", "Event", "Phases", "Resolution", "UnsettledInstant", "resolve"]
+__all__ = ["FREE", "HELD", "PUSHED", "SLIDING", "Event", "Phases", "Resolution", "UnsettledInstant", "friction_phases",
+           "resolve"]
 
 
 @dataclass
@@ -44,8 +57,14 @@ class Phases:
 
     @property
     def held(self) -> np.ndarray:
-        """1 where held, as the C ABI wants it (int array)."""
-        return (self.phase == HELD).astype(np.intc)
+        """The contact-law code of each held contact (HELD, or SLIDING), 0 elsewhere: the
+        ``held`` array of the right-hand side (np.intc, as the C ABI wants it)."""
+        return np.where(self.on_ground, self.phase, 0).astype(np.intc)
+
+    @property
+    def on_ground(self) -> np.ndarray:
+        """Bool (nc,): held along the normal (sticking, frictionless or sliding)."""
+        return (self.phase == HELD) | (self.phase == SLIDING)
 
     def copy(self) -> Phases:
         return Phases(self.phase.copy(), self.floor.copy(), self.push.copy(), self.push_until.copy())
@@ -68,7 +87,7 @@ class UnsettledInstant(RuntimeError):
 class Event:
     t: float
     contact: int
-    kind: str  # "impact" or "liftoff"
+    kind: str  # "impact", "liftoff", "stick" or "slip"
     normal_velocity: float = 0.0  # before the impact (m/s, < 0)
     held: bool = True  # False: released right after its impact ("not held")
 
@@ -80,9 +99,51 @@ class Resolution:
     y: np.ndarray
     phases: Phases
     events: list[Event] = field(default_factory=list)
-    not_held: np.ndarray | None = None  # bool (nc,): stopped at this instant, then released at once
+    not_held: np.ndarray | None = None  # bool (nc,): stopped at this instant, then released at once (or rebounded)
     impact_loss: float = 0.0  # kinetic energy removed by instant impacts (J)
     iterations: int = 0
+
+
+def friction_phases(model: Model, t: float, y: np.ndarray, p: np.ndarray, phases: Phases, leaving: np.ndarray,
+                    was_held: np.ndarray, force_tolerance: np.ndarray,
+                    speed_tolerance: float) -> tuple[np.ndarray, float, list[Event]]:
+    """Coulomb friction of the held contacts once their normal forces are settled (the twin
+    of ``friction_phases`` in phases.c; ``phases`` is updated in place).
+
+    For point masses on flat grounds each particle's tangential problem is its own, so the
+    order does not matter.  A sliding contact slower than ``speed_tolerance`` comes to rest
+    (its tangential velocity is zeroed, SETTLE) and sticks if its ground can hold it
+    ("stick"), or slides on along its pull; a sticking contact whose slack ``mu lam - |ft|``
+    is negative, or within its tolerance where its event fired, slides ("slip"); a contact
+    that landed with tangential velocity left slides.
+
+    Returns
+    -------
+    y : ndarray, shape (ny,)
+    loss : float
+        Kinetic energy removed by zeroing the last tangential velocities (J).
+    events : list of Event
+    """
+    held = phases.held
+    vt, ft, slack = model.friction(y, p, held, phases.push)
+    speed = np.linalg.norm(vt, axis=1)
+    on = held != 0
+    stopping = on & (phases.phase == SLIDING) & (speed <= speed_tolerance)
+    sticking = on & (phases.phase == HELD) & np.isfinite(slack)
+    landed = sticking & (speed > speed_tolerance)
+    slips = sticking & ~landed & ((slack < 0.0) | (leaving & (slack <= force_tolerance)))
+    residue = sticking & ~landed & ~slips & (speed > 0.0)  # sticking holds the acceleration: zero the rest
+    phases.phase[landed | slips] = SLIDING
+    events = [Event(t, int(c), "slip") for c in np.flatnonzero(slips & was_held)]
+    settle = stopping | residue
+    if not settle.any():
+        return y, 0.0, events
+    y, loss = model.impact(y, p, np.where(settle, SETTLE, KEEP).astype(np.intc))
+    held = np.where(settle, HELD, held).astype(np.intc)
+    slack = model.friction(y, p, held, phases.push)[2]
+    events += [Event(t, int(c), "stick") for c in np.flatnonzero(settle & (slack >= 0.0) & (phases.phase == SLIDING))]
+    phases.phase[settle] = np.where(slack[settle] >= 0.0, HELD, SLIDING)
+    return y, loss, events
 
 
 def resolve(
@@ -99,6 +160,9 @@ def resolve(
     masses: np.ndarray,
     impact: str = "instant",
     impact_dt: float | None = None,
+    restitution: np.ndarray | None = None,
+    min_rebound: np.ndarray | None = None,
+    speed_tolerance: float = 0.0,
 ) -> Resolution:
     """Apply the event fixed point at instant ``t``.
 
@@ -121,6 +185,15 @@ def resolve(
     impact : {"instant", "thesis"}
     impact_dt : float, optional
         The thesis mode's ΔT (s).
+    restitution : ndarray, shape (nc,), optional
+        Newton's e of each contact's ground (default 0: plastic).  A contact hit at speed
+        ``|v_n|`` leaves at ``e |v_n|`` (instant mode), or is pushed with ``(1 + e)`` times
+        the plastic force (thesis mode), unless ``e |v_n| < min_rebound``.
+    min_rebound : ndarray, shape (nc,), optional
+        Rebound speeds below this are plastic: the rebound would not rise
+        :data:`~flexbody.constants.ZENO_RISE` of the scene's size (default 0).
+    speed_tolerance : float
+        A sliding contact slower than this (m/s) has come to rest (see :func:`friction_phases`).
 
     Returns
     -------
@@ -129,10 +202,12 @@ def resolve(
     phases = phases.copy()
     touching = touching.copy()
     nc = model.n_contacts
+    e = np.zeros(nc) if restitution is None else np.asarray(restitution, float)
+    slowest = np.zeros(nc) if min_rebound is None else np.asarray(min_rebound, float)
     events: list[Event] = []
     loss = 0.0
     impacted, settled, not_held = np.zeros(nc, bool), np.zeros(nc, bool), np.zeros(nc, bool)
-    was_held = phases.phase == HELD  # on the ground before this instant, so v_n = 0
+    was_held = phases.on_ground.copy()  # on the ground before this instant, so v_n = 0
     for iterations in range(1, 2 * nc + 3):
         gaps, vn, lam = model.contact_state(y, p, phases.held, phases.push)
         near = (phases.phase == FREE) & (touching | (gaps <= phases.floor + gap_tolerance))
@@ -144,25 +219,39 @@ def resolve(
         events += [Event(t, int(c), "impact", float(vn[c])) for c in np.flatnonzero(hit)]
         impacted |= hit
         settled |= ending | (hit & (impact == "instant"))  # stopped on the ground at this instant
+        # A rebound too slow to rise ZENO_RISE of the scene is plastic: no endless bouncing.
+        rebounds = hit & (e > 0.0) & (-e * vn >= slowest)
         started = hit if impact == "thesis" else np.zeros_like(hit)
         if started.any():
-            # eq. 4.6: the impulse -m v_n spread as a force over dT; no velocity jump now.
+            # eq. 4.6: the impulse -(1 + e) m v_n spread as a force over dT; no velocity jump now.
             phases.phase[started] = PUSHED
-            phases.push[started] = -masses[started] * vn[started] / impact_dt
+            phases.push[started] = -masses[started] * vn[started] * (1.0 + np.where(rebounds, e, 0.0)[started]) / impact_dt
             phases.push_until[started] = t + impact_dt
             hit = np.zeros_like(hit)
         # After a window, what velocity is left towards the ground is stopped instantly.
         instant = hit | (ending & (vn < 0.0))
         if instant.any():
-            y, lost = model.impact(y, p, instant | (phases.phase == HELD))
+            stop = np.where(instant | phases.on_ground, STOP, KEEP)
+            stop[hit & rebounds] = REBOUND
+            y, lost = model.impact(y, p, stop.astype(np.intc))
             loss += lost
-            phases.phase[instant] = HELD
+            if impact == "instant" and hasattr(model, "settle"):
+                # found by event location up to the gap tolerance below the ground: set onto it
+                # (not the thesis mode's windows, whose penetration is the model's)
+                y = model.settle(y, p, stop.astype(np.intc))
+            gaps = model.gaps(y[: model.nq], p)
+            bounced = stop == REBOUND  # it leaves the ground at once
+            phases.phase[instant & ~bounced] = HELD
+            # armed a hair below where the impact left it: below where it was found, each
+            # bounce within one step would arm the next a hair lower
+            phases.floor[bounced] = np.minimum(0.0, gaps[bounced]) - gap_tolerance
+            not_held |= bounced
         away = ending & (vn >= 0.0)
         phases.phase[away] = FREE
         phases.floor[away] = np.minimum(0.0, gaps[away]) - gap_tolerance
         if (started | instant | away).any():
             continue  # the dampers saw the velocity jump: recompute the forces before holding anyone
-        pulling = (phases.phase == HELD) & ((lam < 0.0) | (leaving & (lam <= force_tolerance)))
+        pulling = phases.on_ground & ((lam < 0.0) | (leaving & (lam <= force_tolerance)))
         if not pulling.any():
             break
         # Release the most pulling contact, then recompute: exact also for coupled contacts.
@@ -175,6 +264,10 @@ def resolve(
             events.append(Event(t, c, "liftoff"))
     else:
         raise UnsettledInstant(t, iterations)
+    if hasattr(model, "friction") and getattr(model, "laws", np.zeros((0, 2)))[:, 0].any():
+        y, lost, found = friction_phases(model, t, y, p, phases, leaving, was_held, force_tolerance, speed_tolerance)
+        loss += lost
+        events += found
     # A free contact too close to its floor to be armed (released on the ground, or left at
     # -1e-16 by round-off) gets a floor a hair below: its next event is a real approach.
     gaps = model.gaps(y[: model.nq], p)

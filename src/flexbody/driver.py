@@ -19,8 +19,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import __version__
-from .compiled import IMPACT, CompiledPath
-from .constants import EVENT, NON_FINITE, SINGULAR, STEP_COLLAPSE, TOO_SLOW
+from .compiled import CompiledPath
+from .constants import (EVENT, IMPACT, LIFTOFF, NON_FINITE, SINGULAR, SLIP, STEP_COLLAPSE, STICK, TOO_SLOW,
+                        ZENO_RISE)
 from .assembly import AssembledModel
 from .contact import HELD, PUSHED, Event, Phases, UnsettledInstant, resolve
 from .events import EventFunctions, locate
@@ -46,6 +47,12 @@ IMPLICIT = ("Radau", "BDF", "LSODA")
 DRIFT_WARNING, LOOSE_RTOL = 1e-3, 1e-4
 #: A particle with more impacts than this within CHATTER_WINDOW seconds is chattering.
 CHATTER_IMPACTS, CHATTER_WINDOW = 25, 1e-3
+#: A contact switching between stick and slip more than this within CHATTER_WINDOW is chattering.
+CHATTER_FRICTION = 25
+#: A sliding contact slower than this times sqrt(|g| size) has come to rest (m/s).
+SPEED_TOLERANCE = 1e-7
+#: Names of the compiled fixed point's event kinds.
+EVENT_KINDS = {IMPACT: "impact", LIFTOFF: "liftoff", STICK: "stick", SLIP: "slip"}
 #: Event instants closer than this (s) count as no progress; this many in a row is a failure.
 STALL_TIME, STALL_COUNT = 1e-12, 200
 
@@ -119,9 +126,39 @@ def _settings(scene: Scene, overrides: dict) -> SimulationSettings:
         values["impact_dt"] = overrides.get("impact_dt")
     problems += [f"`{key}` = {value!r}: {rule}" for key, value, rule in
                  timing_problems(values["t_end"], values["output_dt"], values["impact"], values["impact_dt"])]
+    problems += _contact_law_problems(scene, values)
     if problems:
         raise InputError("invalid simulation options:\n" + "\n".join(f"  - {p}" for p in problems))
     return SimulationSettings(**values)
+
+
+def _contact_law_problems(scene: Scene, values: dict) -> list[str]:
+    """What the grounds' friction and restitution cannot run with (one sentence each)."""
+    friction = [j for j, g in enumerate(scene.grounds) if g.friction > 0.0]
+    restitution = [j for j, g in enumerate(scene.grounds) if g.restitution > 0.0]
+    out = []
+    if (friction or restitution) and values["formulation"] == "floating":
+        out.append(f"`formulation` = 'floating': grounds {sorted(set(friction + restitution))} have friction or "
+                   "restitution, which only the particles formulation (the default) applies")
+    if friction and values["impact"] == "thesis":
+        out.append(f"`impact` = 'thesis': grounds {friction} have friction, whose impulse is applied instantly only; "
+                   "use impact = 'instant' (the default)")
+    return out
+
+
+def _rebound_laws(scene: Scene, contacts: np.ndarray, size: float) -> tuple[np.ndarray, np.ndarray]:
+    """Each contact's Newton e and slowest rebound speed, shape (nc,) each.
+
+    A rebound at ``v`` against gravity's pull ``a = -g . n`` rises ``v^2 / (2 a)``; below
+    ``ZENO_RISE * size`` it is plastic (DESIGN §6), so a bouncing particle comes to rest at
+    its Zeno time t1 (1 + e) / (1 - e) instead of bouncing ever faster.  Grounds gravity does
+    not pull towards never stop a rebound this way (0).
+    """
+    grounds = scene.grounds
+    ground = contacts[:, 1] if len(contacts) else np.zeros(0, int)
+    e = np.array([g.restitution for g in grounds])[ground]
+    pull = np.array([max(0.0, -float(np.dot(scene.gravity, g.normal))) for g in grounds])[ground]
+    return e, np.sqrt(2.0 * pull * ZENO_RISE * size)
 
 
 @dataclass
@@ -154,23 +191,30 @@ class _Run:
         # For point masses on flat grounds a contact's effective mass 1 / (J M^-1 J^T) is its particle's.
         self.contact_masses = scene.masses[model.contacts[:, 0]]
         self.force_tolerance = 1e-10 * self.contact_masses * max(float(np.linalg.norm(scene.gravity)), 1.0)
+        self.restitution, self.min_rebound = _rebound_laws(scene, model.contacts, size)
+        # A sliding contact slower than this has come to rest (a stop's root is ~1e-15 s wide).
+        self.speed_tolerance = SPEED_TOLERANCE * np.sqrt(max(float(np.linalg.norm(scene.gravity)), 1.0) * max(size, 1.0))
+        self.friction = bool(np.any([g.friction > 0.0 for g in scene.grounds]))
         self.grid = np.linspace(0.0, settings.t_end, int(round(settings.t_end / settings.output_dt)) + 1)
         n = len(self.grid)
         self.Y = np.empty((n, model.ny))  # samples at the grid times, the first n_samples of them taken
-        self.sample_held = np.zeros((n, model.n_contacts), bool)
+        self.sample_held = np.zeros((n, model.n_contacts), np.intc)  # contact-law codes (Phases.held)
         self.sample_push = np.zeros((n, model.n_contacts))
         self.n_samples = 0
         self.events: list[Event] = []
         self.impact_times: dict[int, deque[tuple[float, float]]] = defaultdict(deque)  # for the chatter guard
+        self.friction_times: dict[int, deque[float]] = defaultdict(deque)  # stick and slip events, likewise
         self.losses: list[tuple[float, float]] = []
         self.nfev = self.njev = self.steps = self.segments = 0
+        self.h_next = 0.0  # the step an explicit stepper proposed where the last segment ended (s)
         self.segment_log: list | None = None  # set to [] to log (RHS evaluations, y0, held, push) per segment
         self.min_gap = np.inf
         self.stalled = 0
         self.compiled = None
         if model.backend == "c":
             self.compiled = CompiledPath(model, self.p, self.y, self.phases, self.grid, self.Y,
-                                         self.force_tolerance, self.contact_masses, self.gap_tolerance)
+                                         self.force_tolerance, self.contact_masses, self.gap_tolerance,
+                                         self.restitution, self.min_rebound, self.speed_tolerance)
 
     @property
     def counters(self) -> np.ndarray:
@@ -186,7 +230,7 @@ class _Run:
         """Tag samples ``start:stop`` with the current contact set."""
         if stop == start:
             return
-        self.sample_held[start:stop] = self.phases.phase == HELD
+        self.sample_held[start:stop] = self.phases.held
         self.sample_push[start:stop] = self.phases.push
         self.n_samples = stop
 
@@ -196,7 +240,7 @@ class _Run:
         the state there."""
         if self.segment_log is not None:
             before = self.evaluations
-            y0, held, push = self.y.copy(), self.phases.phase == HELD, self.phases.push.copy()
+            y0, held, push = self.y.copy(), self.phases.on_ground, self.phases.push.copy()
         self.segments += 1
         if self.settings.method in COMPILED_METHODS:
             stop = self.segment_compiled(t0, t_bound)
@@ -238,11 +282,14 @@ class _Run:
             options["jac"] = jacobian = model.jacobian_function(self.p, phases.held)
             if s.method == "LSODA":  # Radau and BDF take the sparse Jacobian; LSODA only a dense one
                 options["jac"] = lambda t, y: _dense(jacobian(t, y))
+        elif self.h_next > 0.0:  # as the compiled path: a restart does not guess the step size again
+            options["first_step"] = min(self.h_next, t_bound - t0)
         import scipy.integrate
 
         solver = getattr(scipy.integrate, s.method)(model.rhs_function(self.p, phases.held, phases.push), t0, self.y.copy(),
                                    t_bound, **options)
-        events = EventFunctions(model, self.p, phases, self.force_tolerance)
+        events = EventFunctions(model, self.p, phases, self.force_tolerance, self.gap_tolerance)
+        events.renew(self.y)
         g_old = events(self.y)
         try:
             while True:
@@ -264,6 +311,9 @@ class _Run:
                 self.record(dense, t_stop)
                 if hit:
                     return _Stop(t_stop, hit.contacts & events.free, hit.contacts & events.held_mask, True)
+                if events.friction:  # the next step's slip directions
+                    events.renew(solver.y)
+                    g_new = events(solver.y)
                 if solver.status == "finished":
                     return _Stop(solver.t, np.zeros_like(events.free), np.zeros_like(events.free), False)
                 lowered = events.free & (phases.floor < 0.0)
@@ -281,6 +331,8 @@ class _Run:
         finally:
             self.nfev += solver.nfev
             self.njev += getattr(solver, "njev", 0)
+            if s.method not in IMPLICIT:
+                self.h_next = solver.h_abs
 
     def record(self, dense, t_stop: float) -> None:
         """Keep the output-grid samples up to ``t_stop`` and track penetration."""
@@ -297,15 +349,24 @@ class _Run:
         s = self.settings
         if self.compiled:  # the compiled twin of contact.resolve
             found, not_held, loss = self.compiled.resolve(t, touching, leaving, s.impact == "thesis", s.impact_dt)
-            new = [Event(t, c, "impact" if kind == IMPACT else "liftoff", speed) for c, kind, speed in found]
+            new = [Event(t, c, EVENT_KINDS[kind], speed) for c, kind, speed in found]
         else:
             res = resolve(self.model, t, self.y, self.p, self.phases, touching, leaving,
                           gap_tolerance=self.gap_tolerance, force_tolerance=self.force_tolerance,
-                          masses=self.contact_masses, impact=s.impact, impact_dt=s.impact_dt)
+                          masses=self.contact_masses, impact=s.impact, impact_dt=s.impact_dt,
+                          restitution=self.restitution, min_rebound=self.min_rebound,
+                          speed_tolerance=self.speed_tolerance)
             self.y[:] = res.y
             self.phases.assign(res.phases)
             new, not_held, loss = res.events, res.not_held, res.impact_loss
         self.events += new
+        if any(e.kind == "impact" and self.restitution[e.contact] > 0.0 for e in new):
+            # A rebound reverses a velocity: the step proposed before it says nothing about the
+            # flight after it (a bounce much shorter than that step would be located only at
+            # the floor a hair below the ground); the next step is estimated afresh.
+            self.h_next = 0.0
+            if self.compiled:
+                self.compiled.h_next.value = 0.0
         if not_held.any():
             for c in np.flatnonzero(not_held):
                 latest = next(e for e in reversed(self.events) if e.contact == c and e.kind == "impact")
@@ -328,6 +389,7 @@ class _Run:
         none = np.zeros(model.n_contacts, bool)
         try:
             self.resolve_at(0.0, none, none)
+            self.keep_samples(0, 1)  # its contact set is the instant's outcome (a slide starting at once)
             while t < s.t_end:
                 t_bound = min(s.t_end, float(phases.push_until.min()))  # a thesis-mode window ends a segment
                 stop = self.segment(t, t_bound)
@@ -359,7 +421,11 @@ class _Run:
         if self.stalled >= STALL_COUNT:
             raise SimulationFailed("no_progress", f"{self.stalled} event instants in a row within {STALL_TIME} s "
                                    f"of each other at t = {t:.12g} s; tighten --rtol/--atol.")
+        if self.friction:
+            self.check_corners(t)
         for e in new_events:
+            if e.kind in ("stick", "slip"):
+                self.check_stick_slip(t, e)
             if e.kind != "impact":
                 continue
             recent = self.impact_times[e.contact]
@@ -374,6 +440,37 @@ class _Run:
                     f"particle {particle} impacted {len(recent)} times within {CHATTER_WINDOW * 1e3:g} ms up to "
                     f"t = {t:.9g} s at normal speeds up to {speed:.3g} m/s (an accumulation of impacts); "
                     "tighten --rtol/--atol, or add damping so the body settles.",
+                )
+
+    def check_stick_slip(self, t: float, e: Event) -> None:
+        """Stick-slip chattering: a contact switching more than CHATTER_FRICTION times within CHATTER_WINDOW."""
+        recent = self.friction_times[e.contact]
+        recent.append(e.t)
+        while recent[0] <= t - CHATTER_WINDOW:
+            recent.popleft()
+        if len(recent) > CHATTER_FRICTION:
+            particle = int(self.model.contacts[e.contact][0])
+            raise SimulationFailed(
+                "chattering",
+                f"particle {particle} switched between stick and slip {len(recent)} times within "
+                f"{CHATTER_WINDOW * 1e3:g} ms up to t = {t:.9g} s (stick-slip chattering: its tangential pull stays "
+                "at the friction limit); tighten --rtol/--atol, or change the friction coefficient.",
+            )
+
+    def check_corners(self, t: float) -> None:
+        """Refuse a particle held on two grounds at once where one has friction (a frictional corner):
+        its tangential problem couples the grounds, which flexbody does not solve."""
+        held = self.phases.on_ground.reshape(self.model.n_particles, -1)
+        corner = np.flatnonzero(held.sum(axis=1) > 1)
+        mu = np.array([g.friction for g in self.scene.grounds])
+        for i in corner:
+            if (mu[held[i]] > 0.0).any():
+                grounds = np.flatnonzero(held[i]).tolist()
+                raise SimulationFailed(
+                    "unsupported",
+                    f"particle {i} is held on grounds {grounds} at once at t = {t:.9g} s and one of them has friction: "
+                    "frictional corners are not solved (refused rather than approximated); make the grounds "
+                    "frictionless where they meet, or keep the body away from the corner.",
                 )
 
     # ------------------------------------------------------------------ results
@@ -409,10 +506,19 @@ class _Run:
         lost = np.concatenate([[0.0], np.cumsum([x[1] for x in self.losses])])
         instant = lost[np.searchsorted(loss_t, T, side="left")]
         ev = self.events
+        # The last state entry integrates the power of the thesis mode's impact forces, or (friction
+        # needs instant impacts) of sliding friction.
+        contact_work = Y[:, nq + nu + 1]
+        friction_force = np.zeros_like(V)
+        if self.friction:
+            for j in np.flatnonzero(held.any(axis=1)):
+                ft = model.friction(Y[j], p, held[j], push[j])[1]
+                friction_force[j] = ft.reshape(n, model.n_contacts // n, -1).sum(axis=1)
         result = SimulationResult(
             t=T.copy(), positions=X, velocities=V, contact_force=force,
             kinetic=E[:, 0], spring=E[:, 1], gravity=E[:, 2],
-            damping_work=Y[:, nq + nu], impact_loss=instant + Y[:, nq + nu + 1],
+            damping_work=Y[:, nq + nu], impact_loss=instant + (0.0 if self.friction else contact_work),
+            friction_force=friction_force, friction_work=contact_work if self.friction else np.zeros(len(T)),
             events_time=np.array([e.t for e in ev], dtype=float),
             events_particle=np.array([model.contacts[e.contact][0] for e in ev], dtype=int),
             events_kind=np.array([e.kind for e in ev], dtype="<U7"),
@@ -440,7 +546,9 @@ class _Run:
             "rejected_steps": int(self.counters[2]), "event_rhs_evaluations": int(self.counters[3]),
             "segments": self.segments,
             "events": len(ev), "impacts": len(impacts), "not_held": sum(not e.held for e in impacts),
-            "liftoffs": len(ev) - len(impacts),
+            "liftoffs": sum(e.kind == "liftoff" for e in ev),
+            "sticks": sum(e.kind == "stick" for e in ev), "slips": sum(e.kind == "slip" for e in ev),
+            "friction_work_J": float(result.friction_work[-1]) if len(T) else 0.0,
             "max_penetration_m": max(0.0, -self.min_gap),
             "energy_initial_J": float(total[0]) if len(total) else 0.0,
             "energy_drift_J": drift,

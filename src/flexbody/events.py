@@ -5,6 +5,10 @@ One event function per contact, positive while nothing happens:
 * ``FREE``: ``gap - floor`` (``floor`` is a hair below the ground, so a particle released
   at gap -1e-16 is still armed and a restart never starts on a root);
 * ``HELD``: ``lam + force_tolerance`` (the constraint force, lift-off when it would pull);
+  with friction the smaller of that and ``mu lam - |ft| + force_tolerance`` (it slips at 0);
+* ``SLIDING``: the smaller of ``lam + force_tolerance`` and the tangential velocity along the
+  slip direction at the start of the step (it stops at 0; the direction is renewed after
+  every step because in 3D it turns, see ``friction_event`` in integrator.c);
 * ``PUSHED``: none (its window ends at a known time).
 
 SciPy's ``solve_ivp`` keeps only the first of several terminal events falling at the same
@@ -21,7 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .constants import FREE, GROUP_TIME, HELD
+from .constants import FREE, GROUP_TIME, HELD, SLIDING
 from .contact import Phases
 from .model import Model
 
@@ -30,12 +34,40 @@ from .model import Model
 class EventFunctions:
     """The vector of event functions, shape (nc,), for one contact configuration."""
 
-    def __init__(self, model: Model, p: np.ndarray, phases: Phases, force_tolerance: np.ndarray) -> None:
+    def __init__(self, model: Model, p: np.ndarray, phases: Phases, force_tolerance: np.ndarray,
+                 gap_tolerance: float = 0.0) -> None:
         self.model, self.p, self.phases = model, p, phases
-        self.force_tolerance = force_tolerance
+        self.force_tolerance, self.gap_tolerance = force_tolerance, gap_tolerance
         self.free = phases.phase == FREE
-        self.held_mask = phases.phase == HELD
+        self.held_mask = phases.on_ground
         self.held = phases.held
+        laws = getattr(model, "laws", np.zeros((0, 2)))
+        self.friction = bool(self.held_mask.any() and laws[:, 0].any())
+        self.direction = np.zeros((model.n_contacts, model.dim))  # each sliding contact's, at the step's start
+
+    def renew(self, y: np.ndarray) -> None:
+        """Take each sliding contact's slip direction at ``y`` (the start of the next step):
+        along its tangential velocity, or from rest along its pull (-ft)."""
+        if not self.friction:
+            return
+        vt, ft, _ = self.model.friction(y, self.p, self.held, self.phases.push)
+        speed, pull = np.linalg.norm(vt, axis=1), np.linalg.norm(ft, axis=1)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            direction = np.where((speed > 0.0)[:, None], vt / speed[:, None],
+                                 np.where((pull > 0.0)[:, None], -ft / pull[:, None], 0.0))
+        sliding = self.phases.phase == SLIDING
+        self.direction[sliding] = direction[sliding]
+
+    def rearm(self, g_mid: np.ndarray, g_new: np.ndarray) -> None:
+        """Arm at the ground (floor 0) each free contact armed a hair below it (just released
+        or rebounded) that is 2 gap tolerances above it at the step's midpoint, as at a step's
+        end, for the step's second half; ``g_mid`` and ``g_new`` are moved to it in place.
+        Else a bounce within one step would be caught only at the lower floor."""
+        floor = self.phases.floor
+        lifted = self.free & (floor < 0.0) & (g_mid + floor >= 2.0 * self.gap_tolerance)
+        g_mid[lifted] += floor[lifted]
+        g_new[lifted] += floor[lifted]
+        floor[lifted] = 0.0
 
     def __call__(self, y: np.ndarray) -> np.ndarray:
         m = self.model
@@ -46,6 +78,11 @@ class EventFunctions:
         if self.held_mask.any():
             _, lam = m.rhs(y, self.p, self.held, self.phases.push)
             g[self.held_mask] = lam[self.held_mask] + self.force_tolerance[self.held_mask]
+            if self.friction:
+                vt, _, slack = m.friction(y, self.p, self.held, self.phases.push)
+                sticking, sliding = self.phases.phase == HELD, self.phases.phase == SLIDING
+                g[sticking] = np.minimum(g[sticking], slack[sticking] + self.force_tolerance[sticking])
+                g[sliding] = np.minimum(g[sliding], np.sum(vt * self.direction, axis=1)[sliding])
         return g
 
 
@@ -75,10 +112,12 @@ def locate(
     dense : callable
         The step's dense output, ``t -> y (ny,)``.
     g_old, g_new : ndarray, shape (nc,)
-        Event functions at the step's ends.
+        Event functions at the step's ends (``g_new`` follows a contact armed at the ground
+        at the midpoint, see :meth:`EventFunctions.rearm`).
     """
     t_mid = 0.5 * (t_old + t_new)
     g_mid = events(dense(t_mid))
+    events.rearm(g_mid, g_new)
     for (ta, ga), (tb, gb) in (((t_old, g_old), (t_mid, g_mid)), ((t_mid, g_mid), (t_new, g_new))):
         fired = np.flatnonzero((ga > 0.0) & (gb <= 0.0))
         if fired.size == 0:

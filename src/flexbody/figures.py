@@ -281,7 +281,10 @@ def figure_energy(result: SimulationResult) -> Figure:
     """Thesis fig. 5.4: the energies over time, and the drift of their sum."""
     fig = _figure((8.8, 6), right=1.4, top=0.3, grid=(1, 2), gap=(0.0, 0.3))
     top, bottom = fig.subplots(2, 1, sharex=True, height_ratios=(3, 1))
-    for name in ("kinetic", "spring", "gravity", "damping_work", "impact_loss"):
+    names = ("kinetic", "spring", "gravity", "damping_work", "impact_loss")
+    if np.any(result.friction_work):
+        names += ("friction_work",)
+    for name in names:
         top.plot(result.t, getattr(result, name), lw=1.1, label=name.replace("_", " "))
     total = result.total_energy
     top.plot(result.t, total, "k--", lw=1.2, label="sum")
@@ -292,6 +295,48 @@ def figure_energy(result: SimulationResult) -> Figure:
     bottom.set_ylabel("sum - initial (J)")
     bottom.set_xlabel("t (s)")
     bottom.ticklabel_format(axis="y", style="sci", scilimits=(-2, 2))
+    return fig
+
+
+def has_friction(result: SimulationResult) -> bool:
+    """Whether a run had friction at work (a tangential contact force, or stick and slip events)."""
+    return bool(np.any(result.friction_force) or np.isin(result.events_kind, ("stick", "slip")).any())
+
+
+def figure_friction(result: SimulationResult, grounds: Sequence | None = None, most: int = 6) -> Figure:
+    """Contact forces with friction: normal and tangential force of the particles that touch
+    the ground (top) and each one's phase over time, free, sticking or sliding (bottom).
+
+    A particle is sliding where it is held and its tangential speed is above 1e-6 m/s (its
+    tangential velocity is zeroed when it sticks); stick and slip events are marked.
+    """
+    fig = _figure((8.8, 6), right=1.4, top=0.3, grid=(1, 2), gap=(0.0, 0.3))
+    top, bottom = fig.subplots(2, 1, sharex=True, height_ratios=(3, 2))
+    _, normals = ground_planes(grounds)
+    touched = np.unique(result.events_particle) if len(result.events_particle) else np.flatnonzero(
+        result.contact_force.max(axis=0) > 0)
+    shown = touched[np.argsort(-result.contact_force[:, touched].max(axis=0))][:most] if len(touched) else touched
+    tangential = np.linalg.norm(result.friction_force, axis=2)
+    for row, i in enumerate(sorted(shown)):
+        line, = top.plot(result.t, result.contact_force[:, i], lw=1.0, label=f"{i}: normal")
+        top.plot(result.t, tangential[:, i], lw=1.0, ls="--", color=line.get_color(), label=f"{i}: tangential")
+        held = result.contact_force[:, i] > 0
+        v = result.velocities[:, i]
+        # The tangential speed against the ground the particle is nearest to.
+        n = normals[np.argmin((result.positions[:, i] @ normals.T).min(axis=0))] if len(normals) else np.array([0, 1])
+        speed = np.linalg.norm(v - (v @ n)[:, None] * n, axis=1)
+        for mask, colour in ((held & (speed <= 1e-6), "tab:green"), (held & (speed > 1e-6), "tab:orange")):
+            bottom.fill_between(result.t, row - 0.35, row + 0.35, where=mask, color=colour, lw=0, step="mid")
+        for kind, marker in (("stick", "v"), ("slip", "^")):
+            at = result.events_time[(result.events_particle == i) & (result.events_kind == kind)]
+            bottom.plot(at, np.full(len(at), row), marker, color="k", ms=4, ls="none")
+    top.set_ylabel("contact force (N)")
+    top.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0))
+    top.set_title("Contact forces with friction: normal (solid) and tangential (dashed)", fontsize=10)
+    bottom.set_yticks(range(len(shown)), [f"particle {i}" for i in sorted(shown)], fontsize=7)
+    bottom.set_ylim(-0.6, max(len(shown), 1) - 0.4)
+    bottom.set_xlabel("t (s)")
+    bottom.set_title("phase: sticking (green), sliding (orange), free (blank); events: stick v, slip ^", fontsize=9)
     return fig
 
 
@@ -429,10 +474,12 @@ def render_all(result: SimulationResult, grounds: Sequence | None = None) -> dic
         from .figures3d import render_all as render_all_3d
 
         return render_all_3d(result, grounds)
-    return {
+    figures = {
         "fig5_1_free_fall.png": _png(figure_free_fall(result, grounds)),
         "fig5_2_impact.png": _png(figure_impact(result, grounds)),
         "fig5_3_colliding_points.png": _png(figure_colliding_points(result, grounds)),
         "fig5_4_energy.png": _png(figure_energy(result)),
-        "drop.gif": animation_gif(result, grounds),
     }
+    if has_friction(result):
+        figures["friction.png"] = _png(figure_friction(result, grounds))
+    return figures | {"drop.gif": animation_gif(result, grounds)}

@@ -84,7 +84,11 @@ class Model:
         raise NotImplementedError
 
     def impact(self, y, p, stop) -> tuple[FloatArray, float]:  # pragma: no cover - abstract
-        """Impulses that zero the normal velocity of every contact in ``stop`` (bool (nc,)).
+        """Impulses that zero the normal velocity of every contact in ``stop`` (int (nc,)).
+
+        ``stop[c]`` is a code of :mod:`flexbody.constants`: KEEP, STOP (plastic) or REBOUND
+        (``v_n+ = -e v_n-``).  Models with contact laws (the assembled particles formulation)
+        also apply restitution and the Coulomb friction impulse; the others treat REBOUND as STOP.
 
         Returns the state after them, shape (ny,), and the kinetic energy they removed (J).
         """

@@ -14,7 +14,8 @@ from .paths import check_output_dir, staged_folder
 #: Array keys of result.npz, in the order of DESIGN.md §2 (plus events_held and links).
 ARRAY_KEYS = (
     "t", "positions", "velocities", "contact_force", "kinetic", "spring", "gravity", "damping_work",
-    "impact_loss", "events_time", "events_particle", "events_kind", "events_held", "masses", "links",
+    "impact_loss", "friction_force", "friction_work", "events_time", "events_particle", "events_kind",
+    "events_held", "masses", "links",
 )  # fmt: skip
 
 #: Status values and what each means.
@@ -26,6 +27,7 @@ STATUSES = {
     "blow_up": "The state became non-finite or the mass matrix singular.",
     "max_events": "The maximum number of events was reached.",
     "too_slow": "The run exceeded its max_wall_time.",
+    "unsupported": "The scene reached a situation flexbody refuses to approximate (a frictional corner).",
 }
 
 
@@ -41,13 +43,18 @@ class SimulationResult:
     contact_force : ndarray, shape (nt, n)
         Normal constraint force on each particle (N, >= 0; summed over grounds).
     kinetic, spring, gravity, damping_work, impact_loss : ndarray, shape (nt,)
-        The energy ledger (J): their sum stays at its initial value.
+        The energy ledger (J), with ``friction_work``: their sum stays at its initial value.
+        ``impact_loss`` holds what impulses took, normal and tangential.
     events_time, events_particle, events_kind, events_held : ndarray, shape (ne,)
         Each impact or lift-off; ``events_held`` is False for an impacted particle that
         leaves at once because holding it would need a pulling force.
     masses : ndarray, shape (n,)
     links : ndarray of int, shape (n_links, 2)
         Particle pairs joined by a spring and damper (for drawing the body).
+    friction_force : ndarray, shape (nt, n, dim)
+        Tangential contact force on each particle (N; summed over grounds; 0 without friction).
+    friction_work : ndarray, shape (nt,)
+        Energy dissipated by sliding friction so far (J, >= 0, non-decreasing).
     status : str
         One of :data:`STATUSES`; ``message`` says what happened and what to change.
     stats : dict
@@ -70,9 +77,17 @@ class SimulationResult:
     events_held: np.ndarray
     masses: np.ndarray
     links: np.ndarray
+    friction_force: np.ndarray | None = None  # zeros when not given (a run without friction)
+    friction_work: np.ndarray | None = None
     status: str = "success"
     message: str = STATUSES["success"]
     stats: dict = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if self.friction_force is None:
+            self.friction_force = np.zeros(np.shape(self.velocities))
+        if self.friction_work is None:
+            self.friction_work = np.zeros(len(self.t))
 
     @property
     def success(self) -> bool:
@@ -80,8 +95,8 @@ class SimulationResult:
 
     @property
     def total_energy(self) -> np.ndarray:
-        """Kinetic + spring + gravity + damping work + impact loss, shape (nt,)."""
-        return self.kinetic + self.spring + self.gravity + self.damping_work + self.impact_loss
+        """Kinetic + spring + gravity + damping work + impact loss + friction work, shape (nt,)."""
+        return self.kinetic + self.spring + self.gravity + self.damping_work + self.impact_loss + self.friction_work
 
     def arrays(self) -> dict[str, np.ndarray]:
         return {key: getattr(self, key) for key in ARRAY_KEYS}
@@ -130,7 +145,7 @@ def load_result(out_dir: str | Path) -> SimulationResult:
     """Read a result written by :meth:`SimulationResult.save`."""
     out_dir = Path(out_dir)
     with np.load(out_dir / "result.npz") as data:
-        arrays = {key: data[key] for key in ARRAY_KEYS}
+        arrays = {key: data[key] for key in ARRAY_KEYS if key in data}  # older results lack the friction keys
     summary = json.loads((out_dir / "summary.json").read_text())
     status, message = summary.pop("status"), summary.pop("message")
     return SimulationResult(**arrays, status=status, message=message, stats=summary)

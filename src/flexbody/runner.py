@@ -73,7 +73,9 @@ def run_command(args: argparse.Namespace) -> int:
         f"impact {s['impact']})\n"
         f"  integrated {s['t_end']:g} s in {s['wall_time_s']:.3f} s wall: {s['rhs_evaluations']} RHS evaluations, "
         f"{s['steps']} steps\n"
-        f"  {s['impacts']} impacts ({s['not_held']} not held), {s['liftoffs']} lift-offs; "
+        f"  {s['impacts']} impacts ({s['not_held']} not held), {s['liftoffs']} lift-offs"
+        + (f", {s['sticks']} sticks, {s['slips']} slips (friction work {s['friction_work_J']:.3g} J)"
+           if s.get("sticks") or s.get("slips") or s.get("friction_work_J") else "") + "; "
         f"max penetration {s['max_penetration_m']:.2g} m; energy drift {s['energy_drift_J']:.2g} J "
         f"({s['energy_drift_relative']:.2g} of E0)\n"
         f"  wrote {out}/result.npz, summary.json" + (", figures and drop.gif" if not args.no_figures else "")

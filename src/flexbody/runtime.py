@@ -24,7 +24,8 @@ class FbSystem(ctypes.Structure):
     _fields_ = [
         ("nq", _int), ("nu", _int), ("nc", _int), ("ny", _int), ("n_particles", _int), ("dim", _int),
         ("data", _ptr), ("rhs", _ptr), ("gaps", _ptr), ("contact_state", _ptr), ("impact", _ptr),
-        ("outputs", _ptr), ("project", _ptr),
+        ("outputs", _ptr), ("project", _ptr), ("contact", _ptr), ("stencil", _ptr),
+        ("friction", _ptr), ("settle", _ptr),
     ]  # fmt: skip
 
 
@@ -35,12 +36,13 @@ SIGNATURES = {
     "fb_integrate": (_int, [_ptr, _ptr, _int, _double, _ptr, _double, _ptr, _ptr, _ptr, _ptr, _double, _double,
                             _double, _ptr, _int, _ptr, _ptr, _ptr, _ptr, _ptr, _ptr, _ptr, _ptr, _ptr, _double]),
     "fb_resolve": (_int, [_ptr, _ptr, _double, _ptr, _ptr, _ptr, _ptr, _ptr, _ptr, _ptr, _double, _ptr, _ptr,
-                          _int, _double, _ptr, _ptr, _ptr, _ptr, _ptr, _ptr, _ptr]),
+                          _ptr, _ptr, _double, _int, _double, _ptr, _ptr, _ptr, _ptr, _ptr, _ptr, _ptr]),
     "fb_trajectory": (_int, [_ptr, _ptr, _long, _ptr, _ptr, _ptr, _ptr, _ptr, _ptr, _ptr]),
     "fb_time_rhs": (_double, [_ptr, _ptr, _int, _ptr, _ptr, _ptr]),
     "fb_asm_new": (_ptr, [_int, _int, _int, _int, _ptr, _ptr]),
     "fb_asm_free": (None, [_ptr]),
     "fb_asm_bind": (None, [_ptr, _ptr]),
+    "fb_asm_laws": (None, [_ptr, _ptr]),
     "fb_asm_system": (None, [_ptr, _ptr]),
     "fb_asm_link_jacobians": (None, [_ptr, _ptr, _ptr]),
     "fb_sys_rhs": (_int, [_ptr, _ptr, _ptr, _ptr, _ptr, _ptr]),
@@ -48,6 +50,9 @@ SIGNATURES = {
     "fb_sys_contact_state": (_int, [_ptr, _ptr, _ptr, _ptr, _ptr, _ptr, _ptr]),
     "fb_sys_impact": (_int, [_ptr, _ptr, _ptr, _ptr, _ptr]),
     "fb_sys_outputs": (None, [_ptr, _ptr, _ptr, _ptr, _ptr]),
+    "fb_sys_friction": (_int, [_ptr, _ptr, _ptr, _ptr, _int, _ptr, _ptr, _ptr, _ptr]),
+    "fb_sys_contact": (_int, [_ptr, _ptr, _ptr, _ptr, _int, _ptr, _ptr, _ptr, _ptr, _int, _ptr]),
+    "fb_sys_settle": (_int, [_ptr, _ptr, _ptr]),
 }
 
 
@@ -140,6 +145,51 @@ class SystemModel:
                                           gaps.ctypes.data, vn.ctypes.data, lam.ctypes.data):
             raise singular_matrix_error()
         return gaps, vn, lam
+
+    def contact(self, y, p, held, push, c: int) -> tuple[float, float, float, np.ndarray] | None:
+        """Contact ``c`` alone, as event location and the event instant evaluate it: its gap,
+        normal velocity, force if held, and the state entries it reads (int array); None where
+        contacts couple (whole-scene models)."""
+        y, held, push = _floats(y), _ints(held), _floats(push)
+        gap, vn, lam, k = ctypes.c_double(0.0), ctypes.c_double(0.0), ctypes.c_double(0.0), ctypes.c_int(0)
+        entries = np.empty(self.ny, np.intc)
+        status = library().fb_sys_contact(self._address(p), y.ctypes.data, held.ctypes.data, push.ctypes.data,
+                                          int(c), ctypes.addressof(gap), ctypes.addressof(vn), ctypes.addressof(lam),
+                                          entries.ctypes.data, self.ny, ctypes.addressof(k))
+        if status == -2:
+            return None
+        if status:
+            raise singular_matrix_error()
+        return gap.value, vn.value, lam.value, entries[: k.value].copy()
+
+    def friction(self, y, p, held, push) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Each contact's tangential velocity and tangential contact force (nc, dim) and its
+        sticking slack ``mu lam - |ft|`` (nc,; inf without friction), with the contact laws of
+        ``held`` (phase codes: HELD sticks, SLIDING slips).  Zeros and inf for systems without
+        contact laws (whole-scene models)."""
+        y, held, push = _floats(y), _ints(held), _floats(push)
+        vt, ft = np.zeros((self.n_contacts, self.dim)), np.zeros((self.n_contacts, self.dim))
+        slack = np.full(self.n_contacts, np.inf)
+        out = [np.zeros(3), np.zeros(3), ctypes.c_double(0.0), ctypes.c_double(0.0)]
+        address, call = self._address(p), library().fb_sys_friction
+        for c in range(self.n_contacts):
+            status = call(address, y.ctypes.data, held.ctypes.data, push.ctypes.data, c, out[0].ctypes.data,
+                          out[1].ctypes.data, ctypes.addressof(out[2]), ctypes.addressof(out[3]))
+            if status == -2:
+                break
+            if status:
+                raise singular_matrix_error()
+            vt[c], ft[c], slack[c] = out[0][: self.dim], out[1][: self.dim], out[2].value
+        return vt, ft, slack
+
+    def settle(self, y, p, stop) -> np.ndarray:
+        """``y`` with each particle with ``stop[c]`` set onto the grounds it is below (a copy;
+        unchanged where the system has no settle, as whole-scene models)."""
+        out, stop = np.array(y, float), _ints(stop)
+        status = library().fb_sys_settle(self._address(p), out.ctypes.data, stop.ctypes.data)
+        if status not in (0, -2):
+            raise singular_matrix_error()
+        return out
 
     def impact(self, y, p, stop):
         y, stop = _floats(y), _ints(stop)

@@ -90,10 +90,17 @@ def _frozen(array: Any) -> np.ndarray:
 
 @dataclass(frozen=True)
 class Ground:
-    """A frictionless half-plane: a particle's gap is ``(x - point) . normal`` (>= 0 outside)."""
+    """A half-plane: a particle's gap is ``(x - point) . normal`` (>= 0 outside).
+
+    ``friction`` is Coulomb's mu (one coefficient, static = kinetic) and ``restitution``
+    Newton's e (``v_n+ = -e v_n-`` at an impact); both 0 by default: frictionless and
+    plastic, the thesis's ground.
+    """
 
     point: tuple[float, ...]
     normal: tuple[float, ...]  # unit length
+    friction: float = 0.0
+    restitution: float = 0.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -407,9 +414,12 @@ def _grounds(raw: Any, dim: int, gravity: tuple[float, ...], problems: Problems)
         return []
     grounds: list[Ground] = []
     for j, table in enumerate(raw):
-        reader = TableReader(table, f"grounds[{j}]", problems, ("point", "normal"))
+        reader = TableReader(table, f"grounds[{j}]", problems, ("point", "normal", "friction", "restitution"))
         point = reader.vector("point", dim)
         normal = reader.vector("normal", dim)
+        friction = reader.number("friction", 0.0, check=lambda v: v >= 0.0, rule="must be >= 0 (Coulomb's mu)")
+        restitution = reader.number("restitution", 0.0, check=lambda v: 0.0 <= v <= 1.0,
+                                    rule="must be in [0, 1] (Newton's e: 0 plastic, 1 elastic)")
         reader.finish()
         if normal is None:
             continue
@@ -419,7 +429,9 @@ def _grounds(raw: Any, dim: int, gravity: tuple[float, ...], problems: Problems)
             continue
         if point is None:
             continue
-        ground = Ground(point=point, normal=unit)
+        if friction is None or restitution is None:
+            continue
+        ground = Ground(point=point, normal=unit, friction=friction, restitution=restitution)
         for i, other in enumerate(grounds):
             clash = _redundant(ground, other, f"grounds[{i}]")
             if clash:
