@@ -14,6 +14,8 @@ Three studies, each printed as a table and saved as JSON and PNG in ``--out``:
   each costs, and the coarsest model within 1 %.
 * ``mujoco`` — the same ball in MuJoCo (optional extra ``flexbody[mujoco]``): time,
   penetration, rebound height and height error against the tight flexbody reference.
+* ``mujoco3d`` — the same for the 3D sphere of ``sphere_drop`` (201 particles) on level
+  ground.
 * ``run`` — the whole default command ``flexbody run thesis_ball --out DIR`` in fresh
   processes, with and without figures, its imports, and each figure drawn alone.
 
@@ -457,51 +459,81 @@ def plot_resolution(data: dict):
 
 def mujoco_comparison(out: Path, quick: bool) -> dict | None:
     """The thesis ball (axial dampers, as MuJoCo's tendons) in flexbody and in MuJoCo."""
+    return _side_by_side(out, "mujoco", _ball_variant(damper="axial"), quick,
+                         "Thesis ball (axial dampers)", "thesis ball with axial dampers")
+
+
+def mujoco3d_comparison(out: Path, quick: bool) -> dict | None:
+    """The ``sphere_drop`` sphere (201 particles, axial dampers) dropped on level ground,
+    in flexbody and in MuJoCo.  Level, not tilted as in the bundled scene: on a slope the
+    centre's height mixes the rebound with the slide downhill."""
+    scene = _scene_variant("sphere_drop", {"output_dt": 1e-3}, drop=("grounds",), damper="axial")
+    return _side_by_side(out, "mujoco3d", scene, quick, "3D sphere, 201 particles (axial dampers), level ground",
+                         "the sphere_drop sphere with axial dampers on level ground")
+
+
+def _side_by_side(out: Path, name: str, scene: Scene, quick: bool, title: str, what: str) -> dict | None:
+    """``scene`` in flexbody (dopri5, dop853) and in MuJoCo (1 ms, 0.1 ms steps) against a tight
+    flexbody reference: time, penetration, centre-of-mass rebound, height error; saves ``name``."""
     try:
         from . import mujoco_compare
         import mujoco  # noqa: F401
     except ImportError:
-        print("mujoco comparison skipped: MuJoCo is not installed (pip install 'flexbody[mujoco]')")
+        print(f"{name} comparison skipped: MuJoCo is not installed (pip install 'flexbody[mujoco]')")
         return None
-    scene = _ball_variant(damper="axial")
     repeats = 3 if quick else 7
-    print("MuJoCo side by side: thesis ball with axial dampers, 2 s")
+    print(f"MuJoCo side by side: {what}, {scene.simulation.t_end:g} s")
+    up = -np.asarray(scene.gravity) / np.linalg.norm(scene.gravity)
     rows, curves = [], {}
     reference = simulate(scene, method="dop853", rtol=1e-11, atol=1e-14)
-    curves["reference: flexbody dop853 rtol 1e-11"] = (reference.t, reference.positions[:, :, 1] @ scene.masses
-                                                       / scene.masses.sum())
+    ref_heights = reference.positions @ up
+    curves["reference: flexbody dop853 rtol 1e-11"] = (reference.t, ref_heights @ scene.masses / scene.masses.sum())
     for label, options in (("flexbody dopri5 rtol 1e-6", dict(method="dopri5", rtol=1e-6, atol=1e-9)),
                            ("flexbody dop853 rtol 1e-9", dict(method="dop853", rtol=1e-9, atol=1e-12))):
         result, wall = _timed(scene, repeats, **options)
-        y = result.positions[:, :, 1]
+        y = result.positions @ up
         rows.append({"label": label, "time_s": wall, "max_penetration_m": result.stats["max_penetration_m"],
-                     **_rebound(result.t, y, result.masses),
-                     "max_height_error_m": float(np.abs(y - reference.positions[:, :, 1]).max())})
+                     "diverged_at_s": None, **_rebound(result.t, y, result.masses),
+                     "max_height_error_m": float(np.abs(y - ref_heights).max())})
         curves[label] = (result.t, y @ result.masses / result.masses.sum())
     for dt in (1e-3, 1e-4):
         m = mujoco_compare.run(scene, dt, repeats)
-        ref_y = np.array([np.interp(m["t"], reference.t, reference.positions[:, i, 1])
-                          for i in range(scene.n_particles)]).T
+        ref_y = np.array([np.interp(m["t"], reference.t, ref_heights[:, i]) for i in range(scene.n_particles)]).T
+        stable = m["diverged_at_s"] is None
         rows.append({"label": f"MuJoCo {m['version']} dt {dt:g} s", "time_s": m["time_s"],
-                     "max_penetration_m": m["max_penetration_m"], **_rebound(m["t"], m["heights"], scene.masses),
-                     "max_height_error_m": float(np.abs(m["heights"] - ref_y).max())})
-        curves[rows[-1]["label"]] = (m["t"], m["heights"] @ scene.masses / scene.masses.sum())
+                     "max_penetration_m": m["max_penetration_m"], "diverged_at_s": m["diverged_at_s"],
+                     **(_rebound(m["t"], m["heights"], scene.masses) if stable else
+                        {"rebound_height_m": float("nan"), "lowest_centre_m": float("nan")}),
+                     "max_height_error_m": float(np.abs(m["heights"] - ref_y).max()) if stable else float("nan")})
+        if stable:  # a diverged run's heights are meaningless before MuJoCo even notices
+            curves[rows[-1]["label"]] = (m["t"], m["heights"] @ scene.masses / scene.masses.sum())
     print(f"  {'run':32s} {'time ms':>9s} {'penetration m':>14s} {'rebound m':>10s} {'height error m':>15s}")
     for r in rows:
+        diverged = f"  unstable: MuJoCo reset its state at t = {r['diverged_at_s']:g} s" if r["diverged_at_s"] else ""
         print(f"  {r['label']:32s} {r['time_s'] * 1e3:9.2f} {r['max_penetration_m']:14.2e} "
-              f"{r['rebound_height_m']:10.4f} {r['max_height_error_m']:15.2e}")
+              f"{r['rebound_height_m']:10.4f} {r['max_height_error_m']:15.2e}{diverged}")
     grid = np.arange(0.0, scene.simulation.t_end + 1e-9, 2e-3)
-    data = {"rows": rows, "curves": {"t": grid.tolist(), "centre_height_m": {
-        label: np.interp(grid, t, y).tolist() for label, (t, y) in curves.items()}}, "environment": _environment()}
-    _save(out, "mujoco", data, plot_mujoco(data))
+    data = {"title": title, "scene": scene.name, "particles": scene.n_particles, "links": len(scene.links()),
+            "rows": rows, "curves": {"t": grid.tolist(), "centre_height_m": {
+                label: np.interp(grid, t, y).tolist() for label, (t, y) in curves.items()}},
+            "environment": _environment()}
+    _save(out, name, data, plot_mujoco(data))
     return data
 
 
 def _ball_variant(simulation: dict | None = None, **body) -> Scene:
     """The bundled thesis ball (from its TOML) with some body and simulation fields changed."""
+    return _scene_variant("thesis_ball", simulation, **body)
+
+
+def _scene_variant(name: str, simulation: dict | None = None, drop: tuple[str, ...] = (), **body) -> Scene:
+    """A bundled single-body scene (from its TOML) with some body and simulation fields changed
+    and the top-level tables in ``drop`` removed (``grounds``: the default level ground)."""
     import tomllib
 
-    table = tomllib.loads(Path(load_scene("thesis_ball").source).read_text())
+    table = tomllib.loads(Path(load_scene(name).source).read_text())
+    for key in drop:
+        table.pop(key, None)
     table["bodies"][0].update(body)
     table["simulation"].update(simulation or {})
     return load_scene(table)
@@ -527,9 +559,14 @@ def plot_mujoco(data: dict):
     for (label, y), style in zip(runs, styles):
         (line,) = top.plot(t, y, style, lw=1.1, label=label)
         bottom.semilogy(t, np.abs(y - reference), style, lw=0.9, color=line.get_color())
+    for row in data["rows"]:
+        if row.get("diverged_at_s"):
+            top.plot([], [], " ", label=f"{row['label']}: unstable, reset at t = {row['diverged_at_s']:g} s "
+                                        "(not drawn)")
     top.set_ylabel("height of the centre of mass (m)")
     top.legend(fontsize=8)
-    top.set_title("Thesis ball (axial dampers): flexbody (exact contact) and MuJoCo (soft contact)", fontsize=10)
+    title = data.get("title", "Thesis ball (axial dampers)")  # a mujoco.json saved before titles were
+    top.set_title(f"{title}: flexbody (exact contact) and MuJoCo (soft contact)", fontsize=10)
     bottom.set_ylabel("|height - reference| (m)")
     bottom.set_xlabel("t (s)")
     bottom.set_title("flexbody dopri5 and dop853 coincide above; here they separate", fontsize=9)
@@ -546,7 +583,8 @@ def _plot_friction_map(data: dict):
 
 
 PLOTS = {"work_precision": plot_work_precision, "stability_map": plot_stability, "resolution": plot_resolution,
-         "mujoco": plot_mujoco, "work_precision_incline": plot_work_precision, "friction_map": _plot_friction_map}
+         "mujoco": plot_mujoco, "mujoco3d": plot_mujoco, "work_precision_incline": plot_work_precision,
+         "friction_map": _plot_friction_map}
 
 
 def replot(folder: Path) -> list[Path]:
@@ -555,7 +593,7 @@ def replot(folder: Path) -> list[Path]:
     for name, plot in PLOTS.items():
         source = folder / f"{name}.json"
         data = json.loads(source.read_text()) if source.exists() else None
-        if data is None or (name == "mujoco" and "curves" not in data):
+        if data is None or (name.startswith("mujoco") and "curves" not in data):
             continue  # a mujoco.json from before the curves were saved cannot be redrawn
         plot(data).savefig(folder / f"{name}.png", dpi=110)
         written.append(folder / f"{name}.png")
@@ -669,7 +707,7 @@ def _friction_map(out: Path, quick: bool) -> dict:
 
 
 STUDIES = {"wp": work_precision, "stability": stability_map, "resolution": resolution_study,
-           "mujoco": mujoco_comparison, "run": run_study, "scale": _scale,
+           "mujoco": mujoco_comparison, "mujoco3d": mujoco3d_comparison, "run": run_study, "scale": _scale,
            "sweep": sweep_benchmark, "friction_wp": _friction_wp, "friction_map": _friction_map}
 
 

@@ -111,7 +111,7 @@ def _parser() -> argparse.ArgumentParser:
                                        "(stability), resolution study (resolution), the whole run command (run), cost vs size (scale), Dask sweeps (sweep), "
                                        "friction: work-precision on the incline (friction_wp) and the mu x e map (friction_map); "
                                        "JSON and PNG in --out.")
-    bench.add_argument("--study", choices=("wp", "stability", "resolution", "mujoco", "run", "scale", "sweep",
+    bench.add_argument("--study", choices=("wp", "stability", "resolution", "mujoco", "mujoco3d", "run", "scale", "sweep",
                                            "friction_wp", "friction_map"), action="append",
                        help="which study (repeatable; default: all; mujoco needs flexbody[mujoco])")
     bench.add_argument("--out", default="bench", metavar="DIR", help="output folder")
