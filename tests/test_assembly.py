@@ -194,9 +194,10 @@ def test_a_400_particle_ring_lands_and_lifts_off_cleanly():
 @pytest.mark.parametrize("dim", [2, 3])
 @pytest.mark.parametrize("seed", [0, 1])
 def test_one_contact_alone_equals_the_whole_system_and_reads_only_its_stencil(seed, dim, rng):
-    """Event location evaluates one contact from its particle's stencil: its gap and held
-    force must equal gaps() and rhs() bit for bit (else a root and the step's end disagree),
-    and every state entry outside the stencil may be garbage."""
+    """Event location and event instants evaluate one contact from its particle's stencil:
+    its gap, normal velocity and held force must equal contact_state's and rhs's bit for bit
+    (else a root and the step's end disagree), and every entry outside the stencil may be
+    garbage."""
     scene = random_scene(seed, dim)
     model = assembled_model(scene, "c")
     p, nc, G = model.parameters(scene), model.n_contacts, model.n_grounds
@@ -207,11 +208,12 @@ def test_one_contact_alone_equals_the_whole_system_and_reads_only_its_stencil(se
         if G > 1:
             held.reshape(-1, G)[:, 1:] &= rng.random((scene.n_particles, 1)) < 0.5
         push = np.where(rng.random(nc) < 0.3, rng.uniform(0, 5, nc), 0.0) * (1 - held)
-        gaps, (_, lam) = model.gaps(y, p), model.rhs(y, p, held, push)
+        gaps, vn, lam = model.contact_state(y, p, held, push)
+        np.testing.assert_array_equal(lam, model.rhs(y, p, held, push)[1])
         for c in range(nc):
             i = c // G
-            gap, lam_c, entries = model.contact(y, p, held, push, c)
-            assert gap == gaps[c] and lam_c == lam[c], f"contact {c}"
+            gap, vn_c, lam_c, entries = model.contact(y, p, held, push, c)
+            assert (gap, vn_c, lam_c) == (gaps[c], vn[c], lam[c]), f"contact {c}"
             neighbours = {i} | {int(j) for a, b in links for j in (a, b) if i in (a, b)}
             expected = {k for j in neighbours for k in range(dim * j, dim * j + dim)}
             expected |= {dim * scene.n_particles + k for k in expected}  # their velocities
@@ -219,7 +221,7 @@ def test_one_contact_alone_equals_the_whole_system_and_reads_only_its_stencil(se
             assert entries[:dim].tolist() == list(range(dim * i, dim * i + dim))  # its position first
             garbage = np.full_like(y, np.nan)
             garbage[entries] = y[entries]
-            assert model.contact(garbage, p, held, push, c)[:2] == (gap, lam_c)
+            assert model.contact(garbage, p, held, push, c)[:3] == (gap, vn_c, lam_c)
 
 
 @pytest.mark.skipif(not HAS_CC, reason="no C compiler")
@@ -230,3 +232,28 @@ def test_whole_scene_models_have_no_per_contact_evaluation():
     y = np.concatenate([*initial_coordinates(scene, model), [0.0, 0.0]])
     nc = model.n_contacts
     assert model.contact(y, model.parameters(scene), np.zeros(nc, np.intc), np.zeros(nc), 0) is None
+
+
+@pytest.mark.skipif(not HAS_CC, reason="no C compiler")
+def test_an_impact_sets_a_particle_found_below_the_ground_onto_it():
+    """Event location stops a particle up to the gap tolerance below the ground; the impact
+    puts it on the ground (else every stop-release-stop cycle of a chattering particle starts
+    the next a tolerance lower), moving it along the normal only, and leaves particles above
+    the ground where they are."""
+    scene = make_scene(body(particles=[[0.0, 0.0], [0.3, 0.0], [0.6, 0.0]], links=[[0, 1], [1, 2]], mass=0.1,
+                            position=[0.0, 0.0]),
+                       grounds=[{"point": [0.0, 0.0], "normal": [0.3, 1.0]}])
+    model = assembled_model(scene, "c")
+    p = model.parameters(scene)
+    normal = np.array([0.3, 1.0]) / np.hypot(0.3, 1.0)
+    x = np.array([[0.0, 0.0], [0.3, 0.0], [0.6, 0.0]])
+    x -= (x @ normal)[:, None] * normal  # all on the ground ...
+    x += np.array([-3e-12, -2e-12, 5e-13])[:, None] * normal  # ... then two below, one above
+    y = np.concatenate([x.ravel(), [0.1, -1.0, 0.2, -0.5, 0.0, -0.3], [0.0, 0.0]])
+    out, _ = model.impact(y, p, np.array([1, 0, 1], np.intc))
+    gaps = model.gaps(out, p)
+    assert abs(gaps[0]) <= 1e-16  # stopped and below: set on the ground
+    assert gaps[1] == model.gaps(y, p)[1]  # below but not stopped: not this impact's business
+    assert gaps[2] == model.gaps(y, p)[2]  # stopped above the ground: not moved
+    moved = out[:2] - y[:2]
+    assert abs(moved @ np.array([-normal[1], normal[0]])) <= 1e-20  # along the normal only

@@ -295,12 +295,16 @@ static int friction_2d(const FbSystem *s, const double *y, const int *held, cons
 
 /* Contact c alone (FbSystem.contact): its gap and, if held, its force, O(its stencil). */
 static int contact_2d(const FbSystem *s, const double *y, const int *held, const double *push, int c,
-                     double *gap, double *lam_c)
+                     double *gap, double *vn, double *lam_c)
 {
     const Assembly *A = s->data;
     const int G = A->n_grounds, i = c / G;
     double J[2], acc[2], lam[G];
     ground_2d(A, y, i, c % G, gap, J);
+    if (vn) { /* as contact_state sums it */
+        *vn = 0.0;
+        for (int a = 0; a < 2; ++a) *vn += J[a] * y[s->nq + 2 * i + a];
+    }
     *lam_c = 0.0;
     if (!held[c]) return 0;
     free_acceleration_2d(A, y, push, i, acc);
@@ -404,8 +408,9 @@ static int contact_state_2d(const FbSystem *s, const double *y, const int *held,
 
 /* After the plastic impulse P_n = lam (>= 0 pushing) that stopped particle i's velocity u
  * along ground g's normal: the rebound -e v_n- (code FB_REBOUND), then Coulomb's tangential
- * impulse min(m |v_t|, mu P_n) against v_t (DESIGN §6); FB_SETTLE zeroes v_t (it comes to rest).  One ground only: a particle stopped
- * on two grounds at once with friction or restitution is refused by the driver. */
+ * impulse min(m |v_t|, mu P_n) against v_t (DESIGN §6); FB_SETTLE zeroes v_t (it comes to
+ * rest).  One ground only: a particle stopped on two grounds at once with friction is
+ * refused by the driver. */
 static void contact_laws_2d(const Assembly *A, const double *x, int i, int g, int code, double *u, double lam)
 {
     const double mu = A->laws[2 * g], e = code == FB_REBOUND ? A->laws[2 * g + 1] : 0.0;
@@ -421,6 +426,35 @@ static void contact_laws_2d(const Assembly *A, const double *x, int i, int g, in
     if (!(speed > 0.0)) return;
     const double keep = impulse >= speed || code == FB_SETTLE ? 0.0 : 1.0 - impulse / speed;
     for (int a = 0; a < 2; ++a) u[a] -= (1.0 - keep) * vt[a];
+}
+
+/* Set particle i, stopped on its grounds in S, onto those it is below: event location stops
+ * it within the gap tolerance under the ground, and without this each stop-release-stop
+ * cycle of a chattering particle would start the next a tolerance lower.  The least move
+ * dx with J_S (x + dx) - P = max(gap, 0); at most the tolerance, so the energy it adds
+ * (a spring force or weight times it) is far below the ledger's resolution.  0 or -1. */
+static int settle_2d(const Assembly *A, double *x, int i, const int *S)
+{
+    const int G = A->n_grounds;
+    int k = 0, below = 0;
+    double J[(G > 0 ? G : 1) * 2], b[G > 0 ? G : 1], M[(G > 0 ? G * G : 1)], gap;
+    for (int g = 0; g < G; ++g)
+        if (S[g]) {
+            ground_2d(A, x, i, g, &gap, J + 2 * k);
+            b[k] = gap < 0.0 ? -gap : 0.0;
+            below |= gap < 0.0;
+            ++k;
+        }
+    if (!below) return 0;
+    for (int r = 0; r < k; ++r)
+        for (int c = 0; c < k; ++c) {
+            M[r * k + c] = 0.0;
+            for (int a = 0; a < 2; ++a) M[r * k + c] += J[2 * r + a] * J[2 * c + a];
+        }
+    if (small_solve(M, k, b)) return -1;
+    for (int r = 0; r < k; ++r)
+        for (int a = 0; a < 2; ++a) x[2 * i + a] += J[2 * r + a] * b[r];
+    return 0;
 }
 
 static int impact_2d(const FbSystem *s, const double *y, const int *stop, double *y_out, double *loss)
@@ -441,6 +475,7 @@ static int impact_2d(const FbSystem *s, const double *y, const int *stop, double
         if (stopped == 1) contact_laws_2d(A, y, i, g_stop, stop[i * G + g_stop], u, lam[g_stop]);
         fb_k_particle_2d(y + 2 * i, u, A->mass + i, A->gravity, f, &potential, &after);
         *loss += before - after;
+        if (settle_2d(A, y_out, i, stop + i * G)) return -1;
     }
     return 0;
 }
@@ -638,12 +673,16 @@ static int friction_3d(const FbSystem *s, const double *y, const int *held, cons
 
 /* Contact c alone (FbSystem.contact): its gap and, if held, its force, O(its stencil). */
 static int contact_3d(const FbSystem *s, const double *y, const int *held, const double *push, int c,
-                     double *gap, double *lam_c)
+                     double *gap, double *vn, double *lam_c)
 {
     const Assembly *A = s->data;
     const int G = A->n_grounds, i = c / G;
     double J[3], acc[3], lam[G];
     ground_3d(A, y, i, c % G, gap, J);
+    if (vn) { /* as contact_state sums it */
+        *vn = 0.0;
+        for (int a = 0; a < 3; ++a) *vn += J[a] * y[s->nq + 3 * i + a];
+    }
     *lam_c = 0.0;
     if (!held[c]) return 0;
     free_acceleration_3d(A, y, push, i, acc);
@@ -747,8 +786,9 @@ static int contact_state_3d(const FbSystem *s, const double *y, const int *held,
 
 /* After the plastic impulse P_n = lam (>= 0 pushing) that stopped particle i's velocity u
  * along ground g's normal: the rebound -e v_n- (code FB_REBOUND), then Coulomb's tangential
- * impulse min(m |v_t|, mu P_n) against v_t (DESIGN §6); FB_SETTLE zeroes v_t (it comes to rest).  One ground only: a particle stopped
- * on two grounds at once with friction or restitution is refused by the driver. */
+ * impulse min(m |v_t|, mu P_n) against v_t (DESIGN §6); FB_SETTLE zeroes v_t (it comes to
+ * rest).  One ground only: a particle stopped on two grounds at once with friction is
+ * refused by the driver. */
 static void contact_laws_3d(const Assembly *A, const double *x, int i, int g, int code, double *u, double lam)
 {
     const double mu = A->laws[2 * g], e = code == FB_REBOUND ? A->laws[2 * g + 1] : 0.0;
@@ -764,6 +804,35 @@ static void contact_laws_3d(const Assembly *A, const double *x, int i, int g, in
     if (!(speed > 0.0)) return;
     const double keep = impulse >= speed || code == FB_SETTLE ? 0.0 : 1.0 - impulse / speed;
     for (int a = 0; a < 3; ++a) u[a] -= (1.0 - keep) * vt[a];
+}
+
+/* Set particle i, stopped on its grounds in S, onto those it is below: event location stops
+ * it within the gap tolerance under the ground, and without this each stop-release-stop
+ * cycle of a chattering particle would start the next a tolerance lower.  The least move
+ * dx with J_S (x + dx) - P = max(gap, 0); at most the tolerance, so the energy it adds
+ * (a spring force or weight times it) is far below the ledger's resolution.  0 or -1. */
+static int settle_3d(const Assembly *A, double *x, int i, const int *S)
+{
+    const int G = A->n_grounds;
+    int k = 0, below = 0;
+    double J[(G > 0 ? G : 1) * 3], b[G > 0 ? G : 1], M[(G > 0 ? G * G : 1)], gap;
+    for (int g = 0; g < G; ++g)
+        if (S[g]) {
+            ground_3d(A, x, i, g, &gap, J + 3 * k);
+            b[k] = gap < 0.0 ? -gap : 0.0;
+            below |= gap < 0.0;
+            ++k;
+        }
+    if (!below) return 0;
+    for (int r = 0; r < k; ++r)
+        for (int c = 0; c < k; ++c) {
+            M[r * k + c] = 0.0;
+            for (int a = 0; a < 3; ++a) M[r * k + c] += J[3 * r + a] * J[3 * c + a];
+        }
+    if (small_solve(M, k, b)) return -1;
+    for (int r = 0; r < k; ++r)
+        for (int a = 0; a < 3; ++a) x[3 * i + a] += J[3 * r + a] * b[r];
+    return 0;
 }
 
 static int impact_3d(const FbSystem *s, const double *y, const int *stop, double *y_out, double *loss)
@@ -784,6 +853,7 @@ static int impact_3d(const FbSystem *s, const double *y, const int *stop, double
         if (stopped == 1) contact_laws_3d(A, y, i, g_stop, stop[i * G + g_stop], u, lam[g_stop]);
         fb_k_particle_3d(y + 3 * i, u, A->mass + i, A->gravity, f, &potential, &after);
         *loss += before - after;
+        if (settle_3d(A, y_out, i, stop + i * G)) return -1;
     }
     return 0;
 }
@@ -909,16 +979,16 @@ void fb_sys_outputs(const FbSystem *s, const double *y, double *x, double *v, do
     s->outputs(s, y, x, v, energies);
 }
 
-/* Contact c alone (FbSystem.contact): *gap, *lam_c and, in entries (capacity), the state
- * entries it reads, *k of them.  0, -1 as rhs, -2 if the system has no per-contact
+/* Contact c alone (FbSystem.contact): *gap, *vn, *lam_c and, in entries (capacity), the
+ * state entries it reads, *k of them.  0, -1 as rhs, -2 if the system has no per-contact
  * evaluation, -3 if more than capacity entries. */
 int fb_sys_contact(const FbSystem *s, const double *y, const int *held, const double *push, int c, double *gap,
-                   double *lam_c, int *entries, int capacity, int *k)
+                   double *vn, double *lam_c, int *entries, int capacity, int *k)
 {
     if (!s->contact || !s->stencil) return -2;
     const int *listed;
     *k = s->stencil(s, c, &listed);
     if (*k > capacity) return -3;
     memcpy(entries, listed, sizeof(int) * (size_t)*k);
-    return s->contact(s, y, held, push, c, gap, lam_c);
+    return s->contact(s, y, held, push, c, gap, vn, lam_c);
 }

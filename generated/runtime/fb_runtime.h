@@ -60,12 +60,13 @@ struct FbSystem {
      * where the gaps are nonlinear in q.  0, or -1 if a matrix is not positive definite. */
     int (*project)(const FbSystem *s, double *y, const int *held);
     /* Optional (both NULL where contacts couple, as in whole-scene models): contact c alone,
-     * where each particle's contacts decouple from the others'.  contact gives its gap and,
-     * if held[c], its force lam_c (the values gaps and rhs give, bit for bit), reading only
-     * the state entries stencil lists (its particle's position first, dim entries): event
-     * location costs O(1) per contact, not a right-hand side.  0, or -1 as rhs. */
+     * where each particle's contacts decouple from the others'.  contact gives its gap, its
+     * normal velocity (if vn is not NULL) and, if held[c], its force lam_c (the values
+     * contact_state gives, bit for bit), reading only the state entries stencil lists (its
+     * particle's position first, dim entries): locating an event or resolving an instant
+     * costs O(contacts involved), not a right-hand side.  0, or -1 as rhs. */
     int (*contact)(const FbSystem *s, const double *y, const int *held, const double *push, int c,
-                   double *gap, double *lam_c);
+                   double *gap, double *vn, double *lam_c);
     int (*stencil)(const FbSystem *s, int c, const int **entries);
     /* Optional (NULL without contact laws): contact c's Coulomb friction, from its stencil as
      * contact.  held[c] is FB_HELD (sticking where its ground has friction) or FB_SLIDING; vt and

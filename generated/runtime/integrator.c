@@ -54,7 +54,8 @@ static void layout(FbWork *w, char *base, size_t *size)
                            &w->roots, &w->root_g, &w->r_gaps, &w->r_vn, &w->r_lam};
     for (size_t k = 0; k < sizeof contacts / sizeof *contacts; ++k) *contacts[k] = carve(&next, c);
     int **flags[] = {&w->held, &w->phase, &w->fired, &w->r_touching, &w->r_impacted, &w->r_settled,
-                     &w->r_was_held, &w->r_held, &w->r_hit, &w->r_ending, &w->r_instant, &w->r_stop};
+                     &w->r_was_held, &w->r_held, &w->r_hit, &w->r_ending, &w->r_instant, &w->r_stop,
+                     &w->r_visit};
     for (size_t k = 0; k < sizeof flags / sizeof *flags; ++k) *flags[k] = carve(&next, ci);
     *size = (size_t)(next - base);
 }
@@ -164,7 +165,7 @@ static void events_at(Problem *P, double t, const double *y, double *g)
     if (P->any_held && s->contact) { /* held contacts one by one: O(held), not a right-hand side */
         double gap;
         for (int c = 0; c < P->nc; ++c)
-            if (P->held[c] && s->contact(s, y, P->held, P->push, c, &gap, w->ev_lam + c)) P->failed = 1;
+            if (P->held[c] && s->contact(s, y, P->held, P->push, c, &gap, 0, w->ev_lam + c)) P->failed = 1;
     } else if (P->any_held) {
         if (s->rhs(s, t, y, P->held, P->push, w->ev_dy, w->ev_lam)) P->failed = 1;
         P->nevent++;
@@ -373,7 +374,7 @@ static double root(Problem *P, Stepper *S, int c, double a, double fa, double b,
             const int k = P->s->stencil(P->s, c, &entries);
             double gap, lam;
             dense(P, S, b, y, free_contact ? P->s->dim : k, entries);
-            if (P->s->contact(P->s, y, P->held, P->push, c, &gap, &lam)) P->failed = 1;
+            if (P->s->contact(P->s, y, P->held, P->push, c, &gap, 0, &lam)) P->failed = 1;
             fb = free_contact ? gap - P->floor[c] : lam + P->force_tol[c];
             if (!free_contact && P->any_friction) fb = fmin(fb, friction_event(P, y, c, 0));
         } else if (free_contact) { /* the same value events_from gives: gap - floor */
@@ -431,7 +432,10 @@ static int locate(Problem *P, Stepper *S, const double *g_old, const double *g_n
  *     of those reached, *n_sampled how many;
  *   on return: *t_stop, y_stop[ny], touching[nc] and leaving[nc] (the gap events of free
  *     contacts and the force events of held ones that fired), counters = {nfev, steps,
- *     rejected, event evaluations}, *min_gap (lowest gap at step ends, in/out), *h_next.
+ *     rejected, event evaluations}, *min_gap (lowest gap at step ends, in/out);
+ *   *h_next (in/out): the first step to try if > 0 (else it is estimated, costing a right-
+ *     hand side), and on return the step the controller proposes next: carried across
+ *     segments, a restart after an event does not guess the step size again.
  * Returns FB_REACHED at t_bound, FB_EVENT at an event, FB_STEP_COLLAPSE if the step size
  * collapsed, FB_NON_FINITE if the state became non-finite, FB_SINGULAR if the mass or
  * contact matrix was not positive definite, FB_TOO_SLOW after max_seconds of wall time. */
@@ -475,17 +479,21 @@ int fb_integrate(FbWork *w, const FbSystem *s, int method, double t0, const doub
     for (int c = 0; c < nc; ++c)
         if (P.any_friction && P.held[c] == FB_SLIDING) friction_event(&P, S.y, c, 1);
     events_from(&P, S.y, lam, g_old, gaps);
-    /* Initial step: Hairer, Norsett & Wanner, sec. II.4 (as SciPy's select_initial_step). */
-    for (int i = 0; i < ny; ++i) scale[i] = atol + fabs(S.y[i]) * rtol;
-    double d0 = rms(S.y, scale, ny), d1 = rms(f0, scale, ny), interval = t_bound - t0;
-    double h0 = (d0 < 1e-5 || d1 < 1e-5) ? 1e-6 : 0.01 * d0 / d1;
-    h0 = fmin(h0, interval);
-    for (int i = 0; i < ny; ++i) tmp[i] = S.y[i] + h0 * f0[i];
-    rhs(&P, t + h0, tmp, f1, 0);
-    for (int i = 0; i < ny; ++i) tmp[i] = f1[i] - f0[i];
-    double d2 = rms(tmp, scale, ny) / h0;
-    double h1 = (d1 <= 1e-15 && d2 <= 1e-15) ? fmax(1e-6, h0 * 1e-3) : pow(0.01 / fmax(d1, d2), 1.0 / (S.order + 1));
-    double h_abs = fmin(fmin(100.0 * h0, h1), interval);
+    double h_abs, interval = t_bound - t0;
+    if (*h_next > 0.0) { /* the step the controller proposed where the last segment ended */
+        h_abs = fmin(*h_next, interval);
+    } else { /* Hairer, Norsett & Wanner, sec. II.4 (as SciPy's select_initial_step) */
+        for (int i = 0; i < ny; ++i) scale[i] = atol + fabs(S.y[i]) * rtol;
+        double d0 = rms(S.y, scale, ny), d1 = rms(f0, scale, ny);
+        double h0 = (d0 < 1e-5 || d1 < 1e-5) ? 1e-6 : 0.01 * d0 / d1;
+        h0 = fmin(h0, interval);
+        for (int i = 0; i < ny; ++i) tmp[i] = S.y[i] + h0 * f0[i];
+        rhs(&P, t + h0, tmp, f1, 0);
+        for (int i = 0; i < ny; ++i) tmp[i] = f1[i] - f0[i];
+        double d2 = rms(tmp, scale, ny) / h0;
+        double h1 = (d1 <= 1e-15 && d2 <= 1e-15) ? fmax(1e-6, h0 * 1e-3) : pow(0.01 / fmax(d1, d2), 1.0 / (S.order + 1));
+        h_abs = fmin(fmin(100.0 * h0, h1), interval);
+    }
     const double exponent = -1.0 / (S.order + 1);
     /* Step ends, output samples and the event state are moved onto the held constraints
      * (where the model can: its gaps are nonlinear in q); the interpolant between is not. */

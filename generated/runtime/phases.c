@@ -28,13 +28,18 @@ static void add_event(int *contact, int *kind, double *vn, int *n, int c, int k,
  * tangential velocity left slides.  Returns 0, or -1 as rhs. */
 static int friction_phases(FbWork *w, const FbSystem *s, double *y, int *phase, const double *push,
                            const int *leaving, const int *was_held, const double *force_tol, double speed_tol,
-                           int *ev_contact, int *ev_kind, double *ev_vn, int *n_events, double *loss)
+                           const int *visit, int n_visit, int *ev_contact, int *ev_kind, double *ev_vn,
+                           int *n_events, double *loss)
 {
-    const int nc = s->nc, d = s->dim;
+    const int d = s->dim;
     int *held = w->r_held, *stop = w->r_stop, settle = 0;
     double vt[3], ft[3], slack, lam, speed;
-    for (int c = 0; c < nc; ++c) held[c] = phase[c] == FB_HELD || phase[c] == FB_SLIDING ? phase[c] : 0;
-    for (int c = 0; c < nc; ++c) {
+    for (int m = 0; m < n_visit; ++m) { /* the held contacts are all visited */
+        const int c = visit[m];
+        held[c] = phase[c] == FB_HELD || phase[c] == FB_SLIDING ? phase[c] : 0;
+    }
+    for (int m = 0; m < n_visit; ++m) {
+        const int c = visit[m];
         stop[c] = FB_KEEP;
         if (!held[c]) continue;
         if (s->friction(s, y, held, push, c, vt, ft, &slack, &lam)) return -1;
@@ -60,9 +65,10 @@ static int friction_phases(FbWork *w, const FbSystem *s, double *y, int *phase, 
     if (s->impact(s, y, stop, y_new, &lost)) return -1;
     memcpy(y, y_new, sizeof(double) * s->ny);
     *loss += lost;
-    for (int c = 0; c < nc; ++c)
-        if (stop[c] == FB_SETTLE) held[c] = FB_HELD;
-    for (int c = 0; c < nc; ++c) {
+    for (int m = 0; m < n_visit; ++m)
+        if (stop[visit[m]] == FB_SETTLE) held[visit[m]] = FB_HELD;
+    for (int m = 0; m < n_visit; ++m) {
+        const int c = visit[m];
         if (stop[c] != FB_SETTLE) continue;
         if (s->friction(s, y, held, push, c, vt, ft, &slack, &lam)) return -1;
         if (slack >= 0.0 && phase[c] == FB_SLIDING) add_event(ev_contact, ev_kind, ev_vn, n_events, c, FB_STICK, 0.0);
@@ -93,21 +99,48 @@ int fb_resolve(FbWork *w, const FbSystem *s, double t, double *y, int *phase, do
     const int nc = s->nc, ny = s->ny;
     int *touching = w->r_touching, *impacted = w->r_impacted, *settled = w->r_settled;
     int *was_held = w->r_was_held, *held = w->r_held, *hit = w->r_hit, *ending = w->r_ending;
-    int *instant = w->r_instant, *stop = w->r_stop;
+    int *instant = w->r_instant, *stop = w->r_stop, *visit = w->r_visit, n_visit = 0;
     double *gaps = w->r_gaps, *vn = w->r_vn, *lam = w->r_lam, *y_new = w->r_y_new;
     int done = 0;
     *n_events = 0;
     *loss = 0.0;
+    if (s->contact) s->gaps(s, y, gaps);
+    /* Where contacts decouple (s->contact), only the particles this instant can change are
+     * visited, with all their contacts: those with a contact touched, leaving, held, pushed,
+     * or free within gap_tol of its floor.  An instant changes only the velocities (and, by
+     * at most the gap tolerance, the positions) of the particles it stops, so the others
+     * stay free and far: O(contacts involved).  Where contacts couple, all are visited. */
+    const int per_particle = nc / (s->n_particles > 0 ? s->n_particles : 1);
     for (int c = 0; c < nc; ++c) {
         touching[c] = touching_in[c] != 0;
-        was_held[c] = phase[c] == FB_HELD || phase[c] == FB_SLIDING; /* on the ground: v_n = 0 */
-        impacted[c] = settled[c] = not_held[c] = 0;
+        held[c] = phase[c] == FB_HELD || phase[c] == FB_SLIDING ? phase[c] : 0; /* the contact laws' codes */
+        was_held[c] = held[c] != 0; /* on the ground before this instant, so v_n = 0 */
+        impacted[c] = settled[c] = not_held[c] = hit[c] = ending[c] = instant[c] = stop[c] = 0;
+        vn[c] = lam[c] = 0.0;
+    }
+    for (int first = 0; first < nc; first += per_particle) {
+        int involved = !s->contact;
+        for (int c = first; c < first + per_particle; ++c)
+            involved |= touching[c] || leaving[c] || phase[c] != FB_FREE || gaps[c] <= floor[c] + gap_tol;
+        if (involved)
+            for (int c = first; c < first + per_particle; ++c) visit[n_visit++] = c;
     }
     for (*iterations = 1; *iterations < 2 * nc + 3; ++*iterations) {
-        for (int c = 0; c < nc; ++c) held[c] = phase[c] == FB_HELD || phase[c] == FB_SLIDING ? phase[c] : 0;
-        if (s->contact_state(s, y, held, push, gaps, vn, lam)) return -1;
+        for (int m = 0; m < n_visit; ++m) {
+            const int c = visit[m];
+            held[c] = phase[c] == FB_HELD || phase[c] == FB_SLIDING ? phase[c] : 0;
+        }
+        if (s->contact) {
+            for (int m = 0; m < n_visit; ++m) {
+                const int c = visit[m];
+                if (s->contact(s, y, held, push, c, gaps + c, vn + c, lam + c)) return -1;
+            }
+        } else if (s->contact_state(s, y, held, push, gaps, vn, lam)) {
+            return -1;
+        }
         int changed = 0, any_instant = 0;
-        for (int c = 0; c < nc; ++c) {
+        for (int m = 0; m < n_visit; ++m) {
+            const int c = visit[m];
             const int near = phase[c] == FB_FREE && (touching[c] || gaps[c] <= floor[c] + gap_tol);
             /* strictly approaching: <= 0 would flip-flop forever */
             hit[c] = near && vn[c] < 0.0 && !impacted[c] && !was_held[c];
@@ -127,7 +160,8 @@ int fb_resolve(FbWork *w, const FbSystem *s, double t, double *y, int *phase, do
             stop[c] = hit[c] ? (rebounds ? FB_REBOUND : FB_STOP) : FB_KEEP;
         }
         /* after a window, what velocity is left towards the ground is stopped instantly */
-        for (int c = 0; c < nc; ++c) {
+        for (int m = 0; m < n_visit; ++m) {
+            const int c = visit[m];
             instant[c] = hit[c] || (ending[c] && vn[c] < 0.0);
             any_instant |= instant[c];
             if (!hit[c]) stop[c] = instant[c] || held[c] ? FB_STOP : FB_KEEP;
@@ -137,26 +171,32 @@ int fb_resolve(FbWork *w, const FbSystem *s, double t, double *y, int *phase, do
             if (s->impact(s, y, stop, y_new, &lost)) return -1;
             memcpy(y, y_new, sizeof(double) * ny);
             *loss += lost;
-            for (int c = 0; c < nc; ++c)
+            for (int m = 0; m < n_visit; ++m) {
+                const int c = visit[m];
                 if (stop[c] == FB_REBOUND) { /* it leaves the ground at once */
                     phase[c] = FB_FREE;
                     floor[c] = fmin(0.0, gaps[c]) - gap_tol;
                     not_held[c] = 1;
                 } else if (instant[c]) phase[c] = FB_HELD;
+            }
             changed = 1;
         }
-        for (int c = 0; c < nc; ++c)
+        for (int m = 0; m < n_visit; ++m) {
+            const int c = visit[m];
             if (ending[c] && vn[c] >= 0.0) {
                 phase[c] = FB_FREE;
                 floor[c] = fmin(0.0, gaps[c]) - gap_tol;
                 changed = 1;
             }
+        }
         if (changed) continue; /* the dampers saw the velocity jump: recompute the forces */
         /* release the most pulling held contact (the first of equals), then recompute */
         int release = -1;
-        for (int c = 0; c < nc; ++c)
+        for (int m = 0; m < n_visit; ++m) {
+            const int c = visit[m];
             if (held[c] && (lam[c] < 0.0 || (leaving[c] && lam[c] <= force_tol[c])))
                 if (release < 0 || lam[c] < lam[release]) release = c;
+        }
         if (release < 0) {
             done = 1;
             break;
@@ -167,10 +207,14 @@ int fb_resolve(FbWork *w, const FbSystem *s, double t, double *y, int *phase, do
         else add_event(ev_contact, ev_kind, ev_vn, n_events, release, FB_LIFTOFF, 0.0);
     }
     if (!done) return -2;
-    if (s->friction && friction_phases(w, s, y, phase, push, leaving, was_held, force_tol, speed_tol, ev_contact,
-                                       ev_kind, ev_vn, n_events, loss)) return -1;
-    /* a free contact too close to its floor to be armed gets a floor a hair below */
-    s->gaps(s, y, gaps);
+    if (s->friction && friction_phases(w, s, y, phase, push, leaving, was_held, force_tol, speed_tol, visit,
+                                       n_visit, ev_contact, ev_kind, ev_vn, n_events, loss)) return -1;
+    /* a free contact too close to its floor to be armed gets a floor a hair below (the
+     * gaps of particles not visited did not change, where contacts decouple) */
+    if (s->contact)
+        for (int m = 0; m < n_visit; ++m) s->contact(s, y, held, push, visit[m], gaps + visit[m], 0, lam + visit[m]);
+    else
+        s->gaps(s, y, gaps);
     for (int c = 0; c < nc; ++c) {
         if (phase[c] == FB_FREE && gaps[c] - floor[c] <= gap_tol) floor[c] = fmin(0.0, gaps[c]) - gap_tol;
         if (phase[c] != FB_PUSHED) {

@@ -17,6 +17,7 @@ struct FbWork {
     int *held, *phase, *fired;
     /* phases.c */
     int *r_touching, *r_impacted, *r_settled, *r_was_held, *r_held, *r_hit, *r_ending, *r_instant, *r_stop;
+    int *r_visit; /* the contacts an instant can change, where contacts decouple */
     void *block; /* all of the above, one allocation */
 };
 

@@ -95,11 +95,14 @@ def _rhs_cost(model, scene, t_end: float) -> float:
 # ---------------------------------------------------------------------------- work-precision
 
 
-def work_precision(out: Path, repeats: int, quick: bool) -> dict:
-    scene = load_scene("thesis_ball")
+def work_precision(out: Path, repeats: int, quick: bool, scene: Scene | None = None,
+                   name: str = "work_precision") -> dict:
+    """Error against wall time for each method over rtol 1e-3 ... 1e-10 (``scene``: the thesis
+    ball by default), against a dop853 reference at rtol 1e-13; saves ``name``.json/png."""
+    scene = scene or load_scene("thesis_ball")
     t_end = 1.0 if quick else scene.simulation.t_end
     tolerances = TOLERANCES[1:-1:2] if quick else TOLERANCES
-    print(f"work-precision: thesis ball, {t_end:g} s; reference dop853 at rtol 1e-13")
+    print(f"work-precision: {scene.name}, {t_end:g} s; reference dop853 at rtol 1e-13")
     reference = simulate(scene, t_end=t_end, method="dop853", rtol=1e-13, atol=1e-16)
     check = simulate(scene, t_end=t_end, method="DOP853", rtol=1e-12, atol=1e-15)
     ref_gap = float(np.abs(check.positions - reference.positions).max())
@@ -115,9 +118,13 @@ def work_precision(out: Path, repeats: int, quick: bool) -> dict:
         ("SciPy Radau + C RHS + Jacobian", "Radau", "c", "particles", tolerances[1:-3], 1),
         ("SciPy RK45 + NumPy RHS (baseline)", "RK45", "numpy", "particles", tolerances[:-2], 1 if quick else 3),
     ]
-    cost = {f: _rhs_cost(load_model(scene, "c", f), scene, t_end) for f in ("particles", "floating")}
-    print(f"  C RHS cost per evaluation, weighted by the contact phases: {cost['particles'] * 1e6:.3f} us "
-          f"(particles), {cost['floating'] * 1e6:.3f} us (floating)")
+    formulations = ("particles", "floating")
+    if any(g.friction > 0 for g in scene.grounds):  # the floating frame has no friction (a clear error)
+        configs = [c for c in configs if c[3] != "floating"]
+        formulations = ("particles",)
+    cost = {f: _rhs_cost(load_model(scene, "c", f), scene, t_end) for f in formulations}
+    print("  C RHS cost per evaluation, weighted by the contact phases: "
+          + ", ".join(f"{cost[f] * 1e6:.3f} us ({f})" for f in formulations))
     rows = []
     print(f"  {'configuration':36s} {'rtol':>7s} {'time ms':>9s} {'nfev':>7s} {'error m':>9s} {'limit x':>8s}  events")
     for label, method, backend, formulation, tols, reps in configs:
@@ -142,9 +149,10 @@ def work_precision(out: Path, repeats: int, quick: bool) -> dict:
     ratios = _ratios(rows)
     for line in ratios["lines"]:
         print("  " + line)
-    data = {"t_end": t_end, "reference": {"method": "dop853", "rtol": 1e-13, "cross_check_m": ref_gap},
+    data = {"scene": scene.name, "t_end": t_end,
+            "reference": {"method": "dop853", "rtol": 1e-13, "cross_check_m": ref_gap},
             "rhs_cost_s": cost, "rows": rows, "ratios": ratios, "environment": _environment()}
-    _save(out, "work_precision", data, plot_work_precision(data))
+    _save(out, name, data, plot_work_precision(data))
     return data
 
 
@@ -214,7 +222,8 @@ def plot_work_precision(data: dict):
                         textcoords="offset points", fontsize=6, color=line.get_color())
     ax.set_xlabel("wall time of the integration (s)")
     ax.set_ylabel("max position error vs reference (m)")
-    ax.set_title("Work-precision, thesis ball: each line runs rtol 1e-3 ... 1e-10 (atol = 1e-3 rtol), its ends "
+    what = data.get("scene", "thesis_ball").replace("_", " ")
+    ax.set_title(f"Work-precision, {what}: each line runs rtol 1e-3 ... 1e-10 (atol = 1e-3 rtol), its ends "
                  "labelled;\nx: the event sequence differs from the reference's", fontsize=10)
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0))
@@ -303,38 +312,45 @@ LOOPS = {"dopri5": "compiled loop", "dop853": "compiled loop"}
 
 def plot_stability(data: dict):
     """Per damping ratio, a method x stiffness grid: the wall time of each good run, or why it failed."""
+    return verdict_grids(data["cells"], "zeta", "stiffness", lambda z: f"damping ratio {z:g}", "stiffness k (N/m)",
+                         "Stability map: wall time of each run, or why it failed (thesis ball, rtol 1e-6, 0.5 s; "
+                         "every method uses the compiled C right-hand side)", column_format="{:.0e}")
+
+
+def _duration(seconds: float) -> str:
+    return f"{seconds * 1e3:.3g} ms" if seconds < 1 else f"{seconds:.3g} s"
+
+
+def verdict_grids(cells: list[dict], panel: str, column: str, panel_title, column_label: str, title: str,
+                  column_format: str = "{:g}"):
+    """One method x ``column`` grid per value of ``panel``: each cell the wall time of a good
+    run (``verdict`` "ok"), or why it failed."""
     from matplotlib.figure import Figure
 
-    cells = data["cells"]
-    zetas = list(dict.fromkeys(c["zeta"] for c in cells))
-    stiffness = sorted(dict.fromkeys(c["stiffness"] for c in cells))
+    panels = list(dict.fromkeys(c[panel] for c in cells))
+    columns = sorted(dict.fromkeys(c[column] for c in cells))
     methods = list(dict.fromkeys(c["method"] for c in cells))
-    fig = Figure(figsize=(3.6 + 3.4 * len(zetas), 1.0 + 0.55 * len(methods)), layout="constrained")
-    axes = np.atleast_1d(fig.subplots(1, len(zetas), sharey=True))
-    for ax, zeta in zip(axes, zetas):
-        grid = np.full((len(methods), len(stiffness)), np.nan)
+    fig = Figure(figsize=(3.6 + 3.4 * len(panels), 1.0 + 0.55 * len(methods)), layout="constrained")
+    axes = np.atleast_1d(fig.subplots(1, len(panels), sharey=True))
+    for ax, value in zip(axes, panels):
+        grid = np.full((len(methods), len(columns)), np.nan)
         for c in cells:
-            if c["zeta"] != zeta:
+            if c[panel] != value:
                 continue
-            i, j = methods.index(c["method"]), stiffness.index(c["stiffness"])
+            i, j = methods.index(c["method"]), columns.index(c[column])
             ok = c["verdict"] == "ok"
             grid[i, j] = np.log10(c["time_s"]) if ok else np.nan
             text = _duration(c["time_s"]) if ok else c["verdict"].replace("_", "\n")
             ax.text(j, i, text, ha="center", va="center", fontsize=6.5,
                     color="white" if ok and np.log10(c["time_s"]) < -0.5 else "black")
         image = ax.imshow(grid, cmap="viridis", aspect="auto", vmin=-3, vmax=2)
-        ax.set_xticks(range(len(stiffness)), [f"{k:.0e}" for k in stiffness], fontsize=7)
+        ax.set_xticks(range(len(columns)), [column_format.format(k) for k in columns], fontsize=7)
         ax.set_yticks(range(len(methods)), [f"{m} ({LOOPS.get(m, 'SciPy loop')})" for m in methods], fontsize=8)
-        ax.set_xlabel("stiffness k (N/m)")
-        ax.set_title(f"damping ratio {zeta:g}", fontsize=9)
+        ax.set_xlabel(column_label)
+        ax.set_title(panel_title(value), fontsize=9)
     fig.colorbar(image, ax=list(axes), label="log10 wall time (s), successful runs")
-    fig.suptitle("Stability map: wall time of each run, or why it failed (thesis ball, rtol 1e-6, 0.5 s; every "
-                 "method uses the compiled C right-hand side)", fontsize=10)
+    fig.suptitle(title, fontsize=10)
     return fig
-
-
-def _duration(seconds: float) -> str:
-    return f"{seconds * 1e3:.3g} ms" if seconds < 1 else f"{seconds:.3g} s"
 
 
 # ---------------------------------------------------------------------------- resolution
@@ -523,8 +539,14 @@ def plot_mujoco(data: dict):
 
 
 #: The chart of each study, drawn from its saved JSON alone.
+def _plot_friction_map(data: dict):
+    from .bench_friction import plot_friction_map
+
+    return plot_friction_map(data)
+
+
 PLOTS = {"work_precision": plot_work_precision, "stability_map": plot_stability, "resolution": plot_resolution,
-         "mujoco": plot_mujoco}
+         "mujoco": plot_mujoco, "work_precision_incline": plot_work_precision, "friction_map": _plot_friction_map}
 
 
 def replot(folder: Path) -> list[Path]:
@@ -634,9 +656,21 @@ def _scale(out: Path, quick: bool) -> dict:
     return scale_study(out, quick)
 
 
+def _friction_wp(out: Path, repeats: int, quick: bool) -> dict:
+    from .bench_friction import friction_work_precision
+
+    return friction_work_precision(out, repeats, quick)
+
+
+def _friction_map(out: Path, quick: bool) -> dict:
+    from .bench_friction import friction_map
+
+    return friction_map(out, quick)
+
+
 STUDIES = {"wp": work_precision, "stability": stability_map, "resolution": resolution_study,
            "mujoco": mujoco_comparison, "run": run_study, "scale": _scale,
-           "sweep": sweep_benchmark}
+           "sweep": sweep_benchmark, "friction_wp": _friction_wp, "friction_map": _friction_map}
 
 
 def bench_command(args) -> int:
@@ -644,8 +678,8 @@ def bench_command(args) -> int:
     out = Path(args.out)
     for name in args.study or list(STUDIES):
         start = time.perf_counter()
-        if name == "wp":
-            work_precision(out, args.repeats if not args.quick else 1, args.quick)
+        if name in ("wp", "friction_wp"):
+            STUDIES[name](out, args.repeats if not args.quick else 1, args.quick)
         elif name == "run":
             run_study(out, args.repeats if not args.quick else 3)
         else:

@@ -108,9 +108,11 @@ def _parser() -> argparse.ArgumentParser:
 
     bench = sub.add_parser("bench", help="speed and accuracy benchmarks (prints and saves numbers)",
                            description="Benchmarks, not tests: work-precision diagram (wp), stability map "
-                                       "(stability), resolution study (resolution), the whole run command (run), cost vs size (scale), Dask sweeps (sweep); "
+                                       "(stability), resolution study (resolution), the whole run command (run), cost vs size (scale), Dask sweeps (sweep), "
+                                       "friction: work-precision on the incline (friction_wp) and the mu x e map (friction_map); "
                                        "JSON and PNG in --out.")
-    bench.add_argument("--study", choices=("wp", "stability", "resolution", "mujoco", "run", "scale", "sweep"), action="append",
+    bench.add_argument("--study", choices=("wp", "stability", "resolution", "mujoco", "run", "scale", "sweep",
+                                           "friction_wp", "friction_map"), action="append",
                        help="which study (repeatable; default: all; mujoco needs flexbody[mujoco])")
     bench.add_argument("--out", default="bench", metavar="DIR", help="output folder")
     bench.add_argument("--repeats", type=int, default=5, help="timing repeats (median is reported)")
@@ -204,7 +206,7 @@ def _outside_package_note(scene_arg: str) -> str:
     from importlib import resources
     from pathlib import Path
 
-    from .model import find_model_dir
+    from .model import FLOATING_MAX_PARTICLES, find_model_dir
     from .paths import cache_root
     from .scene import load_scene, resolve_scene_path
 
@@ -221,11 +223,14 @@ def _outside_package_note(scene_arg: str) -> str:
     lines = [f"{scene_arg}: {what}, so it has no committed model in generated/ to check."]
     lines.append("  particles: runs assembled from the element kernels (generated/kernels): nothing to derive or "
                  "check; `flexbody show` derives its equations whole on request")
-    if scene.dim == 2:
-        folder = find_model_dir(scene, "floating")
-        where = f"derived, in {folder}" if folder else \
-            f"not derived yet; `flexbody run --formulation floating` derives it on first use into {cache_root() / 'models'}/"
-        lines.append(f"  floating: {where}")
+    folder = find_model_dir(scene, "floating")
+    if scene.n_particles > FLOATING_MAX_PARTICLES:
+        where = f"not offered above {FLOATING_MAX_PARTICLES} particles (it is derived whole per topology)"
+    elif folder:
+        where = f"derived, in {folder}"
+    else:
+        where = f"not derived yet; `flexbody run --formulation floating` derives it on first use into {cache_root() / 'models'}/"
+    lines.append(f"  floating: {where}")
     lines.append("Models in the cache are keyed by the scene's topology (particles, links, dampers, grounds) and are "
                  "never stale for it; to write the files somewhere to read or commit, use "
                  f"`flexbody derive {scene_arg} --out DIR` (then `--check --out DIR` compares against DIR).")

@@ -206,6 +206,7 @@ class _Run:
         self.friction_times: dict[int, deque[float]] = defaultdict(deque)  # stick and slip events, likewise
         self.losses: list[tuple[float, float]] = []
         self.nfev = self.njev = self.steps = self.segments = 0
+        self.h_next = 0.0  # the step an explicit stepper proposed where the last segment ended (s)
         self.segment_log: list | None = None  # set to [] to log (RHS evaluations, y0, held, push) per segment
         self.min_gap = np.inf
         self.stalled = 0
@@ -281,6 +282,8 @@ class _Run:
             options["jac"] = jacobian = model.jacobian_function(self.p, phases.held)
             if s.method == "LSODA":  # Radau and BDF take the sparse Jacobian; LSODA only a dense one
                 options["jac"] = lambda t, y: _dense(jacobian(t, y))
+        elif self.h_next > 0.0:  # as the compiled path: a restart does not guess the step size again
+            options["first_step"] = min(self.h_next, t_bound - t0)
         import scipy.integrate
 
         solver = getattr(scipy.integrate, s.method)(model.rhs_function(self.p, phases.held, phases.push), t0, self.y.copy(),
@@ -328,6 +331,8 @@ class _Run:
         finally:
             self.nfev += solver.nfev
             self.njev += getattr(solver, "njev", 0)
+            if s.method not in IMPLICIT:
+                self.h_next = solver.h_abs
 
     def record(self, dense, t_stop: float) -> None:
         """Keep the output-grid samples up to ``t_stop`` and track penetration."""

@@ -51,7 +51,7 @@ SIGNATURES = {
     "fb_sys_impact": (_int, [_ptr, _ptr, _ptr, _ptr, _ptr]),
     "fb_sys_outputs": (None, [_ptr, _ptr, _ptr, _ptr, _ptr]),
     "fb_sys_friction": (_int, [_ptr, _ptr, _ptr, _ptr, _int, _ptr, _ptr, _ptr, _ptr]),
-    "fb_sys_contact": (_int, [_ptr, _ptr, _ptr, _ptr, _int, _ptr, _ptr, _ptr, _int, _ptr]),
+    "fb_sys_contact": (_int, [_ptr, _ptr, _ptr, _ptr, _int, _ptr, _ptr, _ptr, _ptr, _int, _ptr]),
 }
 
 
@@ -145,20 +145,21 @@ class SystemModel:
             raise singular_matrix_error()
         return gaps, vn, lam
 
-    def contact(self, y, p, held, push, c: int) -> tuple[float, float, np.ndarray] | None:
-        """Contact ``c`` alone, as event location evaluates it: its gap, its force if held, and
-        the state entries it reads (int array); None where contacts couple (whole-scene models)."""
+    def contact(self, y, p, held, push, c: int) -> tuple[float, float, float, np.ndarray] | None:
+        """Contact ``c`` alone, as event location and the event instant evaluate it: its gap,
+        normal velocity, force if held, and the state entries it reads (int array); None where
+        contacts couple (whole-scene models)."""
         y, held, push = _floats(y), _ints(held), _floats(push)
-        gap, lam, k = ctypes.c_double(0.0), ctypes.c_double(0.0), ctypes.c_int(0)
+        gap, vn, lam, k = ctypes.c_double(0.0), ctypes.c_double(0.0), ctypes.c_double(0.0), ctypes.c_int(0)
         entries = np.empty(self.ny, np.intc)
         status = library().fb_sys_contact(self._address(p), y.ctypes.data, held.ctypes.data, push.ctypes.data,
-                                          int(c), ctypes.addressof(gap), ctypes.addressof(lam), entries.ctypes.data,
-                                          self.ny, ctypes.addressof(k))
+                                          int(c), ctypes.addressof(gap), ctypes.addressof(vn), ctypes.addressof(lam),
+                                          entries.ctypes.data, self.ny, ctypes.addressof(k))
         if status == -2:
             return None
         if status:
             raise singular_matrix_error()
-        return gap.value, lam.value, entries[: k.value].copy()
+        return gap.value, vn.value, lam.value, entries[: k.value].copy()
 
     def friction(self, y, p, held, push) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Each contact's tangential velocity and tangential contact force (nc, dim) and its

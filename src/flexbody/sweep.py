@@ -900,6 +900,27 @@ def _cpu_seconds(processes) -> float:
     return own + sum(sum(p.cpu_times()[:2]) for p in processes)
 
 
+def _warm_process(table: dict) -> None:
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", OverdampedLinkWarning)
+        _model_for(load_scene(table))
+
+
+def _parallel_ceiling(tables: list[dict], workers: int) -> float:
+    """Wall time of the same runs split over ``workers`` plain processes (no Dask), their
+    models loaded before the clock starts: the best these cores allow, the ceiling for the
+    sweep's speed-up (cores that share a host's core run slower side by side)."""
+    import multiprocessing
+
+    numbered = list(enumerate(tables))
+    chunks = [numbered[k::workers] for k in range(workers)]
+    with multiprocessing.get_context("spawn").Pool(workers, _warm_process, (tables[0],)) as pool:
+        pool.map(abs, range(workers), chunksize=1)  # every process started and warm
+        start = time.perf_counter()
+        pool.map(run_batch, chunks, chunksize=1)
+        return time.perf_counter() - start
+
+
 def benchmark(out: Path, quick: bool) -> dict:
     """Thesis ball, stiffness x damping (200 runs): a 2-worker LocalCluster against a serial loop.
 
@@ -936,6 +957,9 @@ def benchmark(out: Path, quick: bool) -> dict:
     per_run = serial / len(points)
     print(f"  serial loop: {serial:.2f} s wall, {serial_cpu:.2f} s CPU; {per_run * 1e3:.1f} ms per run "
           f"(integration {np.mean([r['wall_time_s'] for r in serial_rows]) * 1e3:.1f} ms of it)")
+    ceiling = _parallel_ceiling(tables, workers)
+    print(f"  {workers} plain processes (no Dask), half the runs each: {ceiling:.2f} s, speed-up "
+          f"{serial / ceiling:.2f}: the ceiling on these cores")
     start = time.perf_counter()
     engine = _Engine(None, workers)
     client = engine.__enter__()
@@ -963,13 +987,14 @@ def benchmark(out: Path, quick: bool) -> dict:
             runs_cpu = float(frame["task_cpu_s"].sum())
             cpu_overhead = (used - runs_cpu - validation_cpu) / len(points)
             case = {"label": label, "batch": batch, "time_s": elapsed, "cpu_s": used, "runs_cpu_s": runs_cpu,
-                    "speedup": serial / elapsed, "overhead_per_run_s": overhead,
+                    "speedup": serial / elapsed, "of_ceiling": ceiling / elapsed, "overhead_per_run_s": overhead,
                     "overhead_relative": overhead / per_run,
                     "cpu_overhead_per_run_s": cpu_overhead, "cpu_overhead_relative": cpu_overhead * len(points)
                     / runs_cpu, "load_average": load,
                     "failed": int((frame["status"] != "success").sum()), "identical_to_serial": bool(same)}
             cases.append(case)
-            print(f"  {label:42s} {elapsed:6.2f} s  speed-up {case['speedup']:.2f}  overhead per run: wall "
+            print(f"  {label:42s} {elapsed:6.2f} s  speed-up {case['speedup']:.2f} "
+                  f"({100 * case['of_ceiling']:.0f} % of the ceiling)  overhead per run: wall "
                   f"{overhead * 1e3:6.2f} ms ({100 * case['overhead_relative']:.0f} %), "
                   f"CPU {cpu_overhead * 1e3:5.2f} ms ({100 * case['cpu_overhead_relative']:.0f} %); "
                   f"load {load:.1f}; identical to serial: {same}")
@@ -978,7 +1003,8 @@ def benchmark(out: Path, quick: bool) -> dict:
         shutil.rmtree(scratch, ignore_errors=True)
     data = {"runs": len(points), "workers": workers, "serial_s": serial, "serial_cpu_s": serial_cpu,
             "validation_cpu_s": validation_cpu,
-            "serial_per_run_s": per_run, "cluster_start_s": startup, "cases": cases, "vary": vary,
+            "serial_per_run_s": per_run, "plain_processes_s": ceiling, "ceiling_speedup": serial / ceiling,
+            "cluster_start_s": startup, "cases": cases, "vary": vary,
             "environment": {"cpus": os.cpu_count(), **_versions()}}
     out.mkdir(parents=True, exist_ok=True)
     (out / "sweep.json").write_text(json.dumps(data, indent=1) + "\n")
