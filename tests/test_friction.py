@@ -177,7 +177,12 @@ def test_a_bouncing_particle_follows_newton_and_rests_at_its_zeno_time(e, backen
     assert set(r.events_kind) == {"impact"}
     k = np.arange(len(times))
     expected = t1 + np.concatenate([[0.0], np.cumsum(2 * e ** k[1:] * t1)])  # t_{k+1} = t_k + 2 e^k t1
-    np.testing.assert_allclose(times, expected, rtol=1e-8)
+    # Event location resolves heights to the gap tolerance (1e-12 m here), which shifts bounce
+    # k by about 1e-12 / rise_k of its length: the closed form is held to 1e-8 where the
+    # bounces before rise at least 1e-5 h (that shift below 1e-7), the rest by the Zeno bound.
+    resolved = np.concatenate([[True], e ** (2 * k[1:]) >= 1e-5])
+    assert resolved.sum() >= 6
+    np.testing.assert_allclose(times[resolved], expected[resolved], rtol=1e-8)
     # Apex heights e^(2k) h between impacts k and k+1: from every sample in flight, y + v^2 / (2 g).
     for j in range(3):
         between = (r.t > times[j]) & (r.t < times[j + 1])
@@ -193,7 +198,9 @@ def test_a_bouncing_particle_follows_newton_and_rests_at_its_zeno_time(e, backen
     after = r.t > times[-1] + 1e-3
     np.testing.assert_allclose(r.positions[after, 0, 1], 0.0, atol=1e-12)
     np.testing.assert_allclose(r.contact_force[after, 0], 0.1 * G, rtol=1e-9)
-    assert ledger_drift(r) < 1e-10
+    # Each impact may set the particle up onto the ground by at most the gap tolerance (where
+    # event location found it): at most m g 1e-12 J each (twice, for the integration's share).
+    assert ledger_drift(r) < 2 * len(times) * 0.1 * G * 1e-12
 
 
 @needs_cc

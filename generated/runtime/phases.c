@@ -173,9 +173,9 @@ int fb_resolve(FbWork *w, const FbSystem *s, double t, double *y, int *phase, do
             *loss += lost;
             for (int m = 0; m < n_visit; ++m) {
                 const int c = visit[m];
-                if (stop[c] == FB_REBOUND) { /* it leaves the ground at once */
-                    phase[c] = FB_FREE;
-                    floor[c] = fmin(0.0, gaps[c]) - gap_tol;
+                if (stop[c] == FB_REBOUND) { /* it leaves the ground at once, from gap 0 if it was */
+                    phase[c] = FB_FREE;          /* below (the impact set it there): armed a hair below */
+                    floor[c] = -gap_tol;
                     not_held[c] = 1;
                 } else if (instant[c]) phase[c] = FB_HELD;
             }

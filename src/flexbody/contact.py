@@ -237,7 +237,9 @@ def resolve(
             loss += lost
             bounced = stop == REBOUND  # it leaves the ground at once
             phases.phase[instant & ~bounced] = HELD
-            phases.floor[bounced] = np.minimum(0.0, gaps[bounced]) - gap_tolerance
+            # The impact set it onto the ground (gap 0) if it was below: armed a hair below that,
+            # not below where it was found (a cascade of bounces would sink a tolerance each).
+            phases.floor[bounced] = -gap_tolerance
             not_held |= bounced
         away = ending & (vn >= 0.0)
         phases.phase[away] = FREE
