@@ -75,6 +75,10 @@ struct FbSystem {
      * if free).  0, or -1 as rhs. */
     int (*friction)(const FbSystem *s, const double *y, const int *held, const double *push, int c,
                     double *vt, double *ft, double *slack, double *lam_c);
+    /* With friction: (nc, 3) each sliding contact's slip direction at the start of the step,
+     * written by the integrator; past the stop (v_t against it) rhs continues the friction
+     * force along it, so a step across the stop is smooth and its event is located. */
+    double *slip;
 };
 
 /* Work buffers of one run, sized once (integrator.c). */

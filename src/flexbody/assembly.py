@@ -68,6 +68,7 @@ class AssembledModel(Model):
         self.masses = scene.masses.copy()
         # Contact laws per ground (mu, e): runtime data, not parameters of the derived equations.
         self.laws = np.array([[g.friction, g.restitution] for g in scene.grounds], float).reshape(-1, 2)
+        self._slip = np.zeros((self.n_particles * len(scene.grounds), 3))  # the NumPy twin's FbSystem.slip
         self.nq = self.nu = n * self.dim
         self.ny = 2 * self.nq + 2
         self.n_contacts = n * self.n_grounds
@@ -77,6 +78,12 @@ class AssembledModel(Model):
 
     def parameters(self, scene: Scene) -> FloatArray:
         return scene_parameters(scene)
+
+    def slip_directions(self, p) -> FloatArray:
+        """Each sliding contact's slip direction at the start of the step, shape (nc, dim), a
+        writable view (``FbSystem.slip``): past the stop the friction force continues along it
+        (see ``coulomb`` in assembly.c).  Zero it for outputs: then the law is the physical one."""
+        return self._slip[:, : self.dim]
 
     def _split(self, y):
         return y[: self.nq].reshape(-1, self.dim), y[self.nq : 2 * self.nq].reshape(-1, self.dim)
@@ -171,9 +178,17 @@ class AssembledC(runtime.SystemModel, AssembledModel):
         lib.fb_asm_system(handle, ctypes.addressof(system))
         if not (self.laws[:, 0] > 0.0).any():
             system.friction = None  # no friction anywhere: event location skips it
+            system.slip = None
         system.owner = _AssemblyHandle(lib, handle)
         self._system_cache = (key, system)
         return system
+
+    def slip_directions(self, p) -> FloatArray:
+        system = self.system(p)
+        if not system.slip:
+            return np.zeros((self.n_contacts, self.dim))
+        buffer = (ctypes.c_double * (3 * self.n_contacts)).from_address(system.slip)
+        return np.frombuffer(buffer, dtype=float).reshape(-1, 3)[:, : self.dim]
 
     def outputs(self, y, p):
         """Positions and velocities (n, dim) and energies (4,) at one state."""
@@ -327,15 +342,20 @@ class AssembledNumpy(AssembledModel):
         # Sticking: the tangential force cancels the tangential pull.
         ft[i, g] = np.where(sticking[:, None], -m[:, None] * at, 0.0)
         slack[i, g] = np.where(sticking, mu * lam[i, g] - m * pull, 0.0)
-        # Sliding: mu lam against v_t, or against the pull from rest.
+        # Sliding: mu lam against v_t, or against the pull from rest; past the stop (v_t against
+        # the step's starting direction) along that direction, as coulomb in assembly.c.
         speed = np.linalg.norm(vt[i, g], axis=1)
-        along, size = np.where((speed > 0.0)[:, None], vt[i, g], at), np.where(speed > 0.0, speed, pull)
+        direction = self._slip[i * G + g, :d]
+        unit = np.sum(direction**2, axis=1)
+        past = (unit > 0.0) & ((np.sum(vt[i, g] * direction, axis=1) < 0.0) | (speed == 0.0))
+        along = np.where(past[:, None], direction, np.where((speed > 0.0)[:, None], vt[i, g], at))
+        size = np.where(past, np.sqrt(unit), np.where(speed > 0.0, speed, pull))
         force = mu * np.maximum(lam[i, g], 0.0)
         with np.errstate(divide="ignore", invalid="ignore"):
             slide = np.where(((~sticking) & (size > 0.0))[:, None], -force[:, None] * along / size[:, None], 0.0)
         ft[i, g] += slide
         acc[i] += np.where(sticking[:, None], -at, slide / m[:, None])
-        power = float(np.sum(np.where(~sticking & (size > 0.0), force * speed, 0.0)))
+        power = -float(np.sum(slide * vt[i, g]))  # mu lam |v_t| before the stop
         return vt, ft, slack, power
 
     def friction(self, y, p, held, push):
