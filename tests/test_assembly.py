@@ -234,26 +234,27 @@ def test_whole_scene_models_have_no_per_contact_evaluation():
     assert model.contact(y, model.parameters(scene), np.zeros(nc, np.intc), np.zeros(nc), 0) is None
 
 
-@pytest.mark.skipif(not HAS_CC, reason="no C compiler")
-def test_an_impact_sets_a_particle_found_below_the_ground_onto_it():
-    """Event location stops a particle up to the gap tolerance below the ground; the impact
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_settle_sets_a_stopped_particle_found_below_the_ground_onto_it(backend):
+    """Event location stops a particle up to the gap tolerance below the ground; settling
     puts it on the ground (else every stop-release-stop cycle of a chattering particle starts
-    the next a tolerance lower), moving it along the normal only, and leaves particles above
-    the ground where they are."""
+    the next a tolerance lower), moving it along the normal only, and leaves particles not
+    stopped, or above the ground, where they are."""
     scene = make_scene(body(particles=[[0.0, 0.0], [0.3, 0.0], [0.6, 0.0]], links=[[0, 1], [1, 2]], mass=0.1,
                             position=[0.0, 0.0]),
                        grounds=[{"point": [0.0, 0.0], "normal": [0.3, 1.0]}])
-    model = assembled_model(scene, "c")
+    model = assembled_model(scene, backend)
     p = model.parameters(scene)
     normal = np.array([0.3, 1.0]) / np.hypot(0.3, 1.0)
     x = np.array([[0.0, 0.0], [0.3, 0.0], [0.6, 0.0]])
     x -= (x @ normal)[:, None] * normal  # all on the ground ...
     x += np.array([-3e-12, -2e-12, 5e-13])[:, None] * normal  # ... then two below, one above
     y = np.concatenate([x.ravel(), [0.1, -1.0, 0.2, -0.5, 0.0, -0.3], [0.0, 0.0]])
-    out, _ = model.impact(y, p, np.array([1, 0, 1], np.intc))
-    gaps = model.gaps(out, p)
+    out = model.settle(y, p, np.array([1, 0, 1], np.intc))
+    gaps, before = model.gaps(out[: model.nq], p), model.gaps(y[: model.nq], p)
     assert abs(gaps[0]) <= 1e-16  # stopped and below: set on the ground
-    assert gaps[1] == model.gaps(y, p)[1]  # below but not stopped: not this impact's business
-    assert gaps[2] == model.gaps(y, p)[2]  # stopped above the ground: not moved
+    assert gaps[1] == before[1]  # below but not stopped: not this instant's business
+    assert gaps[2] == before[2]  # stopped above the ground: not moved
+    np.testing.assert_array_equal(out[6:], y[6:])  # velocities untouched
     moved = out[:2] - y[:2]
     assert abs(moved @ np.array([-normal[1], normal[0]])) <= 1e-20  # along the normal only

@@ -423,34 +423,9 @@ static int contact_state_2d(const FbSystem *s, const double *y, const int *held,
     return 0;
 }
 
-/* After the plastic impulse P_n = lam (>= 0 pushing) that stopped particle i's velocity u
- * along ground g's normal: the rebound -e v_n- (code FB_REBOUND), then Coulomb's tangential
- * impulse min(m |v_t|, mu P_n) against v_t (DESIGN §6); FB_SETTLE zeroes v_t (it comes to
- * rest).  One ground only: a particle stopped on two grounds at once with friction is
- * refused by the driver. */
-static void contact_laws_2d(const Assembly *A, const double *x, int i, int g, int code, double *u, double lam)
-{
-    const double mu = A->laws[2 * g], e = code == FB_REBOUND ? A->laws[2 * g + 1] : 0.0;
-    if (mu == 0.0 && e == 0.0 && code != FB_SETTLE) return;
-    double gap, J[2], normal[2], tangents[2], vn, vt[2], speed;
-    const double *ground = A->grounds + 2 * 2 * g;
-    fb_k_ground_2d(x + 2 * i, ground, ground + 2, &gap, J, normal, tangents);
-    /* lam / m = -v_n-; a held contact's v_n- is 0 up to round-off, either sign: no impulse */
-    const double stopped = fmax(lam, 0.0) * A->inv_mass[i], rebound = e * stopped;
-    for (int a = 0; a < 2; ++a) u[a] += rebound * normal[a];
-    fb_k_split_2d(u, normal, &vn, vt, &speed);
-    const double impulse = mu * (stopped + rebound); /* mu P_n / m: the most friction can take */
-    if (!(speed > 0.0)) return;
-    const double keep = impulse >= speed || code == FB_SETTLE ? 0.0 : 1.0 - impulse / speed;
-    for (int a = 0; a < 2; ++a) u[a] -= (1.0 - keep) * vt[a];
-}
-
-/* Set particle i, stopped on its grounds in S, onto those it is below: event location stops
- * it within the gap tolerance under the ground, and without this each stop-release-stop
- * cycle of a chattering particle would start the next a tolerance lower.  The least move
- * dx with J_S (x + dx) - P = max(gap, 0); at most the tolerance, so the energy it adds
- * (a spring force or weight times it) is far below the ledger's resolution.  0 or -1. */
-static int settle_2d(const Assembly *A, double *x, int i, const int *S)
+/* Set particle i, stopped on its grounds in S, onto those it is below (FbSystem.settle):
+ * the least move dx with J_S (x + dx) - P = max(gap, 0).  0 or -1. */
+static int settle_particle_2d(const Assembly *A, double *x, int i, const int *S)
 {
     const int G = A->n_grounds;
     int k = 0, below = 0;
@@ -474,6 +449,37 @@ static int settle_2d(const Assembly *A, double *x, int i, const int *S)
     return 0;
 }
 
+/* After the plastic impulse P_n = lam (>= 0 pushing) that stopped particle i's velocity u
+ * along ground g's normal: the rebound -e v_n- (code FB_REBOUND), then Coulomb's tangential
+ * impulse min(m |v_t|, mu P_n) against v_t (DESIGN §6); FB_SETTLE zeroes v_t (it comes to
+ * rest).  One ground only: a particle stopped on two grounds at once with friction is
+ * refused by the driver. */
+static void contact_laws_2d(const Assembly *A, const double *x, int i, int g, int code, double *u, double lam)
+{
+    const double mu = A->laws[2 * g], e = code == FB_REBOUND ? A->laws[2 * g + 1] : 0.0;
+    if (mu == 0.0 && e == 0.0 && code != FB_SETTLE) return;
+    double gap, J[2], normal[2], tangents[2], vn, vt[2], speed;
+    const double *ground = A->grounds + 2 * 2 * g;
+    fb_k_ground_2d(x + 2 * i, ground, ground + 2, &gap, J, normal, tangents);
+    /* lam / m = -v_n-; a held contact's v_n- is 0 up to round-off, either sign: no impulse */
+    const double stopped = fmax(lam, 0.0) * A->inv_mass[i], rebound = e * stopped;
+    for (int a = 0; a < 2; ++a) u[a] += rebound * normal[a];
+    fb_k_split_2d(u, normal, &vn, vt, &speed);
+    const double impulse = mu * (stopped + rebound); /* mu P_n / m: the most friction can take */
+    if (!(speed > 0.0)) return;
+    const double keep = impulse >= speed || code == FB_SETTLE ? 0.0 : 1.0 - impulse / speed;
+    for (int a = 0; a < 2; ++a) u[a] -= (1.0 - keep) * vt[a];
+}
+
+static int settle_2d(const FbSystem *s, double *y, const int *stop)
+{
+    const Assembly *A = s->data;
+    const int G = A->n_grounds;
+    for (int i = 0; i < A->n; ++i)
+        if (settle_particle_2d(A, y, i, stop + i * G)) return -1;
+    return 0;
+}
+
 static int impact_2d(const FbSystem *s, const double *y, const int *stop, double *y_out, double *loss)
 {
     const Assembly *A = s->data;
@@ -492,7 +498,6 @@ static int impact_2d(const FbSystem *s, const double *y, const int *stop, double
         if (stopped == 1) contact_laws_2d(A, y, i, g_stop, stop[i * G + g_stop], u, lam[g_stop]);
         fb_k_particle_2d(y + 2 * i, u, A->mass + i, A->gravity, f, &potential, &after);
         *loss += before - after;
-        if (settle_2d(A, y_out, i, stop + i * G)) return -1;
     }
     return 0;
 }
@@ -815,34 +820,9 @@ static int contact_state_3d(const FbSystem *s, const double *y, const int *held,
     return 0;
 }
 
-/* After the plastic impulse P_n = lam (>= 0 pushing) that stopped particle i's velocity u
- * along ground g's normal: the rebound -e v_n- (code FB_REBOUND), then Coulomb's tangential
- * impulse min(m |v_t|, mu P_n) against v_t (DESIGN §6); FB_SETTLE zeroes v_t (it comes to
- * rest).  One ground only: a particle stopped on two grounds at once with friction is
- * refused by the driver. */
-static void contact_laws_3d(const Assembly *A, const double *x, int i, int g, int code, double *u, double lam)
-{
-    const double mu = A->laws[2 * g], e = code == FB_REBOUND ? A->laws[2 * g + 1] : 0.0;
-    if (mu == 0.0 && e == 0.0 && code != FB_SETTLE) return;
-    double gap, J[3], normal[3], tangents[6], vn, vt[3], speed;
-    const double *ground = A->grounds + 2 * 3 * g;
-    fb_k_ground_3d(x + 3 * i, ground, ground + 3, &gap, J, normal, tangents);
-    /* lam / m = -v_n-; a held contact's v_n- is 0 up to round-off, either sign: no impulse */
-    const double stopped = fmax(lam, 0.0) * A->inv_mass[i], rebound = e * stopped;
-    for (int a = 0; a < 3; ++a) u[a] += rebound * normal[a];
-    fb_k_split_3d(u, normal, &vn, vt, &speed);
-    const double impulse = mu * (stopped + rebound); /* mu P_n / m: the most friction can take */
-    if (!(speed > 0.0)) return;
-    const double keep = impulse >= speed || code == FB_SETTLE ? 0.0 : 1.0 - impulse / speed;
-    for (int a = 0; a < 3; ++a) u[a] -= (1.0 - keep) * vt[a];
-}
-
-/* Set particle i, stopped on its grounds in S, onto those it is below: event location stops
- * it within the gap tolerance under the ground, and without this each stop-release-stop
- * cycle of a chattering particle would start the next a tolerance lower.  The least move
- * dx with J_S (x + dx) - P = max(gap, 0); at most the tolerance, so the energy it adds
- * (a spring force or weight times it) is far below the ledger's resolution.  0 or -1. */
-static int settle_3d(const Assembly *A, double *x, int i, const int *S)
+/* Set particle i, stopped on its grounds in S, onto those it is below (FbSystem.settle):
+ * the least move dx with J_S (x + dx) - P = max(gap, 0).  0 or -1. */
+static int settle_particle_3d(const Assembly *A, double *x, int i, const int *S)
 {
     const int G = A->n_grounds;
     int k = 0, below = 0;
@@ -866,6 +846,37 @@ static int settle_3d(const Assembly *A, double *x, int i, const int *S)
     return 0;
 }
 
+/* After the plastic impulse P_n = lam (>= 0 pushing) that stopped particle i's velocity u
+ * along ground g's normal: the rebound -e v_n- (code FB_REBOUND), then Coulomb's tangential
+ * impulse min(m |v_t|, mu P_n) against v_t (DESIGN §6); FB_SETTLE zeroes v_t (it comes to
+ * rest).  One ground only: a particle stopped on two grounds at once with friction is
+ * refused by the driver. */
+static void contact_laws_3d(const Assembly *A, const double *x, int i, int g, int code, double *u, double lam)
+{
+    const double mu = A->laws[2 * g], e = code == FB_REBOUND ? A->laws[2 * g + 1] : 0.0;
+    if (mu == 0.0 && e == 0.0 && code != FB_SETTLE) return;
+    double gap, J[3], normal[3], tangents[6], vn, vt[3], speed;
+    const double *ground = A->grounds + 2 * 3 * g;
+    fb_k_ground_3d(x + 3 * i, ground, ground + 3, &gap, J, normal, tangents);
+    /* lam / m = -v_n-; a held contact's v_n- is 0 up to round-off, either sign: no impulse */
+    const double stopped = fmax(lam, 0.0) * A->inv_mass[i], rebound = e * stopped;
+    for (int a = 0; a < 3; ++a) u[a] += rebound * normal[a];
+    fb_k_split_3d(u, normal, &vn, vt, &speed);
+    const double impulse = mu * (stopped + rebound); /* mu P_n / m: the most friction can take */
+    if (!(speed > 0.0)) return;
+    const double keep = impulse >= speed || code == FB_SETTLE ? 0.0 : 1.0 - impulse / speed;
+    for (int a = 0; a < 3; ++a) u[a] -= (1.0 - keep) * vt[a];
+}
+
+static int settle_3d(const FbSystem *s, double *y, const int *stop)
+{
+    const Assembly *A = s->data;
+    const int G = A->n_grounds;
+    for (int i = 0; i < A->n; ++i)
+        if (settle_particle_3d(A, y, i, stop + i * G)) return -1;
+    return 0;
+}
+
 static int impact_3d(const FbSystem *s, const double *y, const int *stop, double *y_out, double *loss)
 {
     const Assembly *A = s->data;
@@ -884,7 +895,6 @@ static int impact_3d(const FbSystem *s, const double *y, const int *stop, double
         if (stopped == 1) contact_laws_3d(A, y, i, g_stop, stop[i * G + g_stop], u, lam[g_stop]);
         fb_k_particle_3d(y + 3 * i, u, A->mass + i, A->gravity, f, &potential, &after);
         *loss += before - after;
-        if (settle_3d(A, y_out, i, stop + i * G)) return -1;
     }
     return 0;
 }
@@ -960,8 +970,8 @@ void fb_asm_system(Assembly *A, FbSystem *s)
         s->outputs = outputs_2d;
         s->contact = contact_2d;
         s->friction = friction_2d;
+        s->settle = settle_2d;
     }
-    s->slip = A->slip;
     if (A->dim == 3) {
         s->rhs = rhs_3d;
         s->gaps = gaps_3d;
@@ -970,9 +980,10 @@ void fb_asm_system(Assembly *A, FbSystem *s)
         s->outputs = outputs_3d;
         s->contact = contact_3d;
         s->friction = friction_3d;
+        s->settle = settle_3d;
     }
-    s->slip = A->slip;
     s->stencil = stencil;
+    s->slip = A->slip;
 }
 
 /* d(force on i)/d[x_i, x_j, v_i, v_j] of every link at y: out (n_links, dim, 4 dim). */
@@ -1010,6 +1021,12 @@ int fb_sys_friction(const FbSystem *s, const double *y, const int *held, const d
 void fb_sys_outputs(const FbSystem *s, const double *y, double *x, double *v, double *energies)
 {
     s->outputs(s, y, x, v, energies);
+}
+
+/* FbSystem.settle on y (in place): 0, -1, or -2 if the system has none. */
+int fb_sys_settle(const FbSystem *s, double *y, const int *stop)
+{
+    return s->settle ? s->settle(s, y, stop) : -2;
 }
 
 /* Contact c alone (FbSystem.contact): *gap, *vn, *lam_c and, in entries (capacity), the

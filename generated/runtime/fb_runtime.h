@@ -75,6 +75,11 @@ struct FbSystem {
      * if free).  0, or -1 as rhs. */
     int (*friction)(const FbSystem *s, const double *y, const int *held, const double *push, int c,
                     double *vt, double *ft, double *slack, double *lam_c);
+    /* Optional (NULL: nothing to do): set each particle with stop[c] onto the grounds it is
+     * below, the least move.  Instant impacts find a particle up to the gap tolerance under
+     * the ground; without this each stop-release-stop cycle of a chattering particle would
+     * start the next a tolerance lower.  0, or -1 as rhs. */
+    int (*settle)(const FbSystem *s, double *y, const int *stop);
     /* With friction: (nc, 3) each sliding contact's slip direction at the start of the step,
      * written by the integrator; past the stop (v_t against it) rhs continues the friction
      * force along it, so a step across the stop is smooth and its event is located. */

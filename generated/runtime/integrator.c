@@ -391,7 +391,7 @@ static double root(Problem *P, Stepper *S, int c, double a, double fa, double b,
 }
 
 /* Earliest sign change (+ to <= 0) in the step, checking its midpoint too; 1 if found. */
-static int locate(Problem *P, Stepper *S, const double *g_old, const double *g_new, double *t_hit, int *fired)
+static int locate(Problem *P, Stepper *S, const double *g_old, double *g_new, double *t_hit, int *fired)
 {
     FbWork *w = P->w;
     double *y = w->mid_y, *g_mid = w->g_mid, *roots = w->roots;
@@ -399,6 +399,15 @@ static int locate(Problem *P, Stepper *S, const double *g_old, const double *g_n
     const int nc = P->nc;
     dense(P, S, t_mid, y, P->n_event, 0);
     events_at(P, t_mid, y, g_mid);
+    /* A free contact armed a hair below the ground (just released or rebounded) and 2 gap
+     * tolerances above it at the midpoint is armed at the ground for the second half, as at
+     * a step's end: else a bounce within one step would be caught only at the lower floor. */
+    for (int c = 0; c < nc; ++c)
+        if (P->phase[c] == FB_FREE && P->floor[c] < 0.0 && g_mid[c] + P->floor[c] >= 2.0 * P->gap_tol) {
+            g_mid[c] += P->floor[c];
+            g_new[c] += P->floor[c];
+            P->floor[c] = 0.0;
+        }
     int crossed = 0;
     for (int c = 0; c < nc; ++c)
         crossed |= ((g_old[c] > 0.0) & (g_mid[c] <= 0.0)) | ((g_mid[c] > 0.0) & (g_new[c] <= 0.0));

@@ -113,9 +113,10 @@ int fb_resolve(FbWork *w, const FbSystem *s, double t, double *y, int *phase, do
     const int per_particle = nc / (s->n_particles > 0 ? s->n_particles : 1);
     for (int c = 0; c < nc; ++c) {
         touching[c] = touching_in[c] != 0;
-        held[c] = phase[c] == FB_HELD || phase[c] == FB_SLIDING ? phase[c] : 0; /* the contact laws' codes */
-        was_held[c] = held[c] != 0; /* on the ground before this instant, so v_n = 0 */
-        impacted[c] = settled[c] = not_held[c] = hit[c] = ending[c] = instant[c] = stop[c] = 0;
+        was_held[c] = phase[c] == FB_HELD || phase[c] == FB_SLIDING; /* on the ground: v_n = 0 */
+        held[c] = was_held[c] ? phase[c] : 0;
+        impacted[c] = settled[c] = not_held[c] = hit[c] = ending[c] = instant[c] = 0;
+        stop[c] = FB_KEEP;
         vn[c] = lam[c] = 0.0;
     }
     for (int first = 0; first < nc; first += per_particle) {
@@ -171,11 +172,18 @@ int fb_resolve(FbWork *w, const FbSystem *s, double t, double *y, int *phase, do
             if (s->impact(s, y, stop, y_new, &lost)) return -1;
             memcpy(y, y_new, sizeof(double) * ny);
             *loss += lost;
+            /* found by event location up to the gap tolerance below the ground: set onto it (not
+             * the thesis mode's windows, whose penetration is the model's) */
+            if (!thesis && s->settle && s->settle(s, y, stop)) return -1;
+            if (!s->contact) s->gaps(s, y, gaps);
             for (int m = 0; m < n_visit; ++m) {
                 const int c = visit[m];
-                if (stop[c] == FB_REBOUND) { /* it leaves the ground at once, from gap 0 if it was */
-                    phase[c] = FB_FREE;          /* below (the impact set it there): armed a hair below */
-                    floor[c] = -gap_tol;
+                if (stop[c] == FB_REBOUND) { /* it leaves the ground at once */
+                    /* armed a hair below where the impact left it: below where it was found,
+                     * each bounce within one step would arm the next a hair lower */
+                    if (s->contact) s->contact(s, y, held, push, c, gaps + c, 0, lam + c);
+                    phase[c] = FB_FREE;
+                    floor[c] = fmin(0.0, gaps[c]) - gap_tol;
                     not_held[c] = 1;
                 } else if (instant[c]) phase[c] = FB_HELD;
             }

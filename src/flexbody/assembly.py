@@ -383,17 +383,20 @@ class AssembledNumpy(AssembledModel):
         masses, _, _, grounds = self._views(p)
         self._contact_laws(v, lam, masses, grounds, np.asarray(stop).reshape(lam.shape))
         loss = 0.5 * float(np.sum(masses * (np.sum(v_before**2, axis=1) - np.sum(v**2, axis=1))))
-        self._settle(x, grounds, np.asarray(stop, bool).reshape(lam.shape))
         return out, loss
 
-    def _settle(self, x, grounds, stop):
-        """Set each stopped particle onto the grounds in ``stop`` it is below (at most the gap
-        tolerance: where event location stopped it), the least move (the twin of ``settle``
-        in assembly.c): a particle stopped again and again does not sink a tolerance each time."""
+    def settle(self, y, p, stop) -> np.ndarray:
+        """``y`` with each particle with ``stop[c]`` set onto the grounds it is below: the
+        least move with J_S (x + dx) - P = max(gap, 0) (the twin of ``settle`` in assembly.c)."""
+        out = np.array(y, float)
+        x, _ = self._split(out)
+        _, _, _, grounds = self._views(np.asarray(p, float))
+        stop = np.asarray(stop, bool).reshape(self.n_particles, self.n_grounds)
         gaps, J = self._contacts(x, grounds)
         for i in np.flatnonzero((stop & (gaps < 0.0)).any(axis=1)):
-            Js = J[i, stop[i]]
-            x[i] += Js.T @ np.linalg.solve(Js @ Js.T, np.maximum(-gaps[i, stop[i]], 0.0))
+            Js, below = J[i, stop[i]], np.maximum(-gaps[i, stop[i]], 0.0)
+            x[i] += Js.T @ np.linalg.solve(Js @ Js.T, below)
+        return out
 
     def _contact_laws(self, v, lam, masses, grounds, stop):
         """Restitution and the friction impulse after the plastic impulses ``lam (n, G)``, on

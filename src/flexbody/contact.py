@@ -235,11 +235,16 @@ def resolve(
             stop[hit & rebounds] = REBOUND
             y, lost = model.impact(y, p, stop.astype(np.intc))
             loss += lost
+            if impact == "instant" and hasattr(model, "settle"):
+                # found by event location up to the gap tolerance below the ground: set onto it
+                # (not the thesis mode's windows, whose penetration is the model's)
+                y = model.settle(y, p, stop.astype(np.intc))
+            gaps = model.gaps(y[: model.nq], p)
             bounced = stop == REBOUND  # it leaves the ground at once
             phases.phase[instant & ~bounced] = HELD
-            # The impact set it onto the ground (gap 0) if it was below: armed a hair below that,
-            # not below where it was found (a cascade of bounces would sink a tolerance each).
-            phases.floor[bounced] = -gap_tolerance
+            # armed a hair below where the impact left it: below where it was found, each
+            # bounce within one step would arm the next a hair lower
+            phases.floor[bounced] = np.minimum(0.0, gaps[bounced]) - gap_tolerance
             not_held |= bounced
         away = ending & (vn >= 0.0)
         phases.phase[away] = FREE

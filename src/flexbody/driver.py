@@ -288,7 +288,7 @@ class _Run:
 
         solver = getattr(scipy.integrate, s.method)(model.rhs_function(self.p, phases.held, phases.push), t0, self.y.copy(),
                                    t_bound, **options)
-        events = EventFunctions(model, self.p, phases, self.force_tolerance)
+        events = EventFunctions(model, self.p, phases, self.force_tolerance, self.gap_tolerance)
         events.renew(self.y)
         g_old = events(self.y)
         try:
@@ -360,6 +360,13 @@ class _Run:
             self.phases.assign(res.phases)
             new, not_held, loss = res.events, res.not_held, res.impact_loss
         self.events += new
+        if any(e.kind == "impact" and self.restitution[e.contact] > 0.0 for e in new):
+            # A rebound reverses a velocity: the step proposed before it says nothing about the
+            # flight after it (a bounce much shorter than that step would be located only at
+            # the floor a hair below the ground); the next step is estimated afresh.
+            self.h_next = 0.0
+            if self.compiled:
+                self.compiled.h_next.value = 0.0
         if not_held.any():
             for c in np.flatnonzero(not_held):
                 latest = next(e for e in reversed(self.events) if e.contact == c and e.kind == "impact")

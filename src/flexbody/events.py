@@ -34,9 +34,10 @@ from .model import Model
 class EventFunctions:
     """The vector of event functions, shape (nc,), for one contact configuration."""
 
-    def __init__(self, model: Model, p: np.ndarray, phases: Phases, force_tolerance: np.ndarray) -> None:
+    def __init__(self, model: Model, p: np.ndarray, phases: Phases, force_tolerance: np.ndarray,
+                 gap_tolerance: float = 0.0) -> None:
         self.model, self.p, self.phases = model, p, phases
-        self.force_tolerance = force_tolerance
+        self.force_tolerance, self.gap_tolerance = force_tolerance, gap_tolerance
         self.free = phases.phase == FREE
         self.held_mask = phases.on_ground
         self.held = phases.held
@@ -60,6 +61,17 @@ class EventFunctions:
                                  np.where((pull > 0.0)[:, None], -ft / pull[:, None], 0.0))
         sliding = self.phases.phase == SLIDING
         self.direction[sliding] = direction[sliding]
+
+    def rearm(self, g_mid: np.ndarray, g_new: np.ndarray) -> None:
+        """Arm at the ground (floor 0) each free contact armed a hair below it (just released
+        or rebounded) that is 2 gap tolerances above it at the step's midpoint, as at a step's
+        end, for the step's second half; ``g_mid`` and ``g_new`` are moved to it in place.
+        Else a bounce within one step would be caught only at the lower floor."""
+        floor = self.phases.floor
+        lifted = self.free & (floor < 0.0) & (g_mid + floor >= 2.0 * self.gap_tolerance)
+        g_mid[lifted] += floor[lifted]
+        g_new[lifted] += floor[lifted]
+        floor[lifted] = 0.0
 
     def __call__(self, y: np.ndarray) -> np.ndarray:
         m = self.model
@@ -104,10 +116,12 @@ def locate(
     dense : callable
         The step's dense output, ``t -> y (ny,)``.
     g_old, g_new : ndarray, shape (nc,)
-        Event functions at the step's ends.
+        Event functions at the step's ends (``g_new`` follows a contact armed at the ground
+        at the midpoint, see :meth:`EventFunctions.rearm`).
     """
     t_mid = 0.5 * (t_old + t_new)
     g_mid = events(dense(t_mid))
+    events.rearm(g_mid, g_new)
     for (ta, ga), (tb, gb) in (((t_old, g_old), (t_mid, g_mid)), ((t_mid, g_mid), (t_new, g_new))):
         fired = np.flatnonzero((ga > 0.0) & (gb <= 0.0))
         if fired.size == 0:

@@ -25,7 +25,7 @@ class FbSystem(ctypes.Structure):
         ("nq", _int), ("nu", _int), ("nc", _int), ("ny", _int), ("n_particles", _int), ("dim", _int),
         ("data", _ptr), ("rhs", _ptr), ("gaps", _ptr), ("contact_state", _ptr), ("impact", _ptr),
         ("outputs", _ptr), ("project", _ptr), ("contact", _ptr), ("stencil", _ptr),
-        ("friction", _ptr), ("slip", _ptr),
+        ("friction", _ptr), ("settle", _ptr), ("slip", _ptr),
     ]  # fmt: skip
 
 
@@ -52,6 +52,7 @@ SIGNATURES = {
     "fb_sys_outputs": (None, [_ptr, _ptr, _ptr, _ptr, _ptr]),
     "fb_sys_friction": (_int, [_ptr, _ptr, _ptr, _ptr, _int, _ptr, _ptr, _ptr, _ptr]),
     "fb_sys_contact": (_int, [_ptr, _ptr, _ptr, _ptr, _int, _ptr, _ptr, _ptr, _ptr, _int, _ptr]),
+    "fb_sys_settle": (_int, [_ptr, _ptr, _ptr]),
 }
 
 
@@ -180,6 +181,15 @@ class SystemModel:
                 raise singular_matrix_error()
             vt[c], ft[c], slack[c] = out[0][: self.dim], out[1][: self.dim], out[2].value
         return vt, ft, slack
+
+    def settle(self, y, p, stop) -> np.ndarray:
+        """``y`` with each particle with ``stop[c]`` set onto the grounds it is below (a copy;
+        unchanged where the system has no settle, as whole-scene models)."""
+        out, stop = np.array(y, float), _ints(stop)
+        status = library().fb_sys_settle(self._address(p), out.ctypes.data, stop.ctypes.data)
+        if status not in (0, -2):
+            raise singular_matrix_error()
+        return out
 
     def impact(self, y, p, stop):
         y, stop = _floats(y), _ints(stop)
