@@ -13,7 +13,7 @@ import pytest
 
 import flexbody
 from flexbody.assembly import assembled_model
-from flexbody.constants import REBOUND, STOP, ZENO_RISE
+from flexbody.constants import HELD, REBOUND, SLIDING, STOP, ZENO_RISE
 from flexbody.driver import simulate
 from flexbody.errors import InputError
 
@@ -465,3 +465,55 @@ def test_a_frictional_bouncing_landing_in_the_z0_plane_of_3d_is_the_2d_one(path)
     np.testing.assert_allclose(space.positions[..., 2], 0.0, atol=1e-15)
     np.testing.assert_allclose(space.friction_force[..., :2], flat.friction_force, atol=1e-6)
     np.testing.assert_allclose(space.friction_work, flat.friction_work, atol=1e-9)
+
+
+# ----------------------------------------------------------------- the twins
+
+
+@needs_cc
+@pytest.mark.parametrize("dim", [2, 3])
+def test_c_and_numpy_contact_laws_agree_at_random_states(dim, rng):
+    """The Coulomb law (sticking and sliding right-hand side, friction state) and the impact
+    laws (restitution, friction impulse, settling) in C and in NumPy, at random states."""
+    n = 6
+    pad = [0.0] * (dim - 2)
+    scene = flexbody.load_scene({
+        "name": "chain", "gravity": [0.3, -G] + pad,
+        "grounds": [{"point": [0.0, 0.0] + pad, "normal": [0.1, 1.0] + pad, "friction": 0.4, "restitution": 0.6}],
+        "bodies": [{"name": "chain", "particles": [[0.1 * k, 0.0] + pad for k in range(n)],
+                    "links": [[k, k + 1] for k in range(n - 1)], "mass": 0.05, "stiffness": 500.0, "damping": 0.3,
+                    "position": [0.0, 0.2] + pad}],
+        "simulation": {"t_end": 0.1},
+    })
+    c_model, np_model = assembled_model(scene, "c"), assembled_model(scene, "numpy")
+    p = c_model.parameters(scene)
+    for _ in range(5):
+        y = np.concatenate([rng.normal(size=dim * n) * 0.1, rng.normal(size=dim * n), [0.0, 0.0]])
+        held = rng.choice([0, HELD, SLIDING], size=n).astype(np.intc)
+        push = np.zeros(n)
+        (a, la), (b, lb) = c_model.rhs(y, p, held, push), np_model.rhs(y, p, held, push)
+        np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(la, lb, rtol=1e-12, atol=1e-12)
+        for u, v in zip(c_model.friction(y, p, held, push), np_model.friction(y, p, held, push)):
+            np.testing.assert_allclose(u, v, rtol=1e-12, atol=1e-12)
+        # A sticking particle does not accelerate; a sliding one dissipates mu lam |v_t|.
+        acc = a[dim * n : 2 * dim * n].reshape(n, dim)
+        np.testing.assert_allclose(acc[held == HELD], 0.0, atol=1e-9)
+        vt, ft, _ = c_model.friction(y, p, held, push)
+        sliding = held == SLIDING
+        np.testing.assert_allclose(np.linalg.norm(ft[sliding], axis=1), 0.4 * np.maximum(la[sliding], 0.0), rtol=1e-12)
+        assert a[-1] == pytest.approx(float(np.sum(-ft[sliding] * vt[sliding])), rel=1e-12, abs=1e-15)
+        stop = rng.choice([0, 1, 2, 3], size=n).astype(np.intc)  # KEEP, STOP, REBOUND, SETTLE
+        (ya, la_), (yb, lb_) = c_model.impact(y, p, stop), np_model.impact(y, p, stop)
+        np.testing.assert_allclose(ya, yb, rtol=1e-12, atol=1e-12)
+        assert la_ == pytest.approx(lb_, rel=1e-10, abs=1e-14)
+        # An implicit method's Jacobian: a sticking particle's acceleration rows are those of
+        # the right-hand side, identically zero (checked by finite differences).
+        jac = np_model.jacobian_function(p, held)(0.0, y).toarray()
+        rows = (dim * n + dim * np.flatnonzero(held == HELD)[:, None] + np.arange(dim)).ravel()
+        step = 1e-7
+        fd = np.column_stack([(np_model.rhs(y + step * e_k, p, held, push)[0]
+                               - np_model.rhs(y - step * e_k, p, held, push)[0]) / (2 * step)
+                              for e_k in np.eye(len(y))])
+        np.testing.assert_allclose(fd[rows], 0.0, atol=1e-6)
+        np.testing.assert_array_equal(jac[rows], 0.0)

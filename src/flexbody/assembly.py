@@ -24,7 +24,7 @@ import numpy as np
 
 from . import runtime
 from .cbuild import kernels_dir
-from .constants import REBOUND, SETTLE, SLIDING
+from .constants import HELD, REBOUND, SETTLE, SLIDING
 from .model import Model, singular_matrix_error
 from .scene import Scene
 
@@ -107,7 +107,8 @@ class AssembledModel(Model):
         from scipy import sparse
 
         n, d, nq, nl = self.n_particles, self.dim, self.nq, len(self.links)
-        held = np.asarray(held, bool).reshape(n, self.n_grounds)
+        codes = np.asarray(held).reshape(n, self.n_grounds)
+        held = codes != 0
         masses, _, _, grounds = self._views(np.asarray(p, float))
         # Each link's force on i depends on [x_i, x_j, v_i, v_j]; i gets +f/m_i, j gets -f/m_j.
         ends = self.links.astype(np.int64)
@@ -121,7 +122,7 @@ class AssembledModel(Model):
         cols = np.concatenate([cols, cols]).ravel()
         sign_mass = np.concatenate([1.0 / masses[ends[:, 0]], -1.0 / masses[ends[:, 1]]])
         kinematics = sparse.coo_matrix((np.ones(nq), (np.arange(nq), nq + np.arange(nq))), shape=(self.ny, self.ny))
-        projector = self._held_projector(held, grounds)
+        projector = self._held_projector(held, grounds, codes)
 
         def jacobian(t, y):
             jac = self.link_jacobians(y, p).reshape(nl, d, 4, d)  # (link, row comp, block, col comp)
@@ -133,8 +134,10 @@ class AssembledModel(Model):
 
         return jacobian
 
-    def _held_projector(self, held, grounds):
-        """``P`` (ny, ny) that projects held particles' acceleration rows onto their constraints."""
+    def _held_projector(self, held, grounds, codes=None):
+        """``P`` (ny, ny) that projects held particles' acceleration rows onto their constraints;
+        a sticking particle (held on one ground with friction, code HELD) has all of them zero
+        (its acceleration is held at 0; a sliding one's friction is left out)."""
         from scipy import sparse
 
         if not held.any():
@@ -144,6 +147,9 @@ class AssembledModel(Model):
         for i in np.flatnonzero(held.any(axis=1)):
             J = grounds[held[i], 1, :]  # the normals of its held grounds: d gap / dx, (k, d)
             P = np.eye(d) - J.T @ np.linalg.solve(J @ J.T, J)
+            g = np.flatnonzero(held[i])
+            if codes is not None and len(g) == 1 and self.laws[g[0], 0] > 0.0 and codes[i, g[0]] == HELD:
+                P = np.zeros((d, d))
             r = nq + d * i + np.arange(d)
             blocks.append((np.repeat(r, d), np.tile(r, d), (P - np.eye(d)).ravel()))
         rows, cols, vals = (np.concatenate(x) for x in zip(*blocks))
