@@ -127,7 +127,7 @@ def test_dotted_paths_by_name_index_and_vector_component():
     (["bodies.3.stiffness=1,2"], "has 1 element(s), no index 3"),
     (["bodies.ball.position.7=1"], "no index 7"),
     (["bodies.0.stiffness=1e3,-5"], "`bodies[0].stiffness` = -5"),
-    (["grounds.0.friction=0.1,0.2"], "`grounds[0].friction`"),
+    (["grounds.0.friction=0.1,-0.2"], "`grounds[0].friction` = -0.2"),
     (["simulation.rtol=1e-6,5"], "`simulation.rtol` = 5"),
     (["simulation.backend=numpy"], "`method` = 'dopri5'"),
     (["bodies.ball.stiffness=1e3:1e5"], "needs --samples N"),
@@ -222,7 +222,7 @@ def test_a_run_that_raises_is_a_row(monkeypatch):
 
 def test_rows_equal_single_runs_failed_runs_are_rows_and_the_cluster_is_shut_down(tmp_path):
     """Grid k x c on 2 workers: each successful row equals `flexbody run` of the same scene, bit for
-    bit; the stiffest undamped run fails (an accumulation of impacts) and is a row; no worker outlives it."""
+    bit; the stiffest runs fail (an accumulation of impacts) and are rows; no worker outlives it."""
     before = our_children()
     out = tmp_path / "sweep"
     stiffness, damping = [1e3, 1e5, 1e10], [0.0, 0.5]
@@ -232,9 +232,9 @@ def test_rows_equal_single_runs_failed_runs_are_rows_and_the_cluster_is_shut_dow
     assert list(frame["run"]) == list(range(6))
     assert list(zip(frame["bodies.b.stiffness"], frame["bodies.b.damping"])) == \
         [(k, c) for k in stiffness for c in damping]
-    # Undamped at 1e10 N/m the link makes its particle chatter on the ground (an accumulation
-    # of impacts); with damping 0.5 it settles.
-    stiff = (frame["bodies.b.stiffness"] == 1e10) & (frame["bodies.b.damping"] == 0.0)
+    # At 1e10 N/m the nearly rigid bar (damping ratio below 2e-5 either way) lands in a cascade
+    # of impacts of its particles faster than 25 per ms: chattering, a failed row.
+    stiff = frame["bodies.b.stiffness"] == 1e10
     assert (frame.loc[stiff, "status"] == "chattering").all()
     assert frame.loc[stiff, "message"].str.contains("impacted 26 times").all()
     assert frame.loc[stiff, "first_contact_duration_s"].isna().all()
@@ -260,7 +260,7 @@ def test_rows_equal_single_runs_failed_runs_are_rows_and_the_cluster_is_shut_dow
         assert all(same(float(a), float(b)) for a, b in zip(csv[key], frame[key].astype(float)))
     info = json.loads((out / "sweep.json").read_text())
     assert info["design"]["points"] == [[k, c] for k in stiffness for c in damping]
-    assert info["counts"] == {"success": 5, "chattering": 1} and info["finished"]
+    assert info["counts"] == {"success": 4, "chattering": 2} and info["finished"]
     assert {p.name for p in out.glob("*.png")} == {f"{key}.png" for key in OBSERVABLES}
     # The folder holds a sweep now: a second one there is refused, nothing changes.
     with pytest.raises(SweepError, match="already holds a sweep"):
