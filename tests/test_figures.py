@@ -191,3 +191,13 @@ def test_the_friction_figure_is_drawn_for_a_run_with_friction_only():
     assert [t.get_text() for t in bottom.get_yticklabels()] == ["particle 0"]
     assert "friction.png" in render_all(r, scene.grounds)
     assert not has_friction(simulate("thesis_ball", t_end=0.3))
+    # In 3D too (the z = 0 plane's slide, the 3D figures' set).
+    space = flexbody.load_scene({
+        "name": "slide3d", "gravity": [0.0, 0.0, -9.81],
+        "bodies": [{"name": "p", "particles": [[0.0, 0.0, 0.0]], "links": [], "stiffness": [], "damping": [],
+                    "mass": 0.1, "position": [0.0, 0.0, 0.0], "velocity": [0.6, 0.8, 0.0],
+                    "rotation": [0.0, 0.0, 0.0], "angular_velocity": [0.0, 0.0, 0.0]}],
+        "grounds": [{"point": [0.0, 0.0, 0.0], "normal": [0.0, 0.0, 1.0], "friction": 0.5}],
+        "simulation": {"t_end": 0.3, "output_dt": 1e-3},
+    })
+    assert "friction.png" in render_all(simulate(space), space.grounds)

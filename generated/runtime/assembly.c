@@ -26,6 +26,7 @@ typedef struct {
     double *inv_mass;  /* (n,) */
     const double *mass, *gravity, *grounds; /* views into p; grounds (n_grounds, 2, dim) */
     double *laws;      /* (n_grounds, 2): Coulomb mu and Newton e per ground (0: the thesis's ground) */
+    double *slip;      /* (nc, 3): each sliding contact's direction at the step's start (FbSystem.slip) */
     /* Each particle's links (CSR, ascending: the order the right-hand side sums them in) and
      * its stencil, the state entries its force reads: its own q and u, then its neighbours'. */
     int *adj_start, *adj, *stencil_start, *stencil;
@@ -58,8 +59,9 @@ Assembly *fb_asm_new(int dim, int n, int n_links, int n_grounds, const int *link
     A->stencil_start = malloc(sizeof(int) * ((size_t)n + 1));
     A->stencil = malloc(sizeof(int) * (2 * (size_t)dim * ((size_t)n + 2 * (size_t)n_links) + 1));
     A->laws = calloc(2 * (size_t)n_grounds + 1, sizeof(double));
+    A->slip = calloc(3 * (size_t)n * (size_t)n_grounds + 1, sizeof(double));
     if (!A->links || !A->axial || !A->p || !A->link_par || !A->inv_mass || !A->adj_start || !A->adj
-        || !A->stencil_start || !A->stencil || !A->laws) {
+        || !A->stencil_start || !A->stencil || !A->laws || !A->slip) {
         fb_asm_free(A);
         return 0;
     }
@@ -96,6 +98,7 @@ void fb_asm_free(Assembly *A)
     if (!A) return;
     free(A->links); free(A->axial); free(A->p); free(A->link_par); free(A->inv_mass);
     free(A->adj_start); free(A->adj); free(A->stencil_start); free(A->stencil); free(A->laws);
+    free(A->slip);
     free(A);
 }
 
@@ -232,12 +235,17 @@ static void free_acceleration_2d(const Assembly *A, const double *y, const doubl
 /* Coulomb friction on particle i held on ground g alone (DESIGN §6), after its normal
  * constraint: acc (dim) is its acceleration with the normal force lam applied.  code FB_HELD
  * sticks (the tangential force ft = -m a_t holds it: acc becomes 0), FB_SLIDING slips (ft =
- * -mu lam v_t / |v_t|, or against the tangential pull a_t when v_t = 0).  Writes vt, ft
+ * -mu lam v_t / |v_t|, or against the tangential pull a_t when v_t = 0; past the stop, where
+ * v_t points against the contact's direction at the step's start, along that direction: the
+ * force is continued smoothly beyond the stop, which the solution never reaches (the stick
+ * event cuts it there), so that a step across the stop is smooth and the event is found,
+ * instead of steps shrinking forever before a discontinuity).  Writes vt, ft
  * (dim) and the sticking slack mu lam - |ft| (N; INFINITY without friction); returns the
  * power friction dissipates (W, >= 0). */
 static double coulomb_2d(const Assembly *A, const double *x, const double *v, int i, int g, int code,
                            double lam, double *acc, double *vt, double *ft, double *slack)
 {
+    const double *dir = A->slip + 3 * (i * A->n_grounds + g);
     const double mu = A->laws[2 * g], m = A->mass[i];
     double gap, J[2], normal[2], tangents[2], vn, speed, an, at[2], pull;
     const double *ground = A->grounds + 2 * 2 * g;
@@ -255,7 +263,14 @@ static double coulomb_2d(const Assembly *A, const double *x, const double *v, in
         *slack = mu * lam - m * pull;
         return 0.0;
     }
-    const double *along = speed > 0.0 ? vt : at, size = speed > 0.0 ? speed : pull;
+    double ahead = 0.0, unit = 0.0;
+    for (int a = 0; a < 2; ++a) {
+        ahead += vt[a] * dir[a];
+        unit += dir[a] * dir[a];
+    }
+    const int past = unit > 0.0 && (ahead < 0.0 || speed == 0.0); /* past the stop, or starting from rest */
+    const double *along = past ? dir : (speed > 0.0 ? vt : at);
+    const double size = past ? sqrt(unit) : (speed > 0.0 ? speed : pull);
     const double force = mu * fmax(lam, 0.0);
     if (!(size > 0.0)) return 0.0;
     for (int a = 0; a < 2; ++a) {
@@ -263,7 +278,9 @@ static double coulomb_2d(const Assembly *A, const double *x, const double *v, in
         acc[a] += ft[a] / m;
     }
     *slack = 0.0;
-    return force * speed;
+    double power = 0.0; /* -ft . v_t: mu lam |v_t| before the stop */
+    for (int a = 0; a < 2; ++a) power -= ft[a] * vt[a];
+    return power;
 }
 
 /* Contact c's friction (FbSystem.friction), O(its stencil): its tangential velocity vt and
@@ -434,8 +451,9 @@ static int settle_particle_2d(const Assembly *A, double *x, int i, const int *S)
 
 /* After the plastic impulse P_n = lam (>= 0 pushing) that stopped particle i's velocity u
  * along ground g's normal: the rebound -e v_n- (code FB_REBOUND), then Coulomb's tangential
- * impulse min(m |v_t|, mu P_n) against v_t (DESIGN §6); FB_SETTLE zeroes v_t (it comes to rest).  One ground only: a particle stopped
- * on two grounds at once with friction or restitution is refused by the driver. */
+ * impulse min(m |v_t|, mu P_n) against v_t (DESIGN §6); FB_SETTLE zeroes v_t (it comes to
+ * rest).  One ground only: a particle stopped on two grounds at once with friction is
+ * refused by the driver. */
 static void contact_laws_2d(const Assembly *A, const double *x, int i, int g, int code, double *u, double lam)
 {
     const double mu = A->laws[2 * g], e = code == FB_REBOUND ? A->laws[2 * g + 1] : 0.0;
@@ -614,12 +632,17 @@ static void free_acceleration_3d(const Assembly *A, const double *y, const doubl
 /* Coulomb friction on particle i held on ground g alone (DESIGN §6), after its normal
  * constraint: acc (dim) is its acceleration with the normal force lam applied.  code FB_HELD
  * sticks (the tangential force ft = -m a_t holds it: acc becomes 0), FB_SLIDING slips (ft =
- * -mu lam v_t / |v_t|, or against the tangential pull a_t when v_t = 0).  Writes vt, ft
+ * -mu lam v_t / |v_t|, or against the tangential pull a_t when v_t = 0; past the stop, where
+ * v_t points against the contact's direction at the step's start, along that direction: the
+ * force is continued smoothly beyond the stop, which the solution never reaches (the stick
+ * event cuts it there), so that a step across the stop is smooth and the event is found,
+ * instead of steps shrinking forever before a discontinuity).  Writes vt, ft
  * (dim) and the sticking slack mu lam - |ft| (N; INFINITY without friction); returns the
  * power friction dissipates (W, >= 0). */
 static double coulomb_3d(const Assembly *A, const double *x, const double *v, int i, int g, int code,
                            double lam, double *acc, double *vt, double *ft, double *slack)
 {
+    const double *dir = A->slip + 3 * (i * A->n_grounds + g);
     const double mu = A->laws[2 * g], m = A->mass[i];
     double gap, J[3], normal[3], tangents[6], vn, speed, an, at[3], pull;
     const double *ground = A->grounds + 2 * 3 * g;
@@ -637,7 +660,14 @@ static double coulomb_3d(const Assembly *A, const double *x, const double *v, in
         *slack = mu * lam - m * pull;
         return 0.0;
     }
-    const double *along = speed > 0.0 ? vt : at, size = speed > 0.0 ? speed : pull;
+    double ahead = 0.0, unit = 0.0;
+    for (int a = 0; a < 3; ++a) {
+        ahead += vt[a] * dir[a];
+        unit += dir[a] * dir[a];
+    }
+    const int past = unit > 0.0 && (ahead < 0.0 || speed == 0.0); /* past the stop, or starting from rest */
+    const double *along = past ? dir : (speed > 0.0 ? vt : at);
+    const double size = past ? sqrt(unit) : (speed > 0.0 ? speed : pull);
     const double force = mu * fmax(lam, 0.0);
     if (!(size > 0.0)) return 0.0;
     for (int a = 0; a < 3; ++a) {
@@ -645,7 +675,9 @@ static double coulomb_3d(const Assembly *A, const double *x, const double *v, in
         acc[a] += ft[a] / m;
     }
     *slack = 0.0;
-    return force * speed;
+    double power = 0.0; /* -ft . v_t: mu lam |v_t| before the stop */
+    for (int a = 0; a < 3; ++a) power -= ft[a] * vt[a];
+    return power;
 }
 
 /* Contact c's friction (FbSystem.friction), O(its stencil): its tangential velocity vt and
@@ -816,8 +848,9 @@ static int settle_particle_3d(const Assembly *A, double *x, int i, const int *S)
 
 /* After the plastic impulse P_n = lam (>= 0 pushing) that stopped particle i's velocity u
  * along ground g's normal: the rebound -e v_n- (code FB_REBOUND), then Coulomb's tangential
- * impulse min(m |v_t|, mu P_n) against v_t (DESIGN §6); FB_SETTLE zeroes v_t (it comes to rest).  One ground only: a particle stopped
- * on two grounds at once with friction or restitution is refused by the driver. */
+ * impulse min(m |v_t|, mu P_n) against v_t (DESIGN §6); FB_SETTLE zeroes v_t (it comes to
+ * rest).  One ground only: a particle stopped on two grounds at once with friction is
+ * refused by the driver. */
 static void contact_laws_3d(const Assembly *A, const double *x, int i, int g, int code, double *u, double lam)
 {
     const double mu = A->laws[2 * g], e = code == FB_REBOUND ? A->laws[2 * g + 1] : 0.0;
@@ -950,6 +983,7 @@ void fb_asm_system(Assembly *A, FbSystem *s)
         s->settle = settle_3d;
     }
     s->stencil = stencil;
+    s->slip = A->slip;
 }
 
 /* d(force on i)/d[x_i, x_j, v_i, v_j] of every link at y: out (n_links, dim, 4 dim). */

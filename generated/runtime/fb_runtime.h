@@ -80,6 +80,10 @@ struct FbSystem {
      * the ground; without this each stop-release-stop cycle of a chattering particle would
      * start the next a tolerance lower.  0, or -1 as rhs. */
     int (*settle)(const FbSystem *s, double *y, const int *stop);
+    /* With friction: (nc, 3) each sliding contact's slip direction at the start of the step,
+     * written by the integrator; past the stop (v_t against it) rhs continues the friction
+     * force along it, so a step across the stop is smooth and its event is located. */
+    double *slip;
 };
 
 /* Work buffers of one run, sized once (integrator.c). */

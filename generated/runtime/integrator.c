@@ -468,7 +468,7 @@ int fb_integrate(FbWork *w, const FbSystem *s, int method, double t0, const doub
     }
     if (P.any_held) P.n_event = ny;
     P.any_friction = P.any_held && s->friction;
-    P.dir = w->fr_dir;
+    P.dir = s->slip ? s->slip : w->fr_dir; /* the system's: its rhs continues a slip past the stop along it */
     S.method = method;
     S.stages = method == 0 ? 6 : 12;
     S.order = method == 0 ? 4 : 7;
@@ -487,7 +487,10 @@ int fb_integrate(FbWork *w, const FbSystem *s, int method, double t0, const doub
     double *f0 = S.K[S.stages];
     rhs(&P, t, S.y, f0, lam);
     for (int c = 0; c < nc; ++c)
-        if (P.any_friction && P.held[c] == FB_SLIDING) friction_event(&P, S.y, c, 1);
+        if (P.any_friction && P.held[c] == FB_SLIDING) { /* a direction from an earlier slide is stale */
+            for (int a = 0; a < 3; ++a) P.dir[3 * c + a] = 0.0;
+            friction_event(&P, S.y, c, 1);
+        }
     events_from(&P, S.y, lam, g_old, gaps);
     double h_abs, interval = t_bound - t0;
     if (*h_next > 0.0) { /* the step the controller proposed where the last segment ended */

@@ -28,13 +28,18 @@ static void add_event(int *contact, int *kind, double *vn, int *n, int c, int k,
  * tangential velocity left slides.  Returns 0, or -1 as rhs. */
 static int friction_phases(FbWork *w, const FbSystem *s, double *y, int *phase, const double *push,
                            const int *leaving, const int *was_held, const double *force_tol, double speed_tol,
-                           int *ev_contact, int *ev_kind, double *ev_vn, int *n_events, double *loss)
+                           const int *visit, int n_visit, int *ev_contact, int *ev_kind, double *ev_vn,
+                           int *n_events, double *loss)
 {
-    const int nc = s->nc, d = s->dim;
+    const int d = s->dim;
     int *held = w->r_held, *stop = w->r_stop, settle = 0;
     double vt[3], ft[3], slack, lam, speed;
-    for (int c = 0; c < nc; ++c) held[c] = phase[c] == FB_HELD || phase[c] == FB_SLIDING ? phase[c] : 0;
-    for (int c = 0; c < nc; ++c) {
+    for (int m = 0; m < n_visit; ++m) { /* the held contacts are all visited */
+        const int c = visit[m];
+        held[c] = phase[c] == FB_HELD || phase[c] == FB_SLIDING ? phase[c] : 0;
+    }
+    for (int m = 0; m < n_visit; ++m) {
+        const int c = visit[m];
         stop[c] = FB_KEEP;
         if (!held[c]) continue;
         if (s->friction(s, y, held, push, c, vt, ft, &slack, &lam)) return -1;
@@ -60,9 +65,10 @@ static int friction_phases(FbWork *w, const FbSystem *s, double *y, int *phase, 
     if (s->impact(s, y, stop, y_new, &lost)) return -1;
     memcpy(y, y_new, sizeof(double) * s->ny);
     *loss += lost;
-    for (int c = 0; c < nc; ++c)
-        if (stop[c] == FB_SETTLE) held[c] = FB_HELD;
-    for (int c = 0; c < nc; ++c) {
+    for (int m = 0; m < n_visit; ++m)
+        if (stop[visit[m]] == FB_SETTLE) held[visit[m]] = FB_HELD;
+    for (int m = 0; m < n_visit; ++m) {
+        const int c = visit[m];
         if (stop[c] != FB_SETTLE) continue;
         if (s->friction(s, y, held, push, c, vt, ft, &slack, &lam)) return -1;
         if (slack >= 0.0 && phase[c] == FB_SLIDING) add_event(ev_contact, ev_kind, ev_vn, n_events, c, FB_STICK, 0.0);
@@ -209,8 +215,8 @@ int fb_resolve(FbWork *w, const FbSystem *s, double t, double *y, int *phase, do
         else add_event(ev_contact, ev_kind, ev_vn, n_events, release, FB_LIFTOFF, 0.0);
     }
     if (!done) return -2;
-    if (s->friction && friction_phases(w, s, y, phase, push, leaving, was_held, force_tol, speed_tol, ev_contact,
-                                       ev_kind, ev_vn, n_events, loss)) return -1;
+    if (s->friction && friction_phases(w, s, y, phase, push, leaving, was_held, force_tol, speed_tol, visit,
+                                       n_visit, ev_contact, ev_kind, ev_vn, n_events, loss)) return -1;
     /* a free contact too close to its floor to be armed gets a floor a hair below (the
      * gaps of particles not visited did not change, where contacts decouple) */
     if (s->contact)

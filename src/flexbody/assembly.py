@@ -24,7 +24,7 @@ import numpy as np
 
 from . import runtime
 from .cbuild import kernels_dir
-from .constants import REBOUND, SETTLE, SLIDING
+from .constants import HELD, REBOUND, SETTLE, SLIDING
 from .model import Model, singular_matrix_error
 from .scene import Scene
 
@@ -68,6 +68,7 @@ class AssembledModel(Model):
         self.masses = scene.masses.copy()
         # Contact laws per ground (mu, e): runtime data, not parameters of the derived equations.
         self.laws = np.array([[g.friction, g.restitution] for g in scene.grounds], float).reshape(-1, 2)
+        self._slip = np.zeros((self.n_particles * len(scene.grounds), 3))  # the NumPy twin's FbSystem.slip
         self.nq = self.nu = n * self.dim
         self.ny = 2 * self.nq + 2
         self.n_contacts = n * self.n_grounds
@@ -77,6 +78,12 @@ class AssembledModel(Model):
 
     def parameters(self, scene: Scene) -> FloatArray:
         return scene_parameters(scene)
+
+    def slip_directions(self, p) -> FloatArray:
+        """Each sliding contact's slip direction at the start of the step, shape (nc, dim), a
+        writable view (``FbSystem.slip``): past the stop the friction force continues along it
+        (see ``coulomb`` in assembly.c).  Zero it for outputs: then the law is the physical one."""
+        return self._slip[:, : self.dim]
 
     def _split(self, y):
         return y[: self.nq].reshape(-1, self.dim), y[self.nq : 2 * self.nq].reshape(-1, self.dim)
@@ -100,7 +107,8 @@ class AssembledModel(Model):
         from scipy import sparse
 
         n, d, nq, nl = self.n_particles, self.dim, self.nq, len(self.links)
-        held = np.asarray(held, bool).reshape(n, self.n_grounds)
+        codes = np.asarray(held).reshape(n, self.n_grounds)
+        held = codes != 0
         masses, _, _, grounds = self._views(np.asarray(p, float))
         # Each link's force on i depends on [x_i, x_j, v_i, v_j]; i gets +f/m_i, j gets -f/m_j.
         ends = self.links.astype(np.int64)
@@ -114,7 +122,7 @@ class AssembledModel(Model):
         cols = np.concatenate([cols, cols]).ravel()
         sign_mass = np.concatenate([1.0 / masses[ends[:, 0]], -1.0 / masses[ends[:, 1]]])
         kinematics = sparse.coo_matrix((np.ones(nq), (np.arange(nq), nq + np.arange(nq))), shape=(self.ny, self.ny))
-        projector = self._held_projector(held, grounds)
+        projector = self._held_projector(held, grounds, codes)
 
         def jacobian(t, y):
             jac = self.link_jacobians(y, p).reshape(nl, d, 4, d)  # (link, row comp, block, col comp)
@@ -126,8 +134,10 @@ class AssembledModel(Model):
 
         return jacobian
 
-    def _held_projector(self, held, grounds):
-        """``P`` (ny, ny) that projects held particles' acceleration rows onto their constraints."""
+    def _held_projector(self, held, grounds, codes=None):
+        """``P`` (ny, ny) that projects held particles' acceleration rows onto their constraints;
+        a sticking particle (held on one ground with friction, code HELD) has all of them zero
+        (its acceleration is held at 0; a sliding one's friction is left out)."""
         from scipy import sparse
 
         if not held.any():
@@ -137,6 +147,9 @@ class AssembledModel(Model):
         for i in np.flatnonzero(held.any(axis=1)):
             J = grounds[held[i], 1, :]  # the normals of its held grounds: d gap / dx, (k, d)
             P = np.eye(d) - J.T @ np.linalg.solve(J @ J.T, J)
+            g = np.flatnonzero(held[i])
+            if codes is not None and len(g) == 1 and self.laws[g[0], 0] > 0.0 and codes[i, g[0]] == HELD:
+                P = np.zeros((d, d))
             r = nq + d * i + np.arange(d)
             blocks.append((np.repeat(r, d), np.tile(r, d), (P - np.eye(d)).ravel()))
         rows, cols, vals = (np.concatenate(x) for x in zip(*blocks))
@@ -171,9 +184,17 @@ class AssembledC(runtime.SystemModel, AssembledModel):
         lib.fb_asm_system(handle, ctypes.addressof(system))
         if not (self.laws[:, 0] > 0.0).any():
             system.friction = None  # no friction anywhere: event location skips it
+            system.slip = None
         system.owner = _AssemblyHandle(lib, handle)
         self._system_cache = (key, system)
         return system
+
+    def slip_directions(self, p) -> FloatArray:
+        system = self.system(p)
+        if not system.slip:
+            return np.zeros((self.n_contacts, self.dim))
+        buffer = (ctypes.c_double * (3 * self.n_contacts)).from_address(system.slip)
+        return np.frombuffer(buffer, dtype=float).reshape(-1, 3)[:, : self.dim]
 
     def outputs(self, y, p):
         """Positions and velocities (n, dim) and energies (4,) at one state."""
@@ -327,15 +348,20 @@ class AssembledNumpy(AssembledModel):
         # Sticking: the tangential force cancels the tangential pull.
         ft[i, g] = np.where(sticking[:, None], -m[:, None] * at, 0.0)
         slack[i, g] = np.where(sticking, mu * lam[i, g] - m * pull, 0.0)
-        # Sliding: mu lam against v_t, or against the pull from rest.
+        # Sliding: mu lam against v_t, or against the pull from rest; past the stop (v_t against
+        # the step's starting direction) along that direction, as coulomb in assembly.c.
         speed = np.linalg.norm(vt[i, g], axis=1)
-        along, size = np.where((speed > 0.0)[:, None], vt[i, g], at), np.where(speed > 0.0, speed, pull)
+        direction = self._slip[i * G + g, :d]
+        unit = np.sum(direction**2, axis=1)
+        past = (unit > 0.0) & ((np.sum(vt[i, g] * direction, axis=1) < 0.0) | (speed == 0.0))
+        along = np.where(past[:, None], direction, np.where((speed > 0.0)[:, None], vt[i, g], at))
+        size = np.where(past, np.sqrt(unit), np.where(speed > 0.0, speed, pull))
         force = mu * np.maximum(lam[i, g], 0.0)
         with np.errstate(divide="ignore", invalid="ignore"):
             slide = np.where(((~sticking) & (size > 0.0))[:, None], -force[:, None] * along / size[:, None], 0.0)
         ft[i, g] += slide
         acc[i] += np.where(sticking[:, None], -at, slide / m[:, None])
-        power = float(np.sum(np.where(~sticking & (size > 0.0), force * speed, 0.0)))
+        power = -float(np.sum(slide * vt[i, g]))  # mu lam |v_t| before the stop
         return vt, ft, slack, power
 
     def friction(self, y, p, held, push):

@@ -511,6 +511,7 @@ class _Run:
         contact_work = Y[:, nq + nu + 1]
         friction_force = np.zeros_like(V)
         if self.friction:
+            model.slip_directions(p)[:] = 0.0  # outputs: the physical law (the directions only continue a slip past its stop)
             for j in np.flatnonzero(held.any(axis=1)):
                 ft = model.friction(Y[j], p, held[j], push[j])[1]
                 friction_force[j] = ft.reshape(n, model.n_contacts // n, -1).sum(axis=1)

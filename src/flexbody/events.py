@@ -43,7 +43,11 @@ class EventFunctions:
         self.held = phases.held
         laws = getattr(model, "laws", np.zeros((0, 2)))
         self.friction = bool(self.held_mask.any() and laws[:, 0].any())
-        self.direction = np.zeros((model.n_contacts, model.dim))  # each sliding contact's, at the step's start
+        # Each sliding contact's direction at the step's start: the model's own (FbSystem.slip), whose
+        # right-hand side continues a slip past its stop along it; one from an earlier slide is stale.
+        self.direction = model.slip_directions(p) if self.friction else np.zeros((model.n_contacts, model.dim))
+        if self.friction:
+            self.direction[phases.phase == SLIDING] = 0.0
 
     def renew(self, y: np.ndarray) -> None:
         """Take each sliding contact's slip direction at ``y`` (the start of the next step):

@@ -305,10 +305,12 @@ def render_all(result: SimulationResult, grounds: Sequence | None = None) -> dic
     grounds : sequence of objects with ``.point`` and ``.normal`` (3-vectors), optional
         The scene's grounds; default :data:`DEFAULT_GROUNDS`.
     """
-    return {
+    out = {
         "fig3d_snapshots.png": _png(figure_snapshots(result, grounds)),
         "fig3d_lowest_gap.png": _png(figure_lowest_gap(result, grounds)),
         "fig3d_contact_force.png": _png(figure_contact_force(result)),
         "fig5_4_energy.png": _png(figures.figure_energy(result)),
-        "drop.gif": animation_gif(result, grounds),
     }
+    if figures.has_friction(result):
+        out["friction.png"] = _png(figures.figure_friction(result, grounds or DEFAULT_GROUNDS))
+    return out | {"drop.gif": animation_gif(result, grounds)}

@@ -25,7 +25,7 @@ class FbSystem(ctypes.Structure):
         ("nq", _int), ("nu", _int), ("nc", _int), ("ny", _int), ("n_particles", _int), ("dim", _int),
         ("data", _ptr), ("rhs", _ptr), ("gaps", _ptr), ("contact_state", _ptr), ("impact", _ptr),
         ("outputs", _ptr), ("project", _ptr), ("contact", _ptr), ("stencil", _ptr),
-        ("friction", _ptr), ("settle", _ptr),
+        ("friction", _ptr), ("settle", _ptr), ("slip", _ptr),
     ]  # fmt: skip
 
 
