@@ -1,6 +1,6 @@
 """``flexbody bench``: speed and accuracy, charted (a benchmark, not a test).
 
-Three studies, each printed as a table and saved as JSON and PNG in ``--out``:
+The studies, each printed as a table and saved as JSON and PNG in ``--out``:
 
 * ``wp`` — work-precision diagram on the thesis ball: error against wall time over
   methods, backends, formulations and tolerances, against a tight reference run.  The
@@ -18,11 +18,15 @@ Three studies, each printed as a table and saved as JSON and PNG in ``--out``:
   ground.
 * ``run`` — the whole default command ``flexbody run thesis_ball --out DIR`` in fresh
   processes, with and without figures, its imports, and each figure drawn alone.
+* ``scale`` — cost against size, 2D discs and 3D cubes (:mod:`flexbody.bench_scale`).
+* ``sweep`` — a 200-run stiffness x damping sweep of the ball on a 2-worker Dask cluster
+  against a serial loop and plain processes (optional extra ``flexbody[sweep]``):
+  speed-up, per-run overhead.
+* ``friction_wp``, ``friction_map`` — work-precision on ``ball_on_incline`` and the
+  methods over Coulomb's mu x Newton's e (:mod:`flexbody.bench_friction`).
 
 Each chart is drawn from its study's JSON alone (:data:`PLOTS`): ``python -m
 flexbody.bench [FOLDER]`` redraws the PNGs beside the JSON files without running anything.
-* ``sweep`` — a 200-run stiffness x damping sweep of the ball on a 2-worker Dask cluster
-  against a serial loop (optional extra ``flexbody[sweep]``): speed-up, per-run overhead.
 
 Timings are medians over ``--repeats`` runs (the machine is shared and noisy).
 """
