@@ -343,6 +343,19 @@ def figure_friction(result: SimulationResult, grounds: Sequence | None = None, m
 # ---------------------------------------------------------------------------- the animation
 
 
+def frame_schedule(t: np.ndarray, fps: int, speed: float, max_frames: int) -> tuple[float, np.ndarray]:
+    """The playback speed and the output sample each frame shows, shape (frames,).
+
+    Frames are ``speed / fps`` seconds of the run apart; ``speed`` is raised if the run
+    would need more than ``max_frames`` frames.
+    """
+    span = float(t[-1] - t[0])
+    speed = max(speed, span * fps / (max_frames - 1))
+    count = int(np.floor(span * fps / speed + 1e-9)) + 1
+    wanted = t[0] + np.arange(count) * speed / fps
+    return speed, np.minimum(np.searchsorted(t, wanted - 1e-12), len(t) - 1)
+
+
 class Animation:
     """The run as a GIF: a view of the whole path, frames ``speed / fps`` seconds of the run apart.
 
@@ -370,13 +383,8 @@ class Animation:
 
     def __init__(self, result: SimulationResult, grounds: Sequence | None = None, *, fps: int = 25,
                  speed: float = 1.0, dpi: int = 80, max_frames: int = 200) -> None:
-        t = result.t
-        span = float(t[-1] - t[0])
-        speed = max(speed, span * fps / (max_frames - 1))
-        count = int(np.floor(span * fps / speed + 1e-9)) + 1
-        wanted = t[0] + np.arange(count) * speed / fps
+        speed, self.index = frame_schedule(result.t, fps, speed, max_frames)
         self.result, self.speed, self.frame_ms = result, speed, round(1000 / fps)
-        self.index = np.minimum(np.searchsorted(t, wanted - 1e-12), len(t) - 1)
         box = view_box(result.positions)
         self.fig = _figure(_figsize(box, 4.2, shortest=2.6), left=0.75, right=0.15, bottom=0.5, top=0.3, dpi=dpi)
         self.canvas = FigureCanvasAgg(self.fig)

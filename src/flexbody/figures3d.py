@@ -252,13 +252,8 @@ class Animation(figures.Animation):
 
     def __init__(self, result: SimulationResult, grounds: Sequence | None = None, *, fps: int = 25,
                  speed: float = 1.0, dpi: int = 80, max_frames: int = 200) -> None:
-        t = result.t
-        span = float(t[-1] - t[0])
-        speed = max(speed, span * fps / (max_frames - 1))
-        count = int(np.floor(span * fps / speed + 1e-9)) + 1
-        wanted = t[0] + np.arange(count) * speed / fps
+        speed, self.index = figures.frame_schedule(result.t, fps, speed, max_frames)
         self.result, self.speed, self.frame_ms = result, speed, round(1000 / fps)
-        self.index = np.minimum(np.searchsorted(t, wanted - 1e-12), len(t) - 1)
         lo, hi = view_box(result.positions)
         self.fig = Figure(figsize=(4.8, 4.6), dpi=dpi)
         self.canvas = FigureCanvasAgg(self.fig)
