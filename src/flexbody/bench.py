@@ -535,16 +535,22 @@ def _ball_variant(simulation: dict | None = None, **body) -> Scene:
     return _scene_variant("thesis_ball", simulation, **body)
 
 
-def _scene_variant(name: str, simulation: dict | None = None, drop: tuple[str, ...] = (), **body) -> Scene:
-    """A bundled single-body scene (from its TOML) with some body and simulation fields changed
-    and the top-level tables in ``drop`` removed (``grounds``: the default level ground)."""
+def _scene_variant(name: str, simulation: dict | None = None, drop: tuple[str, ...] = (),
+                   ground: dict | None = None, **body) -> Scene:
+    """A bundled single-body scene (from its TOML) with some body, simulation and first-ground
+    fields changed and the top-level tables in ``drop`` removed (``grounds``: the default
+    level ground)."""
     import tomllib
 
-    table = tomllib.loads(Path(load_scene(name).source).read_text())
+    from .scene import resolve_scene_path
+
+    table = tomllib.loads(resolve_scene_path(name).read_text())
     for key in drop:
         table.pop(key, None)
     table["bodies"][0].update(body)
     table["simulation"].update(simulation or {})
+    if ground:
+        table["grounds"][0].update(ground)
     return load_scene(table)
 
 

@@ -11,10 +11,16 @@ incline): printed tables, JSON and PNG in ``--out``.
 
 from __future__ import annotations
 
-import tomllib
 from pathlib import Path
 
-from .bench import _classify, _environment, _save, verdict_grids, work_precision
+from .bench import (
+    _classify,
+    _environment,
+    _save,
+    _scene_variant,
+    verdict_grids,
+    work_precision,
+)
 from .driver import simulate
 from .scene import Scene, load_scene
 
@@ -25,11 +31,7 @@ METHODS = ("dopri5", "dop853", "RK45", "Radau", "LSODA")
 
 def incline(friction: float, restitution: float, **simulation) -> Scene:
     """The bundled ``ball_on_incline`` with its ground's mu and e (and simulation fields) set."""
-    table = tomllib.loads(Path(load_scene("ball_on_incline").source).read_text())
-    table["grounds"][0].update(friction=friction, restitution=restitution)
-    table["simulation"].update(simulation)
-    table["name"] = f"ball_on_incline_mu{friction:g}_e{restitution:g}"
-    return load_scene(table)
+    return _scene_variant("ball_on_incline", simulation, ground={"friction": friction, "restitution": restitution})
 
 
 def friction_work_precision(out: Path, repeats: int, quick: bool) -> dict:
