@@ -217,12 +217,10 @@ int fb_resolve(FbWork *w, const FbSystem *s, double t, double *y, int *phase, do
     if (!done) return -2;
     if (s->friction && friction_phases(w, s, y, phase, push, leaving, was_held, force_tol, speed_tol, visit,
                                        n_visit, ev_contact, ev_kind, ev_vn, n_events, loss)) return -1;
-    /* a free contact too close to its floor to be armed gets a floor a hair below (the
-     * gaps of particles not visited did not change, where contacts decouple) */
-    if (s->contact)
-        for (int m = 0; m < n_visit; ++m) s->contact(s, y, held, push, visit[m], gaps + visit[m], 0, lam + visit[m]);
-    else
-        s->gaps(s, y, gaps);
+    /* a free contact too close to its floor to be armed gets a floor a hair below.  Where
+     * contacts decouple, the gaps are those of the last pass (only an impact moves a
+     * particle, and every impact is followed by another pass) and of the first scan. */
+    if (!s->contact) s->gaps(s, y, gaps);
     for (int c = 0; c < nc; ++c) {
         if (phase[c] == FB_FREE && gaps[c] - floor[c] <= gap_tol) floor[c] = fmin(0.0, gaps[c]) - gap_tol;
         if (phase[c] != FB_PUSHED) {
