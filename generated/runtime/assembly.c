@@ -27,6 +27,7 @@ typedef struct {
     const double *mass, *gravity, *grounds; /* views into p; grounds (n_grounds, 2, dim) */
     double *laws;      /* (n_grounds, 2): Coulomb mu and Newton e per ground (0: the thesis's ground) */
     double *slip;      /* (nc, 3): each sliding contact's direction at the step's start (FbSystem.slip) */
+    double *tangential_push; /* (nc, 3): a pushed contact's tangential force (FbSystem.tangential_push) */
     /* Each particle's links (CSR, ascending: the order the right-hand side sums them in) and
      * its stencil, the state entries its force reads: its own q and u, then its neighbours'. */
     int *adj_start, *adj, *stencil_start, *stencil;
@@ -60,8 +61,9 @@ Assembly *fb_asm_new(int dim, int n, int n_links, int n_grounds, const int *link
     A->stencil = malloc(sizeof(int) * (2 * (size_t)dim * ((size_t)n + 2 * (size_t)n_links) + 1));
     A->laws = calloc(2 * (size_t)n_grounds + 1, sizeof(double));
     A->slip = calloc(3 * (size_t)n * (size_t)n_grounds + 1, sizeof(double));
+    A->tangential_push = calloc(3 * (size_t)n * (size_t)n_grounds + 1, sizeof(double));
     if (!A->links || !A->axial || !A->p || !A->link_par || !A->inv_mass || !A->adj_start || !A->adj
-        || !A->stencil_start || !A->stencil || !A->laws || !A->slip) {
+        || !A->stencil_start || !A->stencil || !A->laws || !A->slip || !A->tangential_push) {
         fb_asm_free(A);
         return 0;
     }
@@ -98,7 +100,7 @@ void fb_asm_free(Assembly *A)
     if (!A) return;
     free(A->links); free(A->axial); free(A->p); free(A->link_par); free(A->inv_mass);
     free(A->adj_start); free(A->adj); free(A->stencil_start); free(A->stencil); free(A->laws);
-    free(A->slip);
+    free(A->slip); free(A->tangential_push);
     free(A);
 }
 
@@ -227,8 +229,9 @@ static void free_acceleration_2d(const Assembly *A, const double *y, const doubl
     for (int g = 0; g < G; ++g)
         if (push[i * G + g] != 0.0) {
             double gap, J[2];
+            const double *ft = A->tangential_push + 3 * (i * G + g);
             ground_2d(A, x, i, g, &gap, J);
-            for (int a = 0; a < 2; ++a) acc[a] += J[a] * push[i * G + g] * A->inv_mass[i];
+            for (int a = 0; a < 2; ++a) acc[a] += (J[a] * push[i * G + g] + ft[a]) * A->inv_mass[i];
         }
 }
 
@@ -365,14 +368,16 @@ static int rhs_2d(const FbSystem *s, double t, const double *y, const int *held,
         for (int g = 0; g < G; ++g) {
             lam[i * G + g] = 0.0;
             any_held |= h[g];
-            if (f[g] != 0.0) { /* the thesis impact mode's force along the ground's normal */
-                double gap, J[2], jv = 0.0;
+            if (f[g] != 0.0) { /* the thesis impact mode's force: along the ground's normal and tangential */
+                const double *ft = A->tangential_push + 3 * (i * G + g);
+                double gap, J[2], jv = 0.0, tv = 0.0;
                 ground_2d(A, x, i, g, &gap, J);
                 for (int a = 0; a < 2; ++a) {
-                    acc[2 * i + a] += J[a] * f[g] * A->inv_mass[i];
+                    acc[2 * i + a] += (J[a] * f[g] + ft[a]) * A->inv_mass[i];
                     jv += J[a] * v[2 * i + a];
+                    tv += ft[a] * v[2 * i + a];
                 }
-                impact_power -= f[g] * jv;
+                impact_power -= f[g] * jv + tv;
             }
         }
         if (any_held && constrain_2d(A, x, i, h, acc + 2 * i, lam + i * G)) return -1;
@@ -386,7 +391,7 @@ static int rhs_2d(const FbSystem *s, double t, const double *y, const int *held,
         }
     }
     ydot[2 * nq] = power;
-    ydot[2 * nq + 1] = impact_power; /* friction needs instant impacts: never both in one run */
+    ydot[2 * nq + 1] = impact_power; /* the thesis windows' power and sliding friction's (the driver splits them) */
     return 0;
 }
 
@@ -624,8 +629,9 @@ static void free_acceleration_3d(const Assembly *A, const double *y, const doubl
     for (int g = 0; g < G; ++g)
         if (push[i * G + g] != 0.0) {
             double gap, J[3];
+            const double *ft = A->tangential_push + 3 * (i * G + g);
             ground_3d(A, x, i, g, &gap, J);
-            for (int a = 0; a < 3; ++a) acc[a] += J[a] * push[i * G + g] * A->inv_mass[i];
+            for (int a = 0; a < 3; ++a) acc[a] += (J[a] * push[i * G + g] + ft[a]) * A->inv_mass[i];
         }
 }
 
@@ -762,14 +768,16 @@ static int rhs_3d(const FbSystem *s, double t, const double *y, const int *held,
         for (int g = 0; g < G; ++g) {
             lam[i * G + g] = 0.0;
             any_held |= h[g];
-            if (f[g] != 0.0) { /* the thesis impact mode's force along the ground's normal */
-                double gap, J[3], jv = 0.0;
+            if (f[g] != 0.0) { /* the thesis impact mode's force: along the ground's normal and tangential */
+                const double *ft = A->tangential_push + 3 * (i * G + g);
+                double gap, J[3], jv = 0.0, tv = 0.0;
                 ground_3d(A, x, i, g, &gap, J);
                 for (int a = 0; a < 3; ++a) {
-                    acc[3 * i + a] += J[a] * f[g] * A->inv_mass[i];
+                    acc[3 * i + a] += (J[a] * f[g] + ft[a]) * A->inv_mass[i];
                     jv += J[a] * v[3 * i + a];
+                    tv += ft[a] * v[3 * i + a];
                 }
-                impact_power -= f[g] * jv;
+                impact_power -= f[g] * jv + tv;
             }
         }
         if (any_held && constrain_3d(A, x, i, h, acc + 3 * i, lam + i * G)) return -1;
@@ -783,7 +791,7 @@ static int rhs_3d(const FbSystem *s, double t, const double *y, const int *held,
         }
     }
     ydot[2 * nq] = power;
-    ydot[2 * nq + 1] = impact_power; /* friction needs instant impacts: never both in one run */
+    ydot[2 * nq + 1] = impact_power; /* the thesis windows' power and sliding friction's (the driver splits them) */
     return 0;
 }
 
@@ -984,6 +992,7 @@ void fb_asm_system(Assembly *A, FbSystem *s)
     }
     s->stencil = stencil;
     s->slip = A->slip;
+    s->tangential_push = A->tangential_push;
 }
 
 /* d(force on i)/d[x_i, x_j, v_i, v_j] of every link at y: out (n_links, dim, 4 dim). */

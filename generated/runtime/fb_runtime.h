@@ -84,6 +84,11 @@ struct FbSystem {
      * written by the integrator; past the stop (v_t against it) rhs continues the friction
      * force along it, so a step across the stop is smooth and its event is located. */
     double *slip;
+    /* Optional (NULL: frictionless): (nc, 3) the thesis impact mode's tangential force on each
+     * pushed contact (N), constant over its window like the normal push: Coulomb's impulse
+     * min(m |v_t|, mu P_n) against v_t spread over impact_dt; 0 elsewhere.  Written by
+     * fb_resolve, read by rhs (and contact, friction) where push[c] != 0. */
+    double *tangential_push;
 };
 
 /* Work buffers of one run, sized once (integrator.c). */
@@ -100,7 +105,7 @@ int fb_integrate(FbWork *w, const FbSystem *s, int method, double t0, const doub
 int fb_resolve(FbWork *w, const FbSystem *s, double t, double *y, int *phase, double *floor, double *push,
                double *push_until, const int *touching_in, const int *leaving, double gap_tol,
                const double *force_tol, const double *masses, const double *restitution,
-               const double *min_rebound, double speed_tol, int thesis, double impact_dt, int *ev_contact, int *ev_kind, double *ev_vn, int *n_events, int *not_held,
+               const double *min_rebound, const double *friction, double speed_tol, int thesis, double impact_dt, int *ev_contact, int *ev_kind, double *ev_vn, int *n_events, int *not_held,
                double *loss, int *iterations);
 
 int fb_trajectory(FbWork *w, const FbSystem *s, long n, const double *Y, const int *held, const double *push,

@@ -77,14 +77,36 @@ static int friction_phases(FbWork *w, const FbSystem *s, double *y, int *phase, 
     return 0;
 }
 
+/* The thesis mode's frictional impact (DESIGN §6, spread like eq. 4.6): contact c, just
+ * pushed with the normal force push[c] = P_n / impact_dt, also gets the constant tangential
+ * force of Coulomb's impulse min(m |v_t|, mu P_n) against its tangential velocity v_t, spread
+ * over the same window: min(m |v_t| / impact_dt, mu push[c]).  As impact_dt -> 0 it tends to
+ * the instant mode's impulse.  0, or -1 as rhs. */
+static int window_friction(const FbSystem *s, const double *y, const int *held, const double *push, int c,
+                           double mass, double mu, double impact_dt)
+{
+    double *force = s->tangential_push + 3 * c, vt[3] = {0.0, 0.0, 0.0}, ft[3], slack, lam, speed = 0.0;
+    memset(force, 0, 3 * sizeof(double));
+    if (mu == 0.0) return 0;
+    if (s->friction(s, y, held, push, c, vt, ft, &slack, &lam)) return -1; /* a free contact: its v_t */
+    for (int a = 0; a < s->dim; ++a) speed += vt[a] * vt[a];
+    speed = sqrt(speed);
+    if (!(speed > 0.0)) return 0;
+    const double size = fmin(mass * speed / impact_dt, mu * push[c]);
+    for (int a = 0; a < s->dim; ++a) force[a] = -size * vt[a] / speed;
+    return 0;
+}
+
 /* Apply the fixed point at instant t to y[ny] and the phases (all updated in place).
  *   phase[c]: FB_FREE, FB_HELD, FB_SLIDING or FB_PUSHED; floor[c]: a free contact's gap event level;
  *   push[c], push_until[c]: a pushed contact's force and window end (0 and INFINITY elsewhere);
  *   touching[c], leaving[c]: the gap and force events that fired at t;
- *   restitution[c]: Newton's e of the contact's ground; min_rebound[c]: a slower rebound
- *     (e |v_n|) is plastic (it would not rise 1e-9 of the scene's size: no Zeno cascade);
+ *   restitution[c], friction[c]: Newton's e and Coulomb's mu of the contact's ground;
+ *     min_rebound[c]: a slower rebound (e |v_n|) is plastic (it would not rise 1e-9 of the
+ *     scene's size: no Zeno cascade);
  *   speed_tol: a sliding contact slower than this (m/s) has come to rest;
- *   thesis: 0 for instant impacts, 1 for the thesis mode's force -(1 + e) m v_n / impact_dt;
+ *   thesis: 0 for instant impacts, 1 for the thesis mode's force -(1 + e) m v_n / impact_dt
+ *     (and, with friction, the tangential force of window_friction);
  *   events (at most 3 nc): contact, kind (FB_IMPACT, FB_LIFTOFF, FB_STICK, FB_SLIP), normal
  *     velocity before (impacts);
  *   not_held[c]: stopped at t, then released at once, or rebounded; *loss: kinetic energy of the impacts.
@@ -93,7 +115,7 @@ static int friction_phases(FbWork *w, const FbSystem *s, double *y, int *phase, 
 int fb_resolve(FbWork *w, const FbSystem *s, double t, double *y, int *phase, double *floor, double *push,
                double *push_until, const int *touching_in, const int *leaving, double gap_tol,
                const double *force_tol, const double *masses, const double *restitution,
-               const double *min_rebound, double speed_tol, int thesis, double impact_dt, int *ev_contact, int *ev_kind, double *ev_vn, int *n_events, int *not_held,
+               const double *min_rebound, const double *friction, double speed_tol, int thesis, double impact_dt, int *ev_contact, int *ev_kind, double *ev_vn, int *n_events, int *not_held,
                double *loss, int *iterations)
 {
     const int nc = s->nc, ny = s->ny;
@@ -147,6 +169,10 @@ int fb_resolve(FbWork *w, const FbSystem *s, double t, double *y, int *phase, do
             hit[c] = near && vn[c] < 0.0 && !impacted[c] && !was_held[c];
             ending[c] = phase[c] == FB_PUSHED && touching[c]; /* thesis windows that end now */
             if (ending[c] || near) touching[c] = 0;             /* each touch is handled once */
+            if (ending[c]) { /* its force ends with it: a held contact's force is the contact force of eq. 4.8 */
+                push[c] = 0.0;
+                if (s->tangential_push) memset(s->tangential_push + 3 * c, 0, 3 * sizeof(double));
+            }
             if (hit[c]) add_event(ev_contact, ev_kind, ev_vn, n_events, c, FB_IMPACT, vn[c]);
             impacted[c] |= hit[c];
             settled[c] |= ending[c] || (hit[c] && !thesis);
@@ -155,6 +181,8 @@ int fb_resolve(FbWork *w, const FbSystem *s, double t, double *y, int *phase, do
                 phase[c] = FB_PUSHED;
                 push[c] = -masses[c] * vn[c] * (1.0 + (rebounds ? restitution[c] : 0.0)) / impact_dt;
                 push_until[c] = t + impact_dt;
+                if (s->tangential_push && window_friction(s, y, held, push, c, masses[c], friction[c], impact_dt))
+                    return -1;
                 hit[c] = 0;
                 changed = 1;
             }
@@ -224,6 +252,7 @@ int fb_resolve(FbWork *w, const FbSystem *s, double t, double *y, int *phase, do
     for (int c = 0; c < nc; ++c) {
         if (phase[c] == FB_FREE && gaps[c] - floor[c] <= gap_tol) floor[c] = fmin(0.0, gaps[c]) - gap_tol;
         if (phase[c] != FB_PUSHED) {
+            if (push[c] != 0.0 && s->tangential_push) memset(s->tangential_push + 3 * c, 0, 3 * sizeof(double));
             push[c] = 0.0;
             push_until[c] = INFINITY;
         }

@@ -69,6 +69,7 @@ class AssembledModel(Model):
         # Contact laws per ground (mu, e): runtime data, not parameters of the derived equations.
         self.laws = np.array([[g.friction, g.restitution] for g in scene.grounds], float).reshape(-1, 2)
         self._slip = np.zeros((self.n_particles * len(scene.grounds), 3))  # the NumPy twin's FbSystem.slip
+        self._tangential_push = np.zeros_like(self._slip)  # and its FbSystem.tangential_push
         self.nq = self.nu = n * self.dim
         self.ny = 2 * self.nq + 2
         self.n_contacts = n * self.n_grounds
@@ -84,6 +85,13 @@ class AssembledModel(Model):
         writable view (``FbSystem.slip``): past the stop the friction force continues along it
         (see ``coulomb`` in assembly.c).  Zero it for outputs: then the law is the physical one."""
         return self._slip[:, : self.dim]
+
+    def tangential_pushes(self, p) -> FloatArray:
+        """The thesis impact mode's tangential force on each pushed contact (N), shape (nc, dim),
+        a writable view (``FbSystem.tangential_push``): :func:`flexbody.contact.resolve` sets
+        it when a window starts and zeroes it when the window ends; the right-hand side applies
+        it where ``push`` is nonzero."""
+        return self._tangential_push[:, : self.dim]
 
     def _split(self, y):
         return y[: self.nq].reshape(-1, self.dim), y[self.nq : 2 * self.nq].reshape(-1, self.dim)
@@ -185,15 +193,22 @@ class AssembledC(runtime.SystemModel, AssembledModel):
         if not (self.laws[:, 0] > 0.0).any():
             system.friction = None  # no friction anywhere: event location skips it
             system.slip = None
+            system.tangential_push = None
         system.owner = _AssemblyHandle(lib, handle)
         self._system_cache = (key, system)
         return system
 
     def slip_directions(self, p) -> FloatArray:
-        system = self.system(p)
-        if not system.slip:
+        return self._contact_vectors(self.system(p).slip)
+
+    def tangential_pushes(self, p) -> FloatArray:
+        return self._contact_vectors(self.system(p).tangential_push)
+
+    def _contact_vectors(self, address: int | None) -> FloatArray:
+        """A writable view (nc, dim) of an FbSystem's per-contact (nc, 3) array, zeros if NULL."""
+        if not address:
             return np.zeros((self.n_contacts, self.dim))
-        buffer = (ctypes.c_double * (3 * self.n_contacts)).from_address(system.slip)
+        buffer = (ctypes.c_double * (3 * self.n_contacts)).from_address(address)
         return np.frombuffer(buffer, dtype=float).reshape(-1, 3)[:, : self.dim]
 
     def outputs(self, y, p):
@@ -291,8 +306,11 @@ class AssembledNumpy(AssembledModel):
         if np.any(push):
             _, J = self._contacts(x, grounds)
             push = np.asarray(push, float).reshape(self.n_particles, self.n_grounds)
-            force += np.einsum("ng,ngd->nd", push, J)
-            impact_power = -float(np.einsum("ng,ngd,nd->", push, J, v))
+            pushed = (push != 0.0)[:, :, None]
+            tangential = np.where(pushed, self.tangential_pushes(p).reshape(*push.shape, self.dim), 0.0)
+            window = np.einsum("ng,ngd->ngd", push, J) + tangential
+            force += window.sum(axis=1)
+            impact_power = -float(np.einsum("ngd,nd->", window, v))
         return force / masses[:, None], power, impact_power
 
     def _constrain(self, x, w, p, stop):

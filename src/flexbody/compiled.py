@@ -49,8 +49,9 @@ class CompiledPath:
         Receives the states at the grid times.
     force_tolerance, masses : ndarray, shape (nc,)
     gap_tolerance : float
-    restitution, min_rebound : ndarray, shape (nc,), optional
-        Each contact's Newton e and slowest rebound (see :func:`flexbody.contact.resolve`); 0 by default.
+    restitution, min_rebound, friction : ndarray, shape (nc,), optional
+        Each contact's Newton e, slowest rebound and Coulomb mu (see :func:`flexbody.contact.resolve`);
+        0 by default.
     speed_tolerance : float
         A sliding contact slower than this (m/s) has come to rest.
     """
@@ -58,7 +59,7 @@ class CompiledPath:
     def __init__(self, model: Model, p: np.ndarray, y: np.ndarray, phases: Phases, grid: np.ndarray,
                  samples: np.ndarray, force_tolerance: np.ndarray, masses: np.ndarray, gap_tolerance: float,
                  restitution: np.ndarray | None = None, min_rebound: np.ndarray | None = None,
-                 speed_tolerance: float = 0.0) -> None:
+                 speed_tolerance: float = 0.0, friction: np.ndarray | None = None) -> None:
         nc = model.n_contacts
         self.model, self.gap_tolerance, self.n_grid = model, gap_tolerance, len(grid)
         self.lib = runtime.library()
@@ -80,7 +81,8 @@ class CompiledPath:
         self.force_tolerance, self.masses = force_tolerance, masses
         self.restitution = np.zeros(nc) if restitution is None else np.ascontiguousarray(restitution, float)
         self.min_rebound = np.zeros(nc) if min_rebound is None else np.ascontiguousarray(min_rebound, float)
-        self._laws = (_address(self.restitution), _address(self.min_rebound))
+        self.friction = np.zeros(nc) if friction is None else np.ascontiguousarray(friction, float)
+        self._laws = (_address(self.restitution), _address(self.min_rebound), _address(self.friction))
         self._y = _address(y)
         self._phase, self._floor = _address(phases.phase, np.intc), _address(phases.floor)
         self._push, self._push_until = _address(phases.push), _address(phases.push_until)

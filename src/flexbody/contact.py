@@ -146,6 +146,22 @@ def friction_phases(model: Model, t: float, y: np.ndarray, p: np.ndarray, phases
     return y, loss, events
 
 
+def window_friction(model: Model, y: np.ndarray, p: np.ndarray, phases: Phases, started: np.ndarray,
+                    masses: np.ndarray, friction: np.ndarray, impact_dt: float) -> None:
+    """The thesis mode's frictional impact (DESIGN §6, spread like eq. 4.6): each ``started``
+    contact, pushed with ``phases.push = P_n / impact_dt``, also gets the constant tangential
+    force of Coulomb's impulse ``min(m |v_t|, mu P_n)`` against its tangential velocity, spread
+    over the same window (written into ``model.tangential_pushes(p)``, shape (nc, dim)).  As
+    ``impact_dt -> 0`` it tends to the instant mode's impulse (the twin of ``window_friction``
+    in phases.c)."""
+    vt = model.friction(y, p, phases.held, phases.push)[0][started]  # free contacts: their v_t
+    speed = np.linalg.norm(vt, axis=1)
+    size = np.minimum(masses[started] * speed / impact_dt, friction[started] * phases.push[started])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        force = np.where((speed > 0.0)[:, None], -size[:, None] * vt / speed[:, None], 0.0)
+    model.tangential_pushes(p)[started] = force
+
+
 def resolve(
     model: Model,
     t: float,
@@ -163,6 +179,7 @@ def resolve(
     restitution: np.ndarray | None = None,
     min_rebound: np.ndarray | None = None,
     speed_tolerance: float = 0.0,
+    friction: np.ndarray | None = None,
 ) -> Resolution:
     """Apply the event fixed point at instant ``t``.
 
@@ -194,6 +211,9 @@ def resolve(
         :data:`~flexbody.constants.ZENO_RISE` of the scene's size (default 0).
     speed_tolerance : float
         A sliding contact slower than this (m/s) has come to rest (see :func:`friction_phases`).
+    friction : ndarray, shape (nc,), optional
+        Coulomb's mu of each contact's ground (default 0).  In the thesis mode a window also
+        pushes against the tangential velocity (:func:`window_friction`).
 
     Returns
     -------
@@ -216,6 +236,9 @@ def resolve(
         hit = near & (vn < 0.0) & ~impacted & ~was_held
         ending = (phases.phase == PUSHED) & touching  # thesis windows that end now
         touching &= ~(ending | near)  # each touch is handled once
+        phases.push[ending] = 0.0  # its force ends with it: a held contact's force is eq. 4.8's
+        if ending.any() and friction is not None and friction.any():
+            model.tangential_pushes(p)[ending] = 0.0
         events += [Event(t, int(c), "impact", float(vn[c])) for c in np.flatnonzero(hit)]
         impacted |= hit
         settled |= ending | (hit & (impact == "instant"))  # stopped on the ground at this instant
@@ -227,6 +250,8 @@ def resolve(
             phases.phase[started] = PUSHED
             phases.push[started] = -masses[started] * vn[started] * (1.0 + np.where(rebounds, e, 0.0)[started]) / impact_dt
             phases.push_until[started] = t + impact_dt
+            if friction is not None and friction[started].any():
+                window_friction(model, y, p, phases, started, masses, friction, impact_dt)
             hit = np.zeros_like(hit)
         # After a window, what velocity is left towards the ground is stopped instantly.
         instant = hit | (ending & (vn < 0.0))
@@ -273,6 +298,8 @@ def resolve(
     gaps = model.gaps(y[: model.nq], p)
     unarmed = (phases.phase == FREE) & (gaps - phases.floor <= gap_tolerance)
     phases.floor[unarmed] = np.minimum(0.0, gaps[unarmed]) - gap_tolerance
+    if friction is not None and friction.any():
+        model.tangential_pushes(p)[phases.phase != PUSHED] = 0.0
     phases.push[phases.phase != PUSHED] = 0.0
     phases.push_until[phases.phase != PUSHED] = np.inf
     return Resolution(y=y, phases=phases, events=events, not_held=not_held, impact_loss=loss, iterations=iterations)

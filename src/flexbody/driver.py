@@ -140,9 +140,6 @@ def _contact_law_problems(scene: Scene, values: dict) -> list[str]:
     if (friction or restitution) and values["formulation"] == "floating":
         out.append(f"`formulation` = 'floating': grounds {sorted(set(friction + restitution))} have friction or "
                    "restitution, which only the particles formulation (the default) applies")
-    if friction and values["impact"] == "thesis":
-        out.append(f"`impact` = 'thesis': grounds {friction} have friction, whose impulse is applied instantly only; "
-                   "use impact = 'instant' (the default)")
     return out
 
 
@@ -159,6 +156,19 @@ def _rebound_laws(scene: Scene, contacts: np.ndarray, size: float) -> tuple[np.n
     e = np.array([g.restitution for g in grounds])[ground]
     pull = np.array([max(0.0, -float(np.dot(scene.gravity, g.normal))) for g in grounds])[ground]
     return e, np.sqrt(2.0 * pull * ZENO_RISE * size)
+
+
+@dataclass
+class _Window:
+    """A thesis-mode impact window with friction: its constant force on its particle."""
+
+    contact: int
+    particle: int
+    t_start: float
+    force: np.ndarray  # (dim,) N: the normal push along the ground's normal plus the tangential one
+    x_start: np.ndarray  # (dim,) the particle's position when it started
+    t_end: float = np.inf
+    x_end: np.ndarray | None = None
 
 
 @dataclass
@@ -194,12 +204,19 @@ class _Run:
         self.restitution, self.min_rebound = _rebound_laws(scene, model.contacts, size)
         # A sliding contact slower than this has come to rest (a stop's root is ~1e-15 s wide).
         self.speed_tolerance = SPEED_TOLERANCE * np.sqrt(max(float(np.linalg.norm(scene.gravity)), 1.0) * max(size, 1.0))
-        self.friction = bool(np.any([g.friction > 0.0 for g in scene.grounds]))
+        self.mu = np.array([g.friction for g in scene.grounds], float)[model.contacts[:, 1]] if len(model.contacts) \
+            else np.zeros(0)
+        self.friction = bool(np.any(self.mu > 0.0))
+        # The thesis mode's windows with friction: their constant forces (normal and tangential)
+        # and the samples' tangential ones, to split the integrated contact work (see result).
+        thesis_friction = self.friction and settings.impact == "thesis"
+        self.windows: list[_Window] | None = [] if thesis_friction else None
         self.grid = np.linspace(0.0, settings.t_end, int(round(settings.t_end / settings.output_dt)) + 1)
         n = len(self.grid)
         self.Y = np.empty((n, model.ny))  # samples at the grid times, the first n_samples of them taken
         self.sample_held = np.zeros((n, model.n_contacts), np.intc)  # contact-law codes (Phases.held)
         self.sample_push = np.zeros((n, model.n_contacts))
+        self.sample_tangential = np.zeros((n, model.n_contacts, model.dim)) if thesis_friction else None
         self.n_samples = 0
         self.events: list[Event] = []
         self.impact_times: dict[int, deque[tuple[float, float]]] = defaultdict(deque)  # for the chatter guard
@@ -214,7 +231,7 @@ class _Run:
         if model.backend == "c":
             self.compiled = CompiledPath(model, self.p, self.y, self.phases, self.grid, self.Y,
                                          self.force_tolerance, self.contact_masses, self.gap_tolerance,
-                                         self.restitution, self.min_rebound, self.speed_tolerance)
+                                         self.restitution, self.min_rebound, self.speed_tolerance, self.mu)
 
     @property
     def counters(self) -> np.ndarray:
@@ -232,6 +249,8 @@ class _Run:
             return
         self.sample_held[start:stop] = self.phases.held
         self.sample_push[start:stop] = self.phases.push
+        if self.sample_tangential is not None:
+            self.sample_tangential[start:stop] = self.model.tangential_pushes(self.p)
         self.n_samples = stop
 
     # ------------------------------------------------------------------ one smooth segment
@@ -347,6 +366,7 @@ class _Run:
     def resolve_at(self, t: float, touching: np.ndarray, leaving: np.ndarray) -> list[Event]:
         """Apply the fixed point at instant ``t`` to ``y`` and the phases; return the new events."""
         s = self.settings
+        was_pushed = self.phases.phase == PUSHED
         if self.compiled:  # the compiled twin of contact.resolve
             found, not_held, loss = self.compiled.resolve(t, touching, leaving, s.impact == "thesis", s.impact_dt)
             new = [Event(t, c, EVENT_KINDS[kind], speed) for c, kind, speed in found]
@@ -355,11 +375,13 @@ class _Run:
                           gap_tolerance=self.gap_tolerance, force_tolerance=self.force_tolerance,
                           masses=self.contact_masses, impact=s.impact, impact_dt=s.impact_dt,
                           restitution=self.restitution, min_rebound=self.min_rebound,
-                          speed_tolerance=self.speed_tolerance)
+                          speed_tolerance=self.speed_tolerance, friction=self.mu)
             self.y[:] = res.y
             self.phases.assign(res.phases)
             new, not_held, loss = res.events, res.not_held, res.impact_loss
         self.events += new
+        if self.windows is not None:
+            self.track_windows(t, was_pushed)
         if any(e.kind == "impact" and self.restitution[e.contact] > 0.0 for e in new):
             # A rebound reverses a velocity: the step proposed before it says nothing about the
             # flight after it (a bounce much shorter than that step would be located only at
@@ -374,6 +396,32 @@ class _Run:
         if loss:
             self.losses.append((t, loss))
         return new
+
+    def track_windows(self, t: float, was_pushed: np.ndarray) -> None:
+        """Record the thesis-mode windows that start or end at ``t`` (positions, constant force)."""
+        model, d = self.model, self.model.dim
+        pushed = self.phases.phase == PUSHED
+        for c in np.flatnonzero(was_pushed & ~pushed):
+            window = next(w for w in reversed(self.windows) if w.contact == c)
+            window.t_end, window.x_end = t, self.y[d * window.particle : d * window.particle + d].copy()
+        if not np.any(pushed & ~was_pushed):
+            return
+        tangential = model.tangential_pushes(self.p)
+        for c in np.flatnonzero(pushed & ~was_pushed):
+            i, g = (int(k) for k in model.contacts[c])
+            force = self.phases.push[c] * np.asarray(self.scene.grounds[g].normal, float) + tangential[c]
+            self.windows.append(_Window(int(c), i, t, force, self.y[d * i : d * i + d].copy()))
+
+    def window_work(self, T: np.ndarray, X: np.ndarray) -> np.ndarray:
+        """Energy the thesis-mode windows took by each sample time, shape (nt,) (J): a window's
+        force F is constant, so its work up to a time is F . (x - x_start), exactly."""
+        taken = np.zeros(len(T))
+        for w in self.windows:
+            inside = (T > w.t_start) & (T < w.t_end)
+            taken[inside] -= (X[inside, w.particle] - w.x_start) @ w.force
+            if w.x_end is not None:
+                taken[T >= w.t_end] -= float((w.x_end - w.x_start) @ w.force)
+        return taken
 
     def run(self) -> tuple[str, str]:
         s, model, phases = self.settings, self.model, self.phases
@@ -506,20 +554,29 @@ class _Run:
         lost = np.concatenate([[0.0], np.cumsum([x[1] for x in self.losses])])
         instant = lost[np.searchsorted(loss_t, T, side="left")]
         ev = self.events
-        # The last state entry integrates the power of the thesis mode's impact forces, or (friction
-        # needs instant impacts) of sliding friction.
+        # The last state entry integrates the power of the thesis mode's impact forces and of
+        # sliding friction; where both act, the windows' exact work splits them.
         contact_work = Y[:, nq + nu + 1]
+        window_work = self.window_work(T, X) if self.windows is not None else None
         friction_force = np.zeros_like(V)
         if self.friction:
             model.slip_directions(p)[:] = 0.0  # outputs: the physical law (the directions only continue a slip past its stop)
             for j in np.flatnonzero(held.any(axis=1)):
                 ft = model.friction(Y[j], p, held[j], push[j])[1]
                 friction_force[j] = ft.reshape(n, model.n_contacts // n, -1).sum(axis=1)
+            if self.sample_tangential is not None:  # the windows' tangential forces
+                friction_force += self.sample_tangential[:k].reshape(len(T), n, model.n_contacts // n, -1).sum(axis=2)
+        if window_work is not None:
+            impact_work, friction_work = window_work, contact_work - window_work
+        elif self.friction:
+            impact_work, friction_work = 0.0, contact_work
+        else:
+            impact_work, friction_work = contact_work, np.zeros(len(T))
         result = SimulationResult(
             t=T.copy(), positions=X, velocities=V, contact_force=force,
             kinetic=E[:, 0], spring=E[:, 1], gravity=E[:, 2],
-            damping_work=Y[:, nq + nu], impact_loss=instant + (0.0 if self.friction else contact_work),
-            friction_force=friction_force, friction_work=contact_work if self.friction else np.zeros(len(T)),
+            damping_work=Y[:, nq + nu], impact_loss=instant + impact_work,
+            friction_force=friction_force, friction_work=friction_work,
             events_time=np.array([e.t for e in ev], dtype=float),
             events_particle=np.array([model.contacts[e.contact][0] for e in ev], dtype=int),
             events_kind=np.array([e.kind for e in ev], dtype="<U7"),
