@@ -26,6 +26,12 @@ Formulations
     angles; bodies whose particles are all on one line (two particles, a straight chain)
     have no third particle and are refused (the rotation about the line is not fixed).
 
+    A ``rigid`` body is its frame T alone (the thesis's future work, "a flexible as well as a
+    rigid body"): q1, q2, q3 in 2D (six in 3D), and its particles fixed in T at coordinates
+    that are parameters (``rx<i>``, ``ry<i>``, ``rz<i>``: the particle's initial position in
+    T), so its links carry no load and store no energy (they are not elastic; their k, c, L
+    stay in p, unused).  Rigid and flexible bodies mix in one scene.
+
     Gimbal lock: at beta = +-90 deg (T's z-axis along N's x-axis) the angles' rates no
     longer span every spin and M is singular.  A quaternion has no such point, but needs
     ``q' = G(q) u != u`` and a norm constraint that drifts; the angles keep the runtime's
@@ -90,7 +96,21 @@ def _parameters(top: Topology) -> tuple[list[sp.Symbol], dict[str, str]]:
             for axis in "xyz"[: top.dim]:
                 p.append(sp.Symbol(f"{prefix}{j}_{axis}", real=True))
                 text[f"{prefix}{j}_{axis}"] = f"{meaning} ground {j}, {axis} component"
+    first = 0
+    for b, body in enumerate(top.bodies):  # after everything else: flexible scenes keep their p
+        if body.rigid:
+            for i in range(body.n_particles):
+                if i != body.gauge[0]:
+                    for axis in "xyz"[: top.dim]:
+                        p.append(rigid_symbol(axis, first + i))
+                        text[f"r{axis}{first + i}"] = f"{axis} of particle {first + i} in T{b}, fixed (rigid body, m)"
+        first += body.n_particles
     return p, text
+
+
+def rigid_symbol(axis: str, particle: int) -> sp.Symbol:
+    """The parameter of a rigid body's particle coordinate in T (``rx3`` ...)."""
+    return sp.Symbol(f"r{axis}{particle}", real=True)
 
 
 class _Builder:
@@ -141,6 +161,10 @@ class _Builder:
                      "angles": [], "rates": [], "rho": {}, "vrel": {}, "speeds": {}}
             if body.n_particles == 1:
                 T.orient_axis(N, N.z, 0)
+            elif top.dim == 2 and body.rigid:
+                th, w = self.coordinate(f"theta{b}", f"omega{b}", f"angle of rigid body T{b} about N3 (q3, rad)")
+                T.orient_axis(N, N.z, th)
+                T.set_ang_vel(N, w * N.z)
             elif top.dim == 2:
                 th, w = self.coordinate(f"theta{b}", f"omega{b}", f"angle of T{b} about N3 (q3, rad)")
                 T.orient_axis(N, N.z, th)
@@ -148,7 +172,10 @@ class _Builder:
             else:
                 frame["angles"], frame["rates"] = self._orient_3d(T, b)
             for i in range(body.n_particles):
-                points.append(self._particle_in_t(O, T, body.gauge, i, first + i, b, top.dim, frame))
+                if body.rigid:
+                    points.append(self._particle_fixed_in_t(O, T, body.gauge, i, first + i, top.dim, frame))
+                else:
+                    points.append(self._particle_in_t(O, T, body.gauge, i, first + i, b, top.dim, frame))
             if top.dim == 3:
                 self.frames.append(frame)
             first += body.n_particles
@@ -175,6 +202,19 @@ class _Builder:
         omega = T.ang_vel_in(self.N).express(T).xreplace({a.diff(): w for a, w in zip(angles, rates)})
         T.set_ang_vel(self.N, omega)
         return angles, rates
+
+    def _particle_fixed_in_t(self, O: Point, T: ReferenceFrame, gauge: tuple[int, ...], i: int, g: int,
+                             dim: int, frame: dict) -> Point:
+        """Particle g (index i of a rigid body) fixed in T: the anchor at T's origin, the others
+        at the parameters ``rx<g>, ry<g>[, rz<g>]``; no coordinates."""
+        rho = sp.zeros(3, 1)
+        if i != gauge[0]:
+            for k, axis in enumerate("xyz"[:dim]):
+                rho[k] = rigid_symbol(axis, g)
+        frame["rho"][i], frame["vrel"][i], frame["speeds"][i] = rho, sp.zeros(3, 1), []
+        P = O.locatenew(f"P{g}", rho[0] * T.x + rho[1] * T.y + rho[2] * T.z)
+        P.v2pt_theory(O, self.N, T)
+        return P
 
     def _particle_in_t(self, O: Point, T: ReferenceFrame, gauge: tuple[int, ...], i: int, g: int, b: int,
                        dim: int, frame: dict) -> Point:
@@ -240,7 +280,7 @@ def _equations_in_t(build: _Builder, top: Topology, sym: dict[str, sp.Symbol]) -
         # Forces on each particle in T: gravity, then the links.
         force = [m[i] * g_t for i in range(n)]
         torque = sp.zeros(3, 1)  # sum_i rho_i x (internal force on i): the relative dampers only
-        for i, j in body.links:
+        for i, j in body.links if not body.rigid else ():
             k, c, rest = sym[f"k{link}"], sym[f"c{link}"], sym[f"L{link}"]
             d = rho[i] - rho[j]
             length = sp.sqrt(d.dot(d))
@@ -253,6 +293,7 @@ def _equations_in_t(build: _Builder, top: Topology, sym: dict[str, sp.Symbol]) -
             f = k * (rest - length) * d / length + f_damp
             force[i], force[j] = force[i] + f, force[j] - f
             link += 1
+        link += len(body.links) if body.rigid else 0
         # Inertia: a_i|u'=0 in T = w' x rho_i + w x (w x rho_i) + 2 w x v_i/T (a_O|u'=0 = 0).
         inertia = [m[i] * (_cross(omega_dot, rho[i]) + _cross(omega, _cross(omega, rho[i]))
                            + 2 * _cross(omega, vrel[i])) for i in range(n)]
@@ -332,6 +373,8 @@ def derive(top: Topology, formulation: str) -> SymbolicModel:
     """
     if formulation not in ("particles", "floating"):
         raise ValueError(f"`formulation` = {formulation!r}: must be 'particles' or 'floating'")
+    if formulation == "particles" and top.has_rigid:
+        raise ValueError("rigid bodies are frames T without particle coordinates: they need the floating formulation")
     if formulation == "floating" and top.dim == 3:
         unfixed = [b for b, body in enumerate(top.bodies) if body.n_particles > 1 and body.gauge[2] < 0]
         if unfixed:
@@ -350,6 +393,10 @@ def derive(top: Topology, formulation: str) -> SymbolicModel:
     spring_energy = damping_power = sp.S.Zero
     link, first = 0, 0
     for body in top.bodies:
+        if body.rigid:  # fixed in T: its links are not elastic, no load, no energy
+            link += len(body.links)
+            first += body.n_particles
+            continue
         for i, j in body.links:
             Pi, Pj = points[first + i], points[first + j]
             k, c, rest = sym[f"k{link}"], sym[f"c{link}"], sym[f"L{link}"]

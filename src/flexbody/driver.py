@@ -108,6 +108,12 @@ def _settings(scene: Scene, overrides: dict) -> SimulationSettings:
         if value is not None:
             values[key] = value
     problems = []
+    rigid = [b.name for b in scene.bodies if getattr(b, "rigid", False)]
+    if rigid and overrides.get("formulation") == "particles":
+        problems.append(f"`formulation` = 'particles': bodies {rigid} are rigid, frames T without particle "
+                        "coordinates, which only the floating formulation has; drop the option")
+    elif rigid:
+        values["formulation"] = "floating"  # a rigid body is its frame T (DESIGN §6)
     if values["method"] is None:
         values["method"] = "dopri5" if values["backend"] == "c" else "RK45"
     if values["method"] in COMPILED_METHODS and values["backend"] != "c":

@@ -144,6 +144,10 @@ class GeneratedModel(Model):
     def parameters(self, scene: Scene) -> FloatArray:
         """The parameter vector ``p (np,)`` of ``scene`` in this model's order."""
         values = scene.parameters()
+        if any(name.startswith(("rx", "ry", "rz")) for name in self.p_names):  # rigid bodies' shapes
+            from .state import rigid_parameters
+
+            values |= rigid_parameters(scene, scene.topology())
         missing = [name for name in self.p_names if name not in values]
         if missing:
             raise ModelError(f"scene {scene.name!r} gives no value for model parameters {missing}")
@@ -379,7 +383,11 @@ def _scene_and_formulation(scene, backend: str, formulation: str | None) -> tupl
         scene = load_scene(scene)
     if backend not in BACKENDS:
         raise InputError(f"`backend` = {backend!r}: must be one of {sorted(BACKENDS)}")
-    formulation = formulation or scene.simulation.formulation
+    rigid = [b.name for b in scene.bodies if getattr(b, "rigid", False)]
+    if rigid and formulation == "particles":
+        raise InputError(f"`formulation` = 'particles': bodies {rigid} are rigid, frames T without particle "
+                         "coordinates, which only the floating formulation has; drop the option")
+    formulation = formulation or ("floating" if rigid else scene.simulation.formulation)
     if formulation not in ("particles", "floating"):
         raise InputError(f"`formulation` = {formulation!r}: must be 'particles' or 'floating'")
     return scene, formulation
@@ -424,10 +432,11 @@ def load_model(scene: Scene | str | Path, backend: str = "c", formulation: str |
                     "line, so in 3D no third particle fixes T's rotation about it; use the particles formulation "
                     "(the default)"
                 )
-    if scene.n_particles > FLOATING_MAX_PARTICLES:
+    flexible = sum(b.n_particles for b in scene.bodies if not getattr(b, "rigid", False))
+    if flexible > FLOATING_MAX_PARTICLES:  # a rigid body costs its frame alone, whatever its particles
         raise InputError(
-            f"`formulation` = 'floating' with {scene.n_particles} particles: the floating formulation is derived "
-            f"whole per topology and is offered up to {FLOATING_MAX_PARTICLES} particles; use the particles "
+            f"`formulation` = 'floating' with {flexible} particles in flexible bodies: the floating formulation is "
+            f"derived whole per topology and is offered up to {FLOATING_MAX_PARTICLES} of them; use the particles "
             "formulation (the default), which runs any size at once"
         )
     return load_derived_model(scene, backend, formulation)

@@ -257,6 +257,7 @@ class Scene:
                     links=b.links,
                     damper=b.damper,
                     gauge=gauge_particles(b.points),
+                    rigid=bool(getattr(b, "rigid", False)),
                 )
                 for b in self.bodies
             ),

@@ -40,8 +40,12 @@ def initial_coordinates(scene: Scene, model: Model) -> tuple[np.ndarray, np.ndar
         n = body["n_particles"]
         gauge = body["gauge"]
         xb, vb = x[first : first + n], v[first : first + n]
+        if body.get("rigid") and n > 1:
+            _check_rigid_motion(xb, vb, scene.bodies[k].name)
         if len(gauge) == 3 and n > 1:
             qb, ub = _floating_3d(xb, vb, gauge, scene.bodies[k].name)
+            if body.get("rigid"):
+                qb, ub = qb[:6], ub[:6]  # T alone: its particles are fixed in it
             q += qb
             u += ub
             first += n
@@ -55,6 +59,9 @@ def initial_coordinates(scene: Scene, model: Model) -> tuple[np.ndarray, np.ndar
             omega = _cross2(r, vb[reference] - vb[anchor]) / (r @ r)
             q.append(theta)
             u.append(omega)
+            if body.get("rigid"):  # T alone: its particles are fixed in it
+                first += n
+                continue
             c, s = np.cos(theta), np.sin(theta)
             to_t = np.array([[c, s], [-s, c]])  # N components -> T components
             for i in range(n):
@@ -70,6 +77,49 @@ def initial_coordinates(scene: Scene, model: Model) -> tuple[np.ndarray, np.ndar
                     u.append(local_v[1])
         first += n
     return np.array(q), np.array(u)
+
+
+def _check_rigid_motion(x: np.ndarray, v: np.ndarray, name: str) -> None:
+    """A rigid body's initial velocities must be a rigid motion ``v_i = v_c + w x r_i``."""
+    r = x - x.mean(axis=0)
+    dv = v - v.mean(axis=0)
+    if x.shape[1] == 2:  # least squares w: dv_i = w (-r_y, r_x)
+        perp = np.column_stack([-r[:, 1], r[:, 0]])
+        w = float(np.sum(perp * dv)) / max(float(np.sum(perp * perp)), 1e-300)
+        residual = dv - w * perp
+    else:
+        A = np.concatenate([np.array([[0.0, ri[2], -ri[1]], [-ri[2], 0.0, ri[0]], [ri[1], -ri[0], 0.0]]) for ri in r])
+        w = np.linalg.lstsq(A, dv.ravel(), rcond=None)[0]
+        residual = dv - np.cross(w, r)
+    scale = max(float(np.abs(v).max()), float(np.abs(dv).max()), 1e-12)
+    if np.abs(residual).max() > 1e-9 * scale:
+        raise InputError(f"body {name!r}: rigid = true, but its initial particle velocities are not a rigid motion "
+                         f"(off by up to {np.abs(residual).max():.3g} m/s); give it only `velocity` and "
+                         "`angular_velocity`, not `particle_velocities`")
+
+
+def rigid_parameters(scene: Scene, topology) -> dict[str, float]:
+    """The fixed coordinates in T of each rigid body's particles (``rx<i>``, ``ry<i>``[, ``rz<i>``]):
+    their initial positions in the frame T that :func:`initial_coordinates` starts the body in."""
+    values: dict[str, float] = {}
+    x, v = scene.initial_positions(), scene.initial_velocities()
+    first = 0
+    for body in topology.bodies:
+        n, gauge = body.n_particles, body.gauge
+        if body.rigid and n > 1:
+            xb, vb = x[first : first + n], v[first : first + n]
+            if len(gauge) == 3:
+                R = gauge_frame(xb, vb, gauge)[0]
+            else:
+                r = xb[gauge[1]] - xb[gauge[0]]
+                c, s = r / np.linalg.norm(r)
+                R = np.array([[c, -s], [s, c]])  # T's axes in N, as columns
+            for i in range(n):
+                if i != gauge[0]:
+                    for axis, value in zip("xyz", R.T @ (xb[i] - xb[gauge[0]])):
+                        values[f"r{axis}{first + i}"] = float(value)
+        first += n
+    return values
 
 
 def gauge_frame(x: np.ndarray, v: np.ndarray, gauge) -> tuple[np.ndarray, np.ndarray]:

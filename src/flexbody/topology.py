@@ -53,6 +53,7 @@ class BodyTopology:
     links: tuple[tuple[int, int], ...]
     damper: str
     gauge: tuple[int, ...]  # (anchor, reference) in 2D, (anchor, reference, third) in 3D, see gauge_particles
+    rigid: bool = False  # frame T only: its particles are fixed in T (their coordinates are parameters)
 
 
 @dataclass(frozen=True)
@@ -69,9 +70,18 @@ class Topology:
     def n_links(self) -> int:
         return sum(len(b.links) for b in self.bodies)
 
+    @property
+    def has_rigid(self) -> bool:
+        return any(b.rigid for b in self.bodies)
+
     def to_json(self) -> str:
-        """Canonical JSON (sorted keys, no spaces): the input of :meth:`digest`."""
-        return json.dumps(asdict(self), sort_keys=True, separators=(",", ":"))
+        """Canonical JSON (sorted keys, no spaces): the input of :meth:`digest`.  ``rigid``
+        appears only where it is true, so the digests of flexible scenes are what they were."""
+        data = asdict(self)
+        for body in data["bodies"]:
+            if not body["rigid"]:
+                del body["rigid"]
+        return json.dumps(data, sort_keys=True, separators=(",", ":"))
 
     @classmethod
     def from_json(cls, text: str) -> Topology:
@@ -82,6 +92,7 @@ class Topology:
                 links=tuple(tuple(link) for link in b["links"]),
                 damper=b["damper"],
                 gauge=tuple(b["gauge"]),
+                rigid=bool(b.get("rigid", False)),
             )
             for b in data["bodies"]
         )
