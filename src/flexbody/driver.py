@@ -143,7 +143,13 @@ def _contact_law_problems(scene: Scene, values: dict) -> list[str]:
     friction = [j for j, g in enumerate(scene.grounds) if g.friction > 0.0]
     restitution = [j for j, g in enumerate(scene.grounds) if g.restitution > 0.0]
     out = []
-    if (friction or restitution) and values["formulation"] == "floating":
+    rigid = [b.name for b in scene.bodies if getattr(b, "rigid", False)]
+    if (friction or restitution) and rigid:
+        out.append(f"bodies {rigid} are rigid: grounds {sorted(set(friction + restitution))} have friction or "
+                   "restitution, but a rigid body's contacts couple (J M^-1 J^T is not diagonal), and the "
+                   "linear complementarity solver those laws need there is not in the runtime yet; rigid "
+                   "bodies land plastically on frictionless grounds for now")
+    elif (friction or restitution) and values["formulation"] == "floating":
         out.append(f"`formulation` = 'floating': grounds {sorted(set(friction + restitution))} have friction or "
                    "restitution, which only the particles formulation (the default) applies")
     return out
