@@ -134,8 +134,13 @@ def disc_surface(count: int, radius: float) -> np.ndarray:
     """The outward boundary of :func:`disc`'s lattice triangles, shape (m, 2).
 
     A particle held by a single link (no triangle) at the rim is not on it."""
-    points, _, triangles = _disc_lattice(count, radius)
-    return boundary(points, triangles)
+    return disc_with_surface(count, radius)[2]
+
+
+def disc_with_surface(count: int, radius: float) -> tuple[np.ndarray, Links, np.ndarray]:
+    """:func:`disc` and :func:`disc_surface` from one lattice (building it is the slow part)."""
+    points, links, triangles = _disc_lattice(count, radius)
+    return points, links, boundary(points, triangles)
 
 
 def _disc_lattice(count: int, radius: float) -> tuple[np.ndarray, Links, np.ndarray]:

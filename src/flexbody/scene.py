@@ -623,7 +623,7 @@ def _planar_geometry(r: TableReader, shape: str) -> tuple[np.ndarray, list[tuple
         radius = r.number("radius", check=lambda v: v > 0, rule="must be > 0 (m)")
         if count is None or radius is None:
             return None
-        return (*presets.disc(count, radius), presets.disc_surface(count, radius))
+        return presets.disc_with_surface(count, radius)
     count = r.integer("count", minimum=1, maximum=MAX_PARTICLES, why=_PARTICLE_LIMIT)
     spacing = r.number("spacing", check=lambda v: v > 0, rule="must be > 0 (m)")
     if count is None or spacing is None:
@@ -1049,9 +1049,9 @@ def _check_contact_surfaces(bodies: list[Body], raw_bodies: list, contacts: list
     partners: dict[int, list[str]] = {}
     for c in contacts:
         a, b = c.bodies
-        partners.setdefault(a, []).append(bodies[b].name if a != b else "itself")
+        partners.setdefault(a, []).append(repr(bodies[b].name) if a != b else "itself")
         if a != b:
-            partners.setdefault(b, []).append(bodies[a].name)
+            partners.setdefault(b, []).append(repr(bodies[a].name))
     for b in sorted(partners):
         body = bodies[b]
         given = "surface" in raw_bodies[b]
