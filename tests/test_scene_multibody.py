@@ -296,6 +296,26 @@ def test_each_mistake_names_the_field_the_value_and_the_rule(table, field_and_va
     assert len(problems) == 1 and problems[0].startswith(field_and_value) and rule in problems[0], problems
 
 
+def test_a_planar_shape_in_3d_is_flat_and_cannot_collide():
+    flat = dict(ring("disk", 0.0, collide=True), position=[0.0, 0.0, 0.5])
+    problems = problems_of(scene_table(flat, dict(flat, name="other", position=[0.0, 0.0, 1.0]),
+                                       gravity=[0.0, 0.0, -9.81]))
+    assert len(problems) == 2 and all('shape = "ring" is flat in 3D (it encloses no volume)' in p for p in problems)
+
+
+def test_an_open_surface_mesh_cannot_collide(tmp_path):
+    source = flexbody.scene.resolve_scene_path("icosahedron_drop").parent / "icosahedron.obj"
+    ico = meshio.read(str(source))
+    meshio.write(str(tmp_path / "open.obj"), meshio.Mesh(ico.points, [("triangle", ico.cells_dict["triangle"][1:])]))
+    shell = dict(shape="mesh", file=str(tmp_path / "open.obj"), scale=0.1, particles=None, links=None, collide=True)
+    table = scene_table(body(name="shell", position=[0, 0, 0.5], **shell),
+                        body(name="ball", shape="sphere", count=20, radius=0.1, particles=None, links=None,
+                             position=[0, 0, 1.0], collide=True), gravity=[0.0, 0.0, -9.81])
+    problems = problems_of(table)
+    assert len(problems) == 1 and problems[0].startswith("`bodies[0].surface` = (from shape = 'mesh'): is not closed: "
+                                                         "edge ") and "give `surface = [[i, j, k], ...]`" in problems[0]
+
+
 def test_a_body_mistake_does_not_hide_a_contacts_mistake():
     problems = problems_of(_two_rings([{"bodies": ["a", "ghost"]}], rigid="yes"))
     assert len(problems) == 2 and "`bodies[0].rigid`" in problems[0] and "`contacts[0].bodies`" in problems[1]

@@ -25,6 +25,21 @@ T's origin lies in each preset is said below.
   midpoint (the middle particle for an odd count), and ``angle`` tilts it: ``angle = 0``
   lies flat, ``pi/2`` stands it on end with particle 0 at the bottom.  A chain has no
   bending stiffness: it folds freely at every particle.
+
+Surfaces (what other bodies' particles can hit; :mod:`flexbody.surface`), outward, by the
+``*_surface`` functions and :func:`mesh`:
+
+* ``ring`` / ``ellipse`` / ``polygon``: the perimeter segments ``[k, k + 1]`` in particle
+  order, counter-clockwise (a clockwise polygon's are reversed); the centre particle is not
+  on it.  Two particles enclose nothing: no surface.
+* ``disc``: the boundary of the lattice's triangles (a rim particle held by one link only,
+  in no triangle, is not on it).
+* ``chain``: none (an open line has no inside).
+* ``sphere``: the convex hull's triangles (Qhull), without the centre.
+* ``box``: the six faces' lattice squares, two triangles each, so every particle on a face
+  is on it; none for a box one particle thick along an axis.
+* ``mesh``: a volume mesh's boundary faces (the tetrahedron faces used once), a surface
+  mesh's own faces (quads split in two); either turned outward.
 """
 
 from __future__ import annotations

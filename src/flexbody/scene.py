@@ -6,6 +6,31 @@ pose and velocity), the grounds they fall on, gravity and the simulation setting
 and raises one :class:`SceneError` listing every problem (field, value, rule).
 
 Units are SI throughout: m, kg, s, N/m, N·s/m.
+
+Bodies touching each other (DESIGN.md §6; parsed and checked here, not simulated yet:
+``flexbody run`` refuses such a scene, naming the bodies)::
+
+    [[bodies]]
+    name = "ball"
+    rigid = false          # default; true: no springs or dampers (stiffness, damping,
+                           # damper, rest_lengths are then an error)
+    collide = false        # default; true: may touch every other body with collide = true
+    self_contact = false   # default; true: may touch its own surface
+    surface = [[1, 2], [2, 3], ...]   # optional: [i, j] segments in 2D, [i, j, k] triangles
+                                      # in 3D, outward; default: the shape's (below)
+
+    [[contacts]]           # optional, any number; implies collide for this pair only
+    bodies = ["ball", "floor"]   # two body names (the same twice: needs self_contact = true)
+    friction = 0.0         # Coulomb mu >= 0, default 0
+    restitution = 0.0      # Newton e in [0, 1], default 0
+
+Pairs that touch: each ``[[contacts]]`` entry (each pair once), then every pair of bodies
+with ``collide = true`` and every body with ``self_contact = true`` not listed there, with
+friction 0 and restitution 0 (:attr:`Scene.contacts`).  A body's surface comes from its
+shape (:mod:`flexbody.presets`: ring, ellipse and polygon perimeters, the disc's lattice
+boundary, sphere hull, box faces, a mesh's boundary faces; none for a chain, explicit
+particles or a planar shape in 3D) unless ``surface`` is given.  Every body in a pair
+needs a closed, outward surface (:mod:`flexbody.surface`): a gap's sign needs an inside.
 """
 
 from __future__ import annotations
@@ -1061,7 +1086,12 @@ def _check_contact_surfaces(bodies: list[Body], raw_bodies: list, contacts: list
         touches = f"body {body.name!r} may touch {', '.join(partners[b])}, which needs a closed surface"
         fix = "" if given else f"; give `surface = {_SURFACE_EXAMPLE[body.dim]}` (outward)"
         if len(body.surface) == 0:
-            what = f'shape = "{shape}" has none' if shape else "explicit particles have none unless given"
+            if shape in SPATIAL_SHAPES or (shape and body.dim == 2):
+                what = f'shape = "{shape}" has none'
+            elif shape:
+                what = f'shape = "{shape}" is flat in 3D (it encloses no volume)'
+            else:
+                what = "explicit particles have none unless given"
             problems.add(f"bodies[{b}].surface", value, f"{touches} (a gap's sign needs an inside); {what}{fix}")
             continue
         why = closure_problem(body.surface)
