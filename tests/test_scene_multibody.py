@@ -254,11 +254,13 @@ MISTAKES = [
     (_two_rings(surface=[[1, 2], [2, 13]]), "`bodies[0].surface[1]` = [2, 13]",
      "refers to a missing particle (the body has particles 0..12)"),
     (_two_rings(surface=[[1, 2], [3, 3]]), "`bodies[0].surface[1]` = [3, 3]", "repeats a particle"),
-    (_two_rings(surface=[[1, 2], [2, 1]]), "`bodies[0].surface[1]` = [2, 1]", "duplicate element"),
+    (_two_rings(surface=[[1, 2], [2, 1]]), "`bodies[0].surface[1]` = [2, 1]",
+     "duplicate element: the same particles as surface[0]"),
     (_two_rings(surface=[[1, 2, 3]]), "`bodies[0].surface` = [[1, 2, 3]]", "a non-empty list of [i, j] segments"),
     (_two_rings(surface=[]), "`bodies[0].surface` = []", "a non-empty list of [i, j] segments"),
     (_three_d([[0, 1, 1]]), "`bodies[0].surface[0]` = [0, 1, 1]", "repeats a particle"),
-    (_three_d([[0, 1, 2], [2, 1, 0]]), "`bodies[0].surface[1]` = [2, 1, 0]", "duplicate element"),
+    (_three_d([[0, 1, 2], [2, 1, 0]]), "`bodies[0].surface[1]` = [2, 1, 0]",
+     "duplicate element: the same particles as surface[0]"),
     # closed and outward, for the bodies that may touch
     (scene_table(body(name="a", **SQUARE, surface=[[0, 1], [1, 2], [2, 3]], collide=True),
                  body(name="b", **SQUARE, position=[0, 1], surface=[[0, 1], [1, 2], [2, 3], [3, 0]], collide=True)),
@@ -394,7 +396,8 @@ def test_run_refuses_a_rigid_body_naming_it(tmp_path, capsys):
 
 
 def test_run_refuses_bodies_that_may_touch_naming_them(tmp_path, capsys):
-    path = _toml(tmp_path, TWO_RINGS.format(ball="", contacts='[[contacts]]\nbodies = ["block", "ball"]\nfriction = 0.4'))
+    contacts = '[[contacts]]\nbodies = ["block", "ball"]\nfriction = 0.4'
+    path = _toml(tmp_path, TWO_RINGS.format(ball="", contacts=contacts))
     _refused(tmp_path, capsys, path, "bodies 'ball' and 'block' may touch each other (collide = true or [[contacts]]): "
              "contact between bodies is not simulated yet")
 

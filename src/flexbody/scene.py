@@ -825,25 +825,26 @@ def _explicit_surface(r: TableReader, n: int | None, dim: int) -> np.ndarray | N
         return None
     if n is None:  # the particles failed: nothing to check the indices against
         return None
-    elements = np.array(raw, dtype=object)
     missing = [k for k, e in enumerate(raw) if not all(0 <= i < n for i in e)]
     _report_elements(r, raw, missing, f"refers to a missing particle (the body has particles 0..{n - 1})")
     repeated = [k for k, e in enumerate(raw) if len(set(e)) < dim and 0 <= min(e) and max(e) < n]
     _report_elements(r, raw, repeated, "repeats a particle: a segment needs 2 different particles, a triangle 3")
-    seen: dict[tuple[int, ...], int] = {}
+    first: dict[tuple[int, ...], int] = {}  # each element's particles, in any order, once
     duplicate = []
     for k, e in enumerate(raw):
         key = tuple(sorted(e))
         if len(set(key)) < dim or not (0 <= key[0] and key[-1] < n):
             continue
-        if key in seen:
+        if key in first:
             duplicate.append(k)
         else:
-            seen[key] = k
-    _report_elements(r, raw, duplicate, "duplicate element (the same particles appear in an earlier element)")
+            first[key] = k
+    if duplicate:
+        earlier = first[tuple(sorted(raw[duplicate[0]]))]
+        _report_elements(r, raw, duplicate, f"duplicate element: the same particles as surface[{earlier}]")
     if missing or repeated or duplicate:
         return None
-    return elements.astype(np.intp).reshape(-1, dim)
+    return np.array(raw, dtype=np.intp).reshape(-1, dim)
 
 
 def _report_elements(r: TableReader, elements: list, indices: list[int], rule: str) -> None:
@@ -1103,8 +1104,8 @@ def _check_contact_surfaces(bodies: list[Body], raw_bodies: list, contacts: list
             unit, noun = ("m^2", "area") if body.dim == 2 else ("m^3", "volume")
             way = "counter-clockwise" if body.dim == 2 else "counter-clockwise seen from outside"
             problems.add(f"bodies[{b}].surface", value,
-                         f"encloses a signed {noun} of {measure:.3g} {unit} <= 0: it faces inward (or is flat); reverse the order "
-                         f"of every element (outward normals: {way})")
+                         f"encloses a signed {noun} of {measure:.3g} {unit} <= 0: it faces inward (or is flat); "
+                         f"reverse the order of every element (outward normals: {way})")
 
 
 _SURFACE_EXAMPLE = {2: "[[i, j], ...]", 3: "[[i, j, k], ...]"}
