@@ -16,6 +16,13 @@ from .errors import shown
 _MISSING = object()
 
 
+class Words(str):
+    """A value described in words, shown without quotes: ``(from shape = 'chain')``."""
+
+    def __repr__(self) -> str:
+        return str(self)
+
+
 class Problems:
     """An ordered list of human-readable problems, shared by all readers of one file."""
 

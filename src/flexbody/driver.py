@@ -102,6 +102,7 @@ def _settings(scene: Scene, overrides: dict) -> SimulationSettings:
     from .errors import InputError, shown  # here, not at the top: this function is the validation's only user
     from .scene import timing_problems
 
+    _refuse_not_simulated_yet(scene)
     s = scene.simulation
     values = {k: getattr(s, k) for k in s.__dataclass_fields__}
     for key, value in overrides.items():
@@ -136,6 +137,36 @@ def _settings(scene: Scene, overrides: dict) -> SimulationSettings:
     if problems:
         raise InputError("invalid simulation options:\n" + "\n".join(f"  - {p}" for p in problems))
     return SimulationSettings(**values)
+
+
+# ----------------------------------------------------------------------------------------------
+# Issue 13, until the runtime simulates them: rigid bodies and bodies touching each other are
+# valid in a scene (flexbody.scene parses and checks them) but refused here, never ignored.
+
+
+def _refuse_not_simulated_yet(scene: Scene) -> None:
+    """Raise for a scene that asks for rigid bodies or body-body contact.
+
+    Raises
+    ------
+    flexbody.errors.InputError
+        Naming each rigid body and each pair of bodies that may touch.
+    """
+    from .errors import InputError
+
+    names = [b.name for b in scene.bodies]
+    refused = [f"body {b.name!r} has rigid = true: rigid bodies are not simulated yet (set rigid = false to run it "
+               "as a flexible body)" for b in scene.bodies if b.rigid]
+    for c in scene.contacts:
+        first, second = (names[k] for k in c.bodies)
+        who = f"body {first!r} may touch itself (self_contact = true)" if first == second else \
+            f"bodies {first!r} and {second!r} may touch each other (collide = true or [[contacts]])"
+        refused.append(f"{who}: contact between bodies is not simulated yet (only with the grounds)")
+    if refused:
+        raise InputError(f"scene {scene.source} asks for what flexbody does not simulate yet: " + "; ".join(refused))
+
+
+# ----------------------------------------------------------------------------------------------
 
 
 def _contact_law_problems(scene: Scene, values: dict) -> list[str]:

@@ -25,11 +25,28 @@ T's origin lies in each preset is said below.
   midpoint (the middle particle for an odd count), and ``angle`` tilts it: ``angle = 0``
   lies flat, ``pi/2`` stands it on end with particle 0 at the bottom.  A chain has no
   bending stiffness: it folds freely at every particle.
+
+Surfaces (what other bodies' particles can hit; :mod:`flexbody.surface`), outward, by the
+``*_surface`` functions and :func:`mesh`:
+
+* ``ring`` / ``ellipse`` / ``polygon``: the perimeter segments ``[k, k + 1]`` in particle
+  order, counter-clockwise (a clockwise polygon's are reversed); the centre particle is not
+  on it.  Two particles enclose nothing: no surface.
+* ``disc``: the boundary of the lattice's triangles (a rim particle held by one link only,
+  in no triangle, is not on it).
+* ``chain``: none (an open line has no inside).
+* ``sphere``: the convex hull's triangles (Qhull), without the centre.
+* ``box``: the six faces' lattice squares, two triangles each, so every particle on a face
+  is on it; none for a box one particle thick along an axis.
+* ``mesh``: a volume mesh's boundary faces (the tetrahedron faces used once), a surface
+  mesh's own faces (quads split in two); either turned outward.
 """
 
 from __future__ import annotations
 
 import numpy as np
+
+from .surface import boundary, empty, hull, outward, perimeter
 
 Links = list[tuple[int, int]]
 
@@ -87,6 +104,18 @@ def polygon(vertices: list[tuple[float, float]], center: bool) -> tuple[np.ndarr
     return perimeter, links
 
 
+def ellipse_surface(count: int, center: bool) -> np.ndarray:
+    """:func:`ellipse`'s perimeter, counter-clockwise (the centre is not on it), shape (count, 2);
+    empty for two particles, which enclose nothing."""
+    return perimeter(1 if center else 0, count)
+
+
+def polygon_surface(vertices: list[tuple[float, float]], center: bool) -> np.ndarray:
+    """:func:`polygon`'s edges, turned counter-clockwise if the vertices run clockwise, shape (n, 2)."""
+    loop = perimeter(0, len(vertices))
+    return outward(np.asarray(vertices, dtype=float), loop) + (1 if center else 0)
+
+
 def chain(count: int, spacing: float) -> tuple[np.ndarray, Links]:
     """``count`` particles in a straight line along T's x-axis, centred on the origin.
 
@@ -112,6 +141,25 @@ def disc(count: int, radius: float) -> tuple[np.ndarray, Links]:
     exact number is ``len(points)``.  Particles are ordered by row, bottom to top, and
     left to right within a row.
     """
+    points, links, _ = _disc_lattice(count, radius)
+    return points, links
+
+
+def disc_surface(count: int, radius: float) -> np.ndarray:
+    """The outward boundary of :func:`disc`'s lattice triangles, shape (m, 2).
+
+    A particle held by a single link (no triangle) at the rim is not on it."""
+    return disc_with_surface(count, radius)[2]
+
+
+def disc_with_surface(count: int, radius: float) -> tuple[np.ndarray, Links, np.ndarray]:
+    """:func:`disc` and :func:`disc_surface` from one lattice (building it is the slow part)."""
+    points, links, triangles = _disc_lattice(count, radius)
+    return points, links, boundary(points, triangles)
+
+
+def _disc_lattice(count: int, radius: float) -> tuple[np.ndarray, Links, np.ndarray]:
+    """:func:`disc`'s points and links, and its lattice triangles (counter-clockwise), shape (t, 3)."""
     spacing = radius * np.sqrt(np.pi / (count * np.sqrt(3.0) / 2.0))
     height = spacing * np.sqrt(3.0) / 2.0
     rows = int(np.ceil(radius / height))
@@ -125,12 +173,17 @@ def disc(count: int, radius: float) -> tuple[np.ndarray, Links]:
                 index[r, c] = len(points)
                 points.append((x, y))
     links = []
+    triangles = []
     for (r, c), i in index.items():  # right, and the two neighbours in the row above
         up = (c, c + 1) if r % 2 else (c - 1, c)
-        for key in ((r, c + 1), (r + 1, up[0]), (r + 1, up[1])):
-            if key in index:
-                links.append((i, index[key]))
-    return np.array(points), links
+        right, left_up, right_up = index.get((r, c + 1)), index.get((r + 1, up[0])), index.get((r + 1, up[1]))
+        links += [(i, j) for j in (right, left_up, right_up) if j is not None]
+        # the triangle pointing up (right, then the shared neighbour above) and the one pointing down
+        if right is not None and right_up is not None:
+            triangles.append((i, right, right_up))
+        if right_up is not None and left_up is not None:
+            triangles.append((i, right_up, left_up))
+    return np.array(points), links, np.array(triangles, dtype=np.intp).reshape(-1, 3)
 
 
 # ----------------------------------------------------------------------------- 3D presets
@@ -165,6 +218,12 @@ def sphere(count: int, radius: float, center: bool) -> tuple[np.ndarray, Links]:
     return points, [(0, i) for i in range(1, count + 1)] + [(i + 1, j + 1) for i, j in links]
 
 
+def sphere_surface(points: np.ndarray, center: bool) -> np.ndarray:
+    """:func:`sphere`'s convex hull, outward (the centre is not on it), shape (m, 3)."""
+    first = 1 if center else 0
+    return hull(points[first:]) + first
+
+
 def box(count: tuple[int, int, int], size: tuple[float, float, float]) -> tuple[np.ndarray, Links]:
     """A lattice of ``nx x ny x nz`` particles spanning ``size = [a, b, c]``, centred on T's
     origin, ordered x fastest, then y, then z.  Each lattice cell is braced by its 12
@@ -191,11 +250,38 @@ def box(count: tuple[int, int, int], size: tuple[float, float, float]) -> tuple[
     return points, sorted(links)
 
 
+def box_surface(count: tuple[int, int, int]) -> np.ndarray:
+    """:func:`box`'s six faces, each lattice square split into two triangles, outward, shape (m, 3).
+
+    Every particle on a face is on the surface (a convex hull would leave out those inside a
+    flat face).  A box one particle thick along an axis encloses nothing: empty.
+    """
+    nx, ny, nz = (int(c) for c in count)
+    if min(nx, ny, nz) < 2:
+        return empty(3)
+    index = np.arange(nx * ny * nz).reshape(nz, ny, nx)
+    triangles = []
+    for grid in (index[0], index[-1], index[:, 0], index[:, -1], index[:, :, 0], index[:, :, -1]):
+        a, b = grid[:-1, :-1].ravel(), grid[1:, :-1].ravel()
+        c, d = grid[1:, 1:].ravel(), grid[:-1, 1:].ravel()
+        triangles += [np.column_stack([a, b, c]), np.column_stack([a, c, d])]
+    triangles = np.vstack(triangles)
+    # Orient each triangle by its face's outward direction, on the lattice's integer coordinates
+    # (scaling the axes by the positive edge lengths keeps every orientation).
+    zz, yy, xx = np.meshgrid(np.arange(nz), np.arange(ny), np.arange(nx), indexing="ij")
+    grid_points = np.column_stack([xx.ravel(), yy.ravel(), zz.ravel()]) - (np.array([nx, ny, nz]) - 1) / 2.0
+    x = grid_points[triangles]
+    normal = np.cross(x[:, 1] - x[:, 0], x[:, 2] - x[:, 0])
+    inward = np.einsum("ij,ij->i", normal, x.mean(axis=1)) < 0.0  # the box is convex about its centre
+    triangles[inward, 1:] = triangles[inward, :0:-1]
+    return triangles
+
+
 class MeshError(ValueError):
     """A mesh file that cannot be a body: unreadable, no edges, duplicate vertices."""
 
 
-def mesh(path, center: bool) -> tuple[np.ndarray, Links, np.ndarray]:
+def mesh(path, center: bool) -> tuple[np.ndarray, Links, np.ndarray, np.ndarray]:
     """Particles at a mesh file's vertices, linked along its cells' edges.
 
     Surface meshes (OBJ, STL, PLY: triangles, quads) give vertex particles and edge links;
@@ -211,6 +297,10 @@ def mesh(path, center: bool) -> tuple[np.ndarray, Links, np.ndarray]:
         Each particle's share of the total mass: a third of the area of its triangles
         (a quarter of the volume of its tetrahedra for volume meshes), normalised; the
         centre particle, if any, an equal share with the vertices.
+    surface : ndarray of int, shape (m, 3)
+        Outward triangles: a volume mesh's boundary faces (those of one tetrahedron only); a
+        surface mesh's own faces (a quad as two triangles), all reversed if they enclose a
+        negative volume.  Whether they close is checked where it matters (a colliding body).
     """
     import contextlib
     import io
@@ -261,9 +351,15 @@ def mesh(path, center: bool) -> tuple[np.ndarray, Links, np.ndarray]:
     if not shares.sum() > 0:
         raise MeshError("its cells have no area or volume (all vertices on a line or a plane)")
     shares /= shares.sum()
+    if volume:
+        faces = boundary(points, np.concatenate(cells))
+    else:
+        faces = outward(points, np.concatenate([
+            np.concatenate([c[:, [0, 1, 2]], c[:, [0, 2, 3]]]) if c.shape[1] == 4 else c for c in cells]))
     if center and not volume:
         n = len(points)
         points = np.vstack([points.mean(axis=0), points])
         links = [(0, i + 1) for i in range(n)] + [(i + 1, j + 1) for i, j in links]
         shares = np.concatenate([[1.0], shares * n]) / (n + 1)
-    return points, links, shares
+        faces = faces + 1
+    return points, links, shares, faces

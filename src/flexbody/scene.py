@@ -6,6 +6,31 @@ pose and velocity), the grounds they fall on, gravity and the simulation setting
 and raises one :class:`SceneError` listing every problem (field, value, rule).
 
 Units are SI throughout: m, kg, s, N/m, N·s/m.
+
+Bodies touching each other (DESIGN.md §6; parsed and checked here, not simulated yet:
+``flexbody run`` refuses such a scene, naming the bodies)::
+
+    [[bodies]]
+    name = "ball"
+    rigid = false          # default; true: no springs or dampers (stiffness, damping,
+                           # damper, rest_lengths are then an error)
+    collide = false        # default; true: may touch every other body with collide = true
+    self_contact = false   # default; true: may touch its own surface
+    surface = [[1, 2], [2, 3], ...]   # optional: [i, j] segments in 2D, [i, j, k] triangles
+                                      # in 3D, outward; default: the shape's (below)
+
+    [[contacts]]           # optional, any number; implies collide for this pair only
+    bodies = ["ball", "floor"]   # two body names (the same twice: needs self_contact = true)
+    friction = 0.0         # Coulomb mu >= 0, default 0
+    restitution = 0.0      # Newton e in [0, 1], default 0
+
+Pairs that touch: each ``[[contacts]]`` entry (each pair once), then every pair of bodies
+with ``collide = true`` and every body with ``self_contact = true`` not listed there, with
+friction 0 and restitution 0 (:attr:`Scene.contacts`).  A body's surface comes from its
+shape (:mod:`flexbody.presets`: ring, ellipse and polygon perimeters, the disc's lattice
+boundary, sphere hull, box faces, a mesh's boundary faces; none for a chain, explicit
+particles or a planar shape in 3D) unless ``surface`` is given.  Every body in a pair
+needs a closed, outward surface (:mod:`flexbody.surface`): a gap's sign needs an inside.
 """
 
 from __future__ import annotations
@@ -23,7 +48,7 @@ from typing import Any
 import numpy as np
 
 from . import presets
-from ._fields import Problems, TableReader
+from ._fields import Problems, TableReader, Words
 from .choices import (  # noqa: F401  (re-exported: the choices are part of the scene schema)
     BACKENDS,
     COMPILED_METHODS,
@@ -37,14 +62,19 @@ from .choices import (  # noqa: F401  (re-exported: the choices are part of the 
     SPATIAL_SHAPES,
 )
 from .errors import InputError
+from .surface import closure_problem, empty, signed_measure
 from .topology import BodyTopology, Topology, gauge_particles
 
 DEFAULT_GRAVITY = (0.0, -9.81)
 BODY_KEYS = (
     "name", "shape", "count", "radius", "radii", "center", "vertices", "spacing", "size", "file", "scale",
     "particles", "links", "mass", "masses", "mass_total", "stiffness", "damping", "damper", "rest_lengths",
-    "position", "angle", "rotation", "velocity", "angular_velocity", "particle_velocities",
+    "position", "angle", "rotation", "velocity", "angular_velocity", "particle_velocities", "rigid", "collide",
+    "surface", "self_contact",
 )  # fmt: skip
+#: Keys of a body that only a flexible body uses (a rigid body has no springs or dampers).
+ELASTIC_KEYS = ("stiffness", "damping", "damper", "rest_lengths")
+CONTACT_KEYS = ("bodies", "friction", "restitution")
 SIMULATION_KEYS = (
     "t_end", "output_dt", "method", "rtol", "atol", "impact", "impact_dt", "formulation", "backend",
 )  # fmt: skip
@@ -134,6 +164,20 @@ class Body:
         Initial spin of T about its origin: a scalar (about N3) in 2D, a vector in 3D.
     particle_velocities : ndarray, shape (n, dim)
         Added to the rigid-body velocity of each particle.
+    surface : ndarray of int, shape (m, dim)
+        What other bodies' particles can hit, indices within the body: segments ``[i, j]``
+        in 2D, triangles ``[i, j, k]`` in 3D, outward (see :mod:`flexbody.surface`).  From
+        the shape (see :mod:`flexbody.presets`) unless the scene gives ``surface``; shape
+        (0, dim) for a body without one (a chain, explicit particles, a planar shape in 3D).
+    rigid : bool
+        A rigid body: the floating frame T without elastic coordinates (no springs, no
+        dampers; ``stiffness`` and ``damping`` are 0).  Default false.
+    collide : bool
+        The body may touch every other body with ``collide = true`` (friction 0,
+        restitution 0 unless a ``[[contacts]]`` entry for the pair says otherwise).
+        Default false.
+    self_contact : bool
+        The body's particles may hit its own surface.  Default false.
     """
 
     name: str
@@ -150,6 +194,10 @@ class Body:
     angular_velocity: float | tuple[float, ...]
     particle_velocities: np.ndarray
     rotation_vector: tuple[float, ...] = (0.0, 0.0, 0.0)
+    surface: np.ndarray = field(default_factory=lambda: empty(2))
+    rigid: bool = False
+    collide: bool = False
+    self_contact: bool = False
 
     @property
     def n_particles(self) -> int:
@@ -193,6 +241,25 @@ def rotation_matrix(rotation_vector) -> np.ndarray:
 
 
 @dataclass(frozen=True)
+class BodyContact:
+    """Two bodies that may touch: the particles of each can hit the other's surface.
+
+    Attributes
+    ----------
+    bodies : (int, int)
+        Indices into ``Scene.bodies``, first <= second; equal for a body's self-contact.
+    friction : float
+        Coulomb's mu between the two (static = kinetic); default 0.
+    restitution : float
+        Newton's e between the two, in [0, 1]; default 0 (plastic).
+    """
+
+    bodies: tuple[int, int]
+    friction: float = 0.0
+    restitution: float = 0.0
+
+
+@dataclass(frozen=True)
 class SimulationSettings:
     """Numerical settings of a run; every field can be overridden from the CLI."""
 
@@ -218,10 +285,29 @@ class Scene:
     simulation: SimulationSettings
     source: str = "<mapping>"
     warnings: tuple[str, ...] = field(default=())
+    #: The pairs of bodies that may touch: ``[[contacts]]`` entries in file order, then the
+    #: pairs of ``collide = true`` bodies and the ``self_contact = true`` bodies not listed there.
+    contacts: tuple[BodyContact, ...] = ()
 
     @property
     def dim(self) -> int:
         return len(self.gravity)
+
+    def surfaces(self) -> tuple[np.ndarray, np.ndarray]:
+        """Every body's surface with global particle indices.
+
+        Returns
+        -------
+        elements : ndarray of int, shape (m, dim)
+            Segments (2D) or triangles (3D), bodies in file order.
+        owner : ndarray of int, shape (m,)
+            The index in ``bodies`` of each element's body.
+        """
+        offsets = np.cumsum([0] + [b.n_particles for b in self.bodies])
+        elements = [np.asarray(b.surface, dtype=np.intp).reshape(-1, self.dim) + o
+                    for b, o in zip(self.bodies, offsets)]
+        owner = [np.full(len(e), k, dtype=np.intp) for k, e in enumerate(elements)]
+        return np.vstack(elements), np.concatenate(owner)
 
     @property
     def n_particles(self) -> int:
@@ -346,7 +432,7 @@ def _build(data: dict[str, Any], source: str, default_name: str, folder: Path | 
     """Validate a parsed scene; ``folder`` is where relative paths in it (mesh files) start."""
     folder = folder or Path.cwd()
     problems = Problems()
-    top = TableReader(data, "", problems, ("name", "gravity", "grounds", "bodies", "simulation"))
+    top = TableReader(data, "", problems, ("name", "gravity", "grounds", "bodies", "contacts", "simulation"))
     name = top.string("name", default_name)
     if name is not None and not NAME_PATTERN.fullmatch(name):
         top.fail("name", name, NAME_RULE)
@@ -361,6 +447,7 @@ def _build(data: dict[str, Any], source: str, default_name: str, folder: Path | 
             body = _body(TableReader(table, f"bodies[{b}]", problems, BODY_KEYS), dim, folder)
             if body is not None:
                 bodies.append(body)
+    listed = _listed_contacts(top.raw("contacts", None), raw_bodies, problems)
     simulation = _simulation(TableReader(top.raw("simulation", None), "simulation", problems, SIMULATION_KEYS))
     top.finish()
     total = sum(b.n_particles for b in bodies)
@@ -371,6 +458,9 @@ def _build(data: dict[str, Any], source: str, default_name: str, folder: Path | 
         names = [b.name for b in bodies]
         for dup in sorted({n for n in names if names.count(n) > 1}):
             problems.add("bodies[].name", dup, "body names must be unique")
+    contacts = _contact_pairs(bodies, listed or [])
+    if not problems:
+        _check_contact_surfaces(bodies, raw_bodies, contacts, problems)
     if problems or simulation is None:
         raise SceneError(source, problems.items)
     notes = _overdamped_links(bodies)
@@ -384,6 +474,7 @@ def _build(data: dict[str, Any], source: str, default_name: str, folder: Path | 
         simulation=simulation,
         source=source,
         warnings=tuple(notes),
+        contacts=tuple(contacts),
     )
 
 
@@ -480,12 +571,14 @@ def _redundant(a: Ground, b: Ground, b_name: str) -> str:
 _PARTICLE_LIMIT = " (a scene has at most 1 million particles)"
 
 
-Geometry = tuple[np.ndarray, list[tuple[int, int]], "np.ndarray | None"]
+#: A body's points (n, dim), links, mass shares (None: equal) and surface (m, dim).
+Geometry = tuple[np.ndarray, list[tuple[int, int]], "np.ndarray | None", np.ndarray]
 
 
 def _geometry(r: TableReader, dim: int, folder: Path) -> Geometry | None:
-    """A body's points in T (n, dim), links and mass shares (None: equal), from a preset
-    ``shape`` or explicit ``particles``.  Planar presets lie in T's x-y plane (z = 0 in 3D)."""
+    """A body's points in T (n, dim), links, mass shares (None: equal) and the shape's surface
+    (m, dim), from a preset ``shape`` or explicit ``particles`` (no surface).  Planar presets
+    lie in T's x-y plane (z = 0 in 3D), where they enclose no volume: no surface."""
     shape = r.string("shape", None, choices=SHAPES)
     if r.has("shape") and shape is None:
         return None
@@ -515,19 +608,19 @@ def _geometry(r: TableReader, dim: int, folder: Path) -> Geometry | None:
         ):
             r.fail("links", links, "must be a list of [i, j] particle index pairs (integers)")
             return None
-        return np.array(points, dtype=float).reshape(-1, dim), [tuple(p) for p in links], None
+        return np.array(points, dtype=float).reshape(-1, dim), [tuple(p) for p in links], None, empty(dim)
     if shape in SPATIAL_SHAPES:
         return _spatial_geometry(r, shape, folder)
     planar = _planar_geometry(r, shape)
     if planar is None:
         return None
-    points, links = planar
+    points, links, outline = planar
     if dim == 3:
-        points = np.column_stack([points, np.zeros(len(points))])
-    return points, links, None
+        return np.column_stack([points, np.zeros(len(points))]), links, None, empty(3)
+    return points, links, None, outline
 
 
-def _planar_geometry(r: TableReader, shape: str) -> tuple[np.ndarray, list[tuple[int, int]]] | None:
+def _planar_geometry(r: TableReader, shape: str) -> tuple[np.ndarray, list[tuple[int, int]], np.ndarray] | None:
     if shape in ("ring", "ellipse"):
         count = r.integer("count", minimum=2, maximum=MAX_PARTICLES, why=_PARTICLE_LIMIT)
         center = r.boolean("center", False)
@@ -541,7 +634,7 @@ def _planar_geometry(r: TableReader, shape: str) -> tuple[np.ndarray, list[tuple
                 radii = None
         if count is None or radii is None or center is None:
             return None
-        return presets.ellipse(count, radii, center)
+        return (*presets.ellipse(count, radii, center), presets.ellipse_surface(count, center))
     if shape == "polygon":
         vertices = r.vectors("vertices", 2)
         center = r.boolean("center", False)
@@ -550,18 +643,18 @@ def _planar_geometry(r: TableReader, shape: str) -> tuple[np.ndarray, list[tuple
             return None
         if vertices is None or center is None:
             return None
-        return presets.polygon(vertices, center)
+        return (*presets.polygon(vertices, center), presets.polygon_surface(vertices, center))
     if shape == "disc":
         count = r.integer("count", minimum=1, maximum=MAX_PARTICLES, why=_PARTICLE_LIMIT)
         radius = r.number("radius", check=lambda v: v > 0, rule="must be > 0 (m)")
         if count is None or radius is None:
             return None
-        return presets.disc(count, radius)
+        return presets.disc_with_surface(count, radius)
     count = r.integer("count", minimum=1, maximum=MAX_PARTICLES, why=_PARTICLE_LIMIT)
     spacing = r.number("spacing", check=lambda v: v > 0, rule="must be > 0 (m)")
     if count is None or spacing is None:
         return None
-    return presets.chain(count, spacing)
+    return (*presets.chain(count, spacing), empty(2))  # an open line: no inside
 
 
 def _spatial_geometry(r: TableReader, shape: str, folder: Path) -> Geometry | None:
@@ -571,7 +664,8 @@ def _spatial_geometry(r: TableReader, shape: str, folder: Path) -> Geometry | No
         center = r.boolean("center", False)
         if count is None or radius is None or center is None:
             return None
-        return (*presets.sphere(count, radius, center), None)
+        points, links = presets.sphere(count, radius, center)
+        return points, links, None, presets.sphere_surface(points, center)
     if shape == "box":
         raw = r.raw("count", None)
         ok = isinstance(raw, list) and len(raw) == 3 and all(
@@ -590,7 +684,7 @@ def _spatial_geometry(r: TableReader, shape: str, folder: Path) -> Geometry | No
             size = None
         if not ok or size is None:
             return None
-        return (*presets.box(tuple(raw), size), None)
+        return (*presets.box(tuple(raw), size), None, presets.box_surface(tuple(raw)))
     file = r.string("file", None)
     scale = r.number("scale", 1.0, check=lambda v: v > 0, rule="must be > 0 (a factor on the file's coordinates)")
     center = r.boolean("center", False)
@@ -606,18 +700,21 @@ def _spatial_geometry(r: TableReader, shape: str, folder: Path) -> Geometry | No
     if scale is None or center is None:
         return None
     try:
-        points, links, shares = presets.mesh(path, center)
+        points, links, shares, outline = presets.mesh(path, center)
     except presets.MeshError as exc:
         r.fail("file", file, str(exc))
         return None
     if len(points) > MAX_PARTICLES:
         r.fail("file", file, f"has {len(points)} vertices{_PARTICLE_LIMIT}")
         return None
-    return points * scale, links, shares
+    return points * scale, links, shares, outline
 
 
 def _body(r: TableReader, dim: int, folder: Path) -> Body | None:
-    name = r.string("name", r.path.replace("bodies", "body").replace("[", "").replace("]", ""))
+    name = r.string("name", _default_body_name(r.path))
+    rigid = r.boolean("rigid", False)
+    collide = r.boolean("collide", False)
+    self_contact = r.boolean("self_contact", False)
     geometry = _geometry(r, dim, folder)
     points = None if geometry is None else geometry[0]
     shares = None if geometry is None else geometry[2]
@@ -639,11 +736,22 @@ def _body(r: TableReader, dim: int, folder: Path) -> Body | None:
         masses = None if total is None else (total * share).tolist()
     else:
         masses = r.scalar_or_list("masses", n, minimum=0.0, strict=True, item="particle")
-    stiffness = r.scalar_or_list("stiffness", nl, minimum=0.0, strict=False, item="link")
-    damping = r.scalar_or_list("damping", nl, minimum=0.0, strict=False, item="link")
-    damper = r.string("damper", "relative", choices=DAMPERS)
+    if rigid:  # no springs or dampers: their constants would be ignored, so they are a mistake
+        for key in ELASTIC_KEYS:
+            if r.has(key):
+                r.fail(key, r.raw(key), "is not used with rigid = true (a rigid body has no springs or dampers): "
+                       "remove it, or set rigid = false")
+        stiffness = damping = [0.0] * (nl or 0)
+        damper = "relative"
+    else:
+        stiffness = r.scalar_or_list("stiffness", nl, minimum=0.0, strict=False, item="link")
+        damping = r.scalar_or_list("damping", nl, minimum=0.0, strict=False, item="link")
+        damper = r.string("damper", "relative", choices=DAMPERS)
+    surface = None if geometry is None else geometry[3]
+    if r.has("surface"):
+        surface = _explicit_surface(r, n, dim)
     rest = None
-    if r.has("rest_lengths"):
+    if not rigid and r.has("rest_lengths"):
         rest = r.scalar_or_list("rest_lengths", nl, minimum=0.0, strict=True, item="link")
     position = r.vector("position", dim)
     velocity = r.vector("velocity", dim, (0.0,) * dim)
@@ -666,7 +774,8 @@ def _body(r: TableReader, dim: int, folder: Path) -> Body | None:
         if given is not None:
             extra = np.array(given, dtype=float).reshape(-1, dim)
     r.finish()
-    if not links_ok or None in (masses, stiffness, damping, damper, position, angle, rotation, velocity, spin):
+    if not links_ok or surface is None or None in (masses, stiffness, damping, damper, position, angle, rotation,
+                                                   velocity, spin, rigid, collide, self_contact):
         return None
     if rest is None:
         rest = [float(np.linalg.norm(points[i] - points[j])) for i, j in links]
@@ -685,7 +794,65 @@ def _body(r: TableReader, dim: int, folder: Path) -> Body | None:
         angular_velocity=spin,
         particle_velocities=_frozen(extra),
         rotation_vector=rotation,
+        surface=_frozen_indices(surface),
+        rigid=rigid,
+        collide=collide,
+        self_contact=self_contact,
     )
+
+
+def _default_body_name(path: str) -> str:
+    """A body without ``name`` is called after its place: ``bodies[2]`` is ``body2``."""
+    return path.replace("bodies", "body").replace("[", "").replace("]", "")
+
+
+def _frozen_indices(array: np.ndarray) -> np.ndarray:
+    out = np.array(array, dtype=np.intp)
+    out.setflags(write=False)
+    return out
+
+
+def _explicit_surface(r: TableReader, n: int | None, dim: int) -> np.ndarray | None:
+    """A given ``surface``: elements of ``dim`` different particles of the body, each once.
+
+    Closedness and orientation are checked later, for the bodies that may touch others."""
+    raw = r.raw("surface")
+    kind = "[i, j] segments" if dim == 2 else "[i, j, k] triangles"
+    if not isinstance(raw, list) or not raw or not all(
+        isinstance(e, list) and len(e) == dim and all(isinstance(i, int) and not isinstance(i, bool) for i in e)
+        for e in raw
+    ):
+        r.fail("surface", raw, f"must be a non-empty list of {kind} (particle indices within the body, integers)")
+        return None
+    if n is None:  # the particles failed: nothing to check the indices against
+        return None
+    missing = [k for k, e in enumerate(raw) if not all(0 <= i < n for i in e)]
+    _report_elements(r, raw, missing, f"refers to a missing particle (the body has particles 0..{n - 1})")
+    repeated = [k for k, e in enumerate(raw) if len(set(e)) < dim and 0 <= min(e) and max(e) < n]
+    _report_elements(r, raw, repeated, "repeats a particle: a segment needs 2 different particles, a triangle 3")
+    first: dict[tuple[int, ...], int] = {}  # each element's particles, in any order, once
+    duplicate = []
+    for k, e in enumerate(raw):
+        key = tuple(sorted(e))
+        if len(set(key)) < dim or not (0 <= key[0] and key[-1] < n):
+            continue
+        if key in first:
+            duplicate.append(k)
+        else:
+            first[key] = k
+    if duplicate:
+        earlier = first[tuple(sorted(raw[duplicate[0]]))]
+        _report_elements(r, raw, duplicate, f"duplicate element: the same particles as surface[{earlier}]")
+    if missing or repeated or duplicate:
+        return None
+    return np.array(raw, dtype=np.intp).reshape(-1, dim)
+
+
+def _report_elements(r: TableReader, elements: list, indices: list[int], rule: str) -> None:
+    """One problem for the first offending surface element, counting the others."""
+    if indices:
+        more = f" (and {len(indices) - 1} more elements like it)" if len(indices) > 1 else ""
+        r.fail(f"surface[{indices[0]}]", elements[indices[0]], rule + more)
 
 
 def _check_links(r: TableReader, points: np.ndarray, links: list[tuple[int, int]]) -> bool:
@@ -819,6 +986,8 @@ def _check_above_ground(bodies: list[Body], grounds: list[Ground], problems: Pro
 def _overdamped_links(bodies: list[Body]) -> list[str]:
     notes = []
     for b, body in enumerate(bodies):
+        if body.rigid:  # no springs, no dampers
+            continue
         bad = []
         for l_, (i, j) in enumerate(body.links):
             mu = body.masses[i] * body.masses[j] / (body.masses[i] + body.masses[j])
@@ -830,3 +999,114 @@ def _overdamped_links(bodies: list[Body]) -> list[str]:
                 "thesis eq. 3.12): the body will not vibrate but creep; lower `damping` or raise `stiffness`"
             )
     return notes
+
+
+# --------------------------------------------------------------------------- bodies touching
+
+
+def _listed_contacts(raw: Any, raw_bodies: Any, problems: Problems) -> list[BodyContact] | None:
+    """The ``[[contacts]]`` tables, checked against the body names (read from the raw tables,
+    so a mistake in a body does not hide one here); None when any is wrong."""
+    if raw is None:
+        return []
+    if not isinstance(raw, list):
+        problems.add("contacts", raw, "must be an array of [[contacts]] tables")
+        return None
+    tables = raw_bodies if isinstance(raw_bodies, list) else []
+    names = [t.get("name", _default_body_name(f"bodies[{b}]")) if isinstance(t, Mapping) else None
+             for b, t in enumerate(tables)]
+    self_contact = [isinstance(t, Mapping) and t.get("self_contact") is True for t in tables]
+    out: list[BodyContact] = []
+    where: dict[tuple[int, int], int] = {}
+    ok = True
+    for k, table in enumerate(raw):
+        r = TableReader(table, f"contacts[{k}]", problems, CONTACT_KEYS)
+        pair = r.raw("bodies")
+        friction = r.number("friction", 0.0, check=lambda v: v >= 0.0, rule="must be >= 0 (Coulomb's mu)")
+        restitution = r.number("restitution", 0.0, check=lambda v: 0.0 <= v <= 1.0,
+                               rule="must be in [0, 1] (Newton's e: 0 plastic, 1 elastic)")
+        r.finish()
+        indices = _contact_bodies(r, pair, names, self_contact)
+        if indices is not None and indices in where:
+            r.fail("bodies", pair, f"this pair is already listed in contacts[{where[indices]}] (list each pair once)")
+            indices = None
+        if indices is None or friction is None or restitution is None:
+            ok = False
+            continue
+        where[indices] = k
+        out.append(BodyContact(bodies=indices, friction=friction, restitution=restitution))
+    return out if ok else None
+
+
+def _contact_bodies(r: TableReader, pair: Any, names: list, self_contact: list[bool]) -> tuple[int, int] | None:
+    """The body indices of a ``[[contacts]]`` entry's ``bodies``, sorted, or None (reported)."""
+    if not (isinstance(pair, list) and len(pair) == 2 and all(isinstance(p, str) for p in pair)):
+        r.fail("bodies", pair, 'is required: a list of two body names, e.g. ["ball", "floor"]')
+        return None
+    unknown = [p for p in pair if p not in names]
+    if unknown:
+        known = [n for n in names if isinstance(n, str)]
+        r.fail("bodies", pair, f"names no body of the scene: {sorted(set(unknown))}; the bodies are {known}")
+        return None
+    first, second = sorted(names.index(p) for p in pair)
+    if first == second and not self_contact[first]:
+        r.fail("bodies", pair, f"lists body {pair[0]!r} twice: a body touches itself only with "
+               f"`self_contact = true` on it")
+        return None
+    return first, second
+
+
+def _contact_pairs(bodies: list[Body], listed: list[BodyContact]) -> list[BodyContact]:
+    """The listed pairs, then every pair of ``collide = true`` bodies and every
+    ``self_contact = true`` body not listed, with friction 0 and restitution 0."""
+    pairs = list(listed)
+    seen = {c.bodies for c in listed}
+    colliding = [b for b, body in enumerate(bodies) if body.collide]
+    implied = [(a, b) for i, a in enumerate(colliding) for b in colliding[i + 1:]]
+    implied += [(b, b) for b, body in enumerate(bodies) if body.self_contact]
+    for key in sorted(implied):
+        if key not in seen:
+            pairs.append(BodyContact(bodies=key))
+    return pairs
+
+
+def _check_contact_surfaces(bodies: list[Body], raw_bodies: list, contacts: list[BodyContact],
+                            problems: Problems) -> None:
+    """Every body that may touch one has a closed, outward surface (a gap's sign needs an inside)."""
+    partners: dict[int, list[str]] = {}
+    for c in contacts:
+        a, b = c.bodies
+        partners.setdefault(a, []).append(repr(bodies[b].name) if a != b else "itself")
+        if a != b:
+            partners.setdefault(b, []).append(repr(bodies[a].name))
+    for b in sorted(partners):
+        body = bodies[b]
+        given = "surface" in raw_bodies[b]
+        shape = raw_bodies[b].get("shape")
+        value: Any = body.surface.tolist() if given else Words(
+            f"(from shape = {shape!r})" if shape else "(none: explicit particles)")
+        touches = f"body {body.name!r} may touch {', '.join(partners[b])}, which needs a closed surface"
+        fix = "" if given else f"; give `surface = {_SURFACE_EXAMPLE[body.dim]}` (outward)"
+        if len(body.surface) == 0:
+            if shape in SPATIAL_SHAPES or (shape and body.dim == 2):
+                what = f'shape = "{shape}" has none'
+            elif shape:
+                what = f'shape = "{shape}" is flat in 3D (it encloses no volume)'
+            else:
+                what = "explicit particles have none unless given"
+            problems.add(f"bodies[{b}].surface", value, f"{touches} (a gap's sign needs an inside); {what}{fix}")
+            continue
+        why = closure_problem(body.surface)
+        if why:
+            problems.add(f"bodies[{b}].surface", value, f"is not closed: {why}; {touches}{fix}")
+            continue
+        measure = signed_measure(body.points, body.surface)
+        if measure <= 0.0:
+            unit, noun = ("m^2", "area") if body.dim == 2 else ("m^3", "volume")
+            way = "counter-clockwise" if body.dim == 2 else "counter-clockwise seen from outside"
+            problems.add(f"bodies[{b}].surface", value,
+                         f"encloses a signed {noun} of {measure:.3g} {unit} <= 0: it faces inward (or is flat); "
+                         f"reverse the order of every element (outward normals: {way})")
+
+
+_SURFACE_EXAMPLE = {2: "[[i, j], ...]", 3: "[[i, j, k], ...]"}

@@ -1,0 +1,165 @@
+"""Body surfaces: what another body's particles can hit, and the checks that make it usable.
+
+A surface is an int array of elements, shape (m, d), with particle indices within one body:
+in 2D segments ``[i, j]``, in 3D triangles ``[i, j, k]``.  Orientation is outward: a 2D
+boundary runs counter-clockwise (the inside on the left of each segment), a 3D triangle is
+counter-clockwise seen from outside (``(x_j - x_i) x (x_k - x_i)`` points out).
+
+A surface is *closed* when it bounds an inside, which the sign of a body-body gap needs:
+
+* 2D: every particle on it starts exactly one segment and ends exactly one (closed loops,
+  consistently oriented);
+* 3D: every edge is shared by exactly two triangles that run it in opposite directions.
+
+A closed, outward surface encloses a positive signed area (shoelace) or volume (divergence
+theorem): :func:`signed_measure`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+#: The outward faces of a positively oriented tetrahedron (a, b, c, d): det(b-a, c-a, d-a) > 0.
+TETRA_FACES = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
+
+
+def empty(dim: int) -> np.ndarray:
+    """No surface: an int array of shape (0, dim)."""
+    return np.zeros((0, dim), dtype=np.intp)
+
+
+def signed_measure(points: np.ndarray, surface: np.ndarray) -> float:
+    """The area (2D) or volume (3D) a closed surface encloses; negative when it faces inward.
+
+    Parameters
+    ----------
+    points : ndarray, shape (n, d)
+    surface : ndarray of int, shape (m, d)
+
+    Returns
+    -------
+    float
+        2D: the shoelace sum ``1/2 sum (x_i y_j - x_j y_i)``; 3D: the divergence theorem
+        ``1/6 sum x_i . (x_j x x_k)``.  Independent of the origin only for a closed surface.
+    """
+    x = np.asarray(points, dtype=float)[np.asarray(surface, dtype=np.intp)]
+    if len(x) == 0:
+        return 0.0
+    if x.shape[1] == 2:
+        return 0.5 * float(np.sum(x[:, 0, 0] * x[:, 1, 1] - x[:, 1, 0] * x[:, 0, 1]))
+    return float(np.sum(np.einsum("ij,ij->i", x[:, 0], np.cross(x[:, 1], x[:, 2])))) / 6.0
+
+
+def closure_problem(surface: np.ndarray) -> str:
+    """Why a surface is not closed ("" when it is), naming the first offending particle or edge.
+
+    Parameters
+    ----------
+    surface : ndarray of int, shape (m, d)
+        Segments (d = 2) or triangles (d = 3), without repeated or degenerate elements.
+    """
+    surface = np.asarray(surface, dtype=np.intp)
+    if len(surface) == 0:
+        return "it is empty"
+    if surface.shape[1] == 2:
+        n = int(surface.max()) + 1
+        starts = np.bincount(surface[:, 0], minlength=n)
+        ends = np.bincount(surface[:, 1], minlength=n)
+        bad = np.flatnonzero((starts + ends > 0) & ((starts != 1) | (ends != 1)))
+        if bad.size:
+            i = int(bad[0])
+            more = f" (and {bad.size - 1} more particles like it)" if bad.size > 1 else ""
+            return (f"particle {i} starts {starts[i]} segment(s) and ends {ends[i]}{more}; on a closed 2D surface "
+                    "every particle starts exactly one segment and ends exactly one (closed loops, one direction)")
+        return ""
+    directed = surface[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
+    undirected, counts = np.unique(np.sort(directed, axis=1), axis=0, return_counts=True)
+    bad = np.flatnonzero(counts != 2)
+    if bad.size:
+        more = f" (and {bad.size - 1} more edges like it)" if bad.size > 1 else ""
+        return (f"edge {undirected[bad[0]].tolist()} belongs to {counts[bad[0]]} triangle(s){more}; on a closed 3D "
+                "surface every edge belongs to exactly two")
+    runs, run_counts = np.unique(directed, axis=0, return_counts=True)
+    same_way = np.flatnonzero(run_counts > 1)
+    if same_way.size:
+        more = f" (and {same_way.size - 1} more edges like it)" if same_way.size > 1 else ""
+        return (f"the two triangles on edge {runs[same_way[0]].tolist()} both run it from {runs[same_way[0], 0]} to "
+                f"{runs[same_way[0], 1]}{more}; neighbouring triangles must run a shared edge in opposite directions "
+                "(consistent orientation)")
+    return ""
+
+
+def outward(points: np.ndarray, surface: np.ndarray) -> np.ndarray:
+    """``surface`` with every element reversed if it encloses a negative measure, shape (m, d)."""
+    surface = np.asarray(surface, dtype=np.intp)
+    return surface[:, ::-1].copy() if signed_measure(points, surface) < 0.0 else surface
+
+
+def perimeter(first: int, count: int) -> np.ndarray:
+    """The loop ``first, first + 1, ..., first + count - 1, first``, shape (count, 2); empty for
+    fewer than three particles (two particles enclose nothing)."""
+    if count < 3:
+        return empty(2)
+    k = np.arange(count)
+    return np.column_stack([first + k, first + (k + 1) % count])
+
+
+def boundary(points: np.ndarray, cells: np.ndarray) -> np.ndarray:
+    """The outward boundary of a mesh of triangles (2D) or tetrahedra (3D).
+
+    Each cell is first turned to positive orientation; its faces are then outward, and the
+    faces no other cell shares (each shared face is met once in each direction) make the
+    boundary.
+
+    Parameters
+    ----------
+    points : ndarray, shape (n, d)
+    cells : ndarray of int, shape (c, d + 1)
+
+    Returns
+    -------
+    ndarray of int, shape (m, d)
+        Segments (2D) or triangles (3D), outward.
+    """
+    points = np.asarray(points, dtype=float)
+    cells = np.asarray(cells, dtype=np.intp).copy()
+    dim = points.shape[1]
+    if len(cells) == 0:
+        return empty(dim)
+    edges = points[cells[:, 1:]] - points[cells[:, :1]]
+    flip = np.linalg.det(edges) < 0.0
+    cells[flip, :2] = cells[flip, 1::-1]  # swapping two corners reverses the orientation
+    if dim == 2:
+        faces = cells[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
+    else:
+        faces = cells[:, TETRA_FACES].reshape(-1, 3)
+    keys, counts = np.unique(np.sort(faces, axis=1), axis=0, return_inverse=False, return_counts=True)
+    once = keys[counts == 1]
+    keep = _rows_in(np.sort(faces, axis=1), once)
+    return faces[keep]
+
+
+def hull(points: np.ndarray) -> np.ndarray:
+    """The convex hull's triangles (scipy.spatial.ConvexHull, i.e. Qhull), outward, shape (m, 3).
+
+    Only hull vertices appear: a particle inside the hull or on a flat face's interior does not.
+    """
+    from scipy.spatial import ConvexHull
+
+    h = ConvexHull(points)
+    tri = np.asarray(h.simplices, dtype=np.intp).copy()
+    x = np.asarray(points, dtype=float)[tri]
+    normal = np.cross(x[:, 1] - x[:, 0], x[:, 2] - x[:, 0])
+    inward = np.einsum("ij,ij->i", normal, h.equations[:, :3]) < 0.0  # Qhull's normals point out
+    tri[inward, 1:] = tri[inward, :0:-1]
+    return tri
+
+
+def _rows_in(rows: np.ndarray, table: np.ndarray) -> np.ndarray:
+    """Which rows of ``rows`` (shape (a, k)) are rows of ``table`` (shape (b, k)), shape (a,)."""
+    if len(table) == 0:
+        return np.zeros(len(rows), dtype=bool)
+    view = np.dtype((np.void, rows.dtype.itemsize * rows.shape[1]))
+    a = np.ascontiguousarray(rows).view(view).ravel()
+    b = np.ascontiguousarray(table.astype(rows.dtype)).view(view).ravel()
+    return np.isin(a, b)
