@@ -49,7 +49,12 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     root = args.out or generated_root()
     stale = 0
-    for formulation in args.formulation or FORMULATIONS:
+    rigid = [b.name for b in scene.bodies if b.rigid]
+    if rigid and "particles" in (args.formulation or ()):
+        print(f"error: `--formulation` = 'particles': bodies {rigid} are rigid, frames T without particle "
+              "coordinates, which only the floating formulation has", file=sys.stderr)
+        return 2
+    for formulation in args.formulation or (("floating",) if rigid else FORMULATIONS):
         name = args.scene if Path(args.scene).suffix == "" else str(args.scene)
         start = time.perf_counter()
         files = render_scene(scene, formulation, source=name,

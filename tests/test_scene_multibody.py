@@ -388,13 +388,6 @@ def _refused(tmp_path, capsys, path, says: str) -> None:
     assert not out.exists()
 
 
-def test_run_refuses_a_rigid_body_naming_it(tmp_path, capsys):
-    text = TWO_RINGS.replace("    stiffness = 2000.0\n    damping = 0.5\n    position = [0.0, 0.5]",
-                             "    position = [0.0, 0.5]", 1)
-    path = _toml(tmp_path, text.format(ball="rigid = true", contacts=""))
-    _refused(tmp_path, capsys, path, "body 'ball' has rigid = true: rigid bodies are not simulated yet")
-
-
 def test_run_refuses_bodies_that_may_touch_naming_them(tmp_path, capsys):
     contacts = '[[contacts]]\nbodies = ["block", "ball"]\nfriction = 0.4'
     path = _toml(tmp_path, TWO_RINGS.format(ball="", contacts=contacts))

@@ -140,23 +140,23 @@ def _settings(scene: Scene, overrides: dict) -> SimulationSettings:
 
 
 # ----------------------------------------------------------------------------------------------
-# Issue 13, until the runtime simulates them: rigid bodies and bodies touching each other are
-# valid in a scene (flexbody.scene parses and checks them) but refused here, never ignored.
+# Issue 13, until the runtime simulates them: bodies touching each other are valid in a scene
+# (flexbody.scene parses and checks them) but refused here, never ignored.  Rigid bodies run
+# (on the grounds, see _contact_law_problems for what they cannot run with yet).
 
 
 def _refuse_not_simulated_yet(scene: Scene) -> None:
-    """Raise for a scene that asks for rigid bodies or body-body contact.
+    """Raise for a scene that asks for body-body contact.
 
     Raises
     ------
     flexbody.errors.InputError
-        Naming each rigid body and each pair of bodies that may touch.
+        Naming each pair of bodies that may touch.
     """
     from .errors import InputError
 
     names = [b.name for b in scene.bodies]
-    refused = [f"body {b.name!r} has rigid = true: rigid bodies are not simulated yet (set rigid = false to run it "
-               "as a flexible body)" for b in scene.bodies if b.rigid]
+    refused = []
     for c in scene.contacts:
         first, second = (names[k] for k in c.bodies)
         who = f"body {first!r} may touch itself (self_contact = true)" if first == second else \

@@ -1,0 +1,238 @@
+"""Rigid bodies (DESIGN §6): a body's frame T without elastic coordinates, against closed forms.
+
+A rigid body's particles are fixed in T, so its motion is T's: free flight is a parabola of
+the centre of mass with a constant spin (2D) or a conserved angular momentum (3D); resting
+on the ground its contact forces are those of statics; landing flat, its plastic impulses
+stop it whole, in any order of its particles.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import flexbody
+from flexbody.driver import simulate
+from flexbody.errors import InputError
+from flexbody.model import load_model
+
+from .conftest import needs_cc
+
+G = 9.81
+TIGHT = dict(rtol=1e-10, atol=1e-12)
+
+
+def rigid_scene(particles, masses, *, position, angle=0.0, velocity=None, angular_velocity=None, t_end=1.0,
+                output_dt=1e-3, gravity=(0.0, -G), reverse=False):
+    """One rigid body (its links carry no load: a rigid body has no springs or dampers)."""
+    particles, masses = list(particles), list(masses)
+    if reverse:  # the same body, its particles listed the other way round
+        particles, masses = particles[::-1], masses[::-1]
+    n, dim = len(particles), len(gravity)
+    body = {"name": "rigid", "rigid": True, "particles": particles, "masses": masses,
+            "links": [[i, i + 1] for i in range(n - 1)], "position": list(position)}
+    if dim == 2:
+        body["angle"] = angle
+    else:
+        body["rotation"] = list(angle) if np.ndim(angle) else [0.0, 0.0, 0.0]
+    if velocity is not None:
+        body["velocity"] = list(velocity)
+    if angular_velocity is not None:
+        body["angular_velocity"] = angular_velocity
+    return flexbody.load_scene({"name": "rigid_body", "gravity": list(gravity), "bodies": [body],
+                                "simulation": {"t_end": t_end, "output_dt": output_dt}})
+
+
+def centre(r, masses):
+    return np.einsum("i,tid->td", np.asarray(masses) / np.sum(masses), r.positions)
+
+
+# ----------------------------------------------------------------- free flight
+
+
+@needs_cc
+def test_a_spinning_rigid_triangle_flies_on_a_parabola_with_a_constant_spin():
+    tri = [[-0.2, 0.0], [0.3, 0.0], [0.05, 0.25]]
+    masses = [0.1, 0.2, 0.3]
+    v0, w = np.array([0.7, 2.0]), 5.0
+    scene = rigid_scene(tri, masses, position=[0.0, 5.0], velocity=v0, angular_velocity=w, t_end=0.5)
+    r = simulate(scene, **TIGHT)
+    assert r.success and len(r.events_kind) == 0, r.message
+    c0 = centre(r, masses)[0]
+    # the centre of mass moves with the body's velocity at its centre of mass
+    x0 = r.positions[0]
+    vc = np.einsum("i,id->d", np.asarray(masses) / np.sum(masses), r.velocities[0])
+    expected_centre = c0 + np.outer(r.t, vc) + np.outer(r.t**2, [0.0, -G / 2])
+    np.testing.assert_allclose(centre(r, masses), expected_centre, atol=1e-9)
+    # and every particle turns about it at w: x_i(t) = c(t) + R(w t) (x_i(0) - c(0))
+    rel0 = x0 - c0
+    for k in (len(r.t) // 3, -1):
+        a = w * r.t[k]
+        R = np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]])
+        np.testing.assert_allclose(r.positions[k] - centre(r, masses)[k], rel0 @ R.T, atol=1e-9)
+    np.testing.assert_allclose(r.total_energy - r.total_energy[0], 0.0, atol=1e-10 * r.total_energy[0])  # rtol 1e-10
+
+
+@needs_cc
+def test_a_3d_rigid_body_keeps_its_angular_momentum_and_energy_in_free_flight():
+    tet = [[0.0, 0.0, 0.0], [0.3, 0.0, 0.0], [0.0, 0.2, 0.0], [0.05, 0.05, 0.25]]
+    masses = [0.1, 0.2, 0.15, 0.25]
+    scene = rigid_scene(tet, masses, position=[0.0, 0.0, 5.0], angle=[0.3, 0.2, 0.1], velocity=[0.5, -0.2, 1.0],
+                        angular_velocity=[1.0, -2.0, 3.0], gravity=(0.0, 0.0, -G), t_end=0.4)
+    r = simulate(scene, **TIGHT)
+    assert r.success and len(r.events_kind) == 0, r.message
+    m = np.asarray(masses)
+    c = centre(r, masses)
+    vc = np.einsum("i,tid->td", m / m.sum(), r.velocities)
+    momentum = np.einsum("i,tid->td", m, np.cross(r.positions - c[:, None], r.velocities - vc[:, None]))
+    np.testing.assert_allclose(momentum, np.broadcast_to(momentum[0], momentum.shape), atol=1e-9 * np.abs(momentum[0]).max())
+    np.testing.assert_allclose(vc, vc[0] + np.outer(r.t, [0.0, 0.0, -G]), atol=1e-9)
+    np.testing.assert_allclose(r.total_energy - r.total_energy[0], 0.0, atol=1e-10 * r.total_energy[0])  # rtol 1e-10
+    # rigid: every distance between particles stays what it was
+    d = np.linalg.norm(r.positions[:, :, None] - r.positions[:, None], axis=-1)
+    np.testing.assert_allclose(d, np.broadcast_to(d[0], d.shape), atol=1e-12)
+
+
+# ----------------------------------------------------------------- on the ground
+
+
+TRIANGLE = [[-0.4, 0.0], [0.6, 0.0], [0.35, 0.3]]  # base on the ground, apex off centre
+TRIANGLE_MASSES = [0.2, 0.1, 0.4]
+
+
+def _statics(particles, masses):
+    """Forces of the two base particles (x1 < x2) holding the body: sum = M g, no moment about its centre."""
+    x = np.asarray(particles)[:, 0]
+    m = np.asarray(masses)
+    xc = float(m @ x / m.sum())
+    x1, x2 = x[0], x[1]
+    share = (x2 - xc) / (x2 - x1)
+    return m.sum() * G * np.array([share, 1.0 - share])
+
+
+@needs_cc
+@pytest.mark.parametrize("reverse", [False, True], ids=["listed", "reversed"])
+def test_a_rigid_body_landing_flat_stops_whole_and_rests_on_the_forces_of_statics(reverse):
+    h = 0.5
+    scene = rigid_scene(TRIANGLE, TRIANGLE_MASSES, position=[0.0, h], reverse=reverse)
+    r = simulate(scene, **TIGHT)
+    assert r.success, r.message
+    base = [0, 1] if not reverse else [2, 1]
+    t1 = np.sqrt(2 * h / G)
+    assert list(r.events_kind) == ["impact", "impact"]
+    assert sorted(r.events_particle) == sorted(base)
+    np.testing.assert_allclose(r.events_time, t1, rtol=1e-10)
+    # plastic: both base contacts stop, so the whole body stops (all its kinetic energy lost)
+    m = np.sum(TRIANGLE_MASSES)
+    assert r.impact_loss[-1] == pytest.approx(0.5 * m * (G * t1) ** 2, rel=1e-9)
+    after = r.t > t1 + 1e-3
+    np.testing.assert_allclose(r.velocities[after], 0.0, atol=1e-12)
+    expected = _statics(TRIANGLE, TRIANGLE_MASSES)
+    np.testing.assert_allclose(r.contact_force[-1, base], expected, rtol=1e-9)
+    total = r.total_energy
+    assert np.abs(total - total[0]).max() < 1e-9 * total[0]
+
+
+@needs_cc
+def test_the_flat_landing_impulses_solve_the_plastic_impact_of_the_two_contacts_by_hand():
+    # Impulses P1 + P2 = M v (the body stops), P1 (xc - x1) = P2 (x2 - xc) (its spin stays 0):
+    # P = M v (x2 - xc, xc - x1) / (x2 - x1), both >= 0 with the centre between the base
+    # particles, so this is also the linear complementarity problem's unique solution.
+    scene = rigid_scene(TRIANGLE, TRIANGLE_MASSES, position=[0.0, 0.5])
+    model = load_model(scene)
+    p = model.parameters(scene)
+    from flexbody.state import initial_coordinates
+
+    q, _ = initial_coordinates(scene, model)
+    v = 2.0
+    u = np.zeros(model.nu)
+    u[1] = -v  # T's origin falls at v, no spin
+    y = np.concatenate([q, u, [0.0, 0.0]])
+    stop = np.zeros(model.n_contacts, np.intc)
+    stop[[0, 1]] = 1
+    out, loss = model.impact(y, p, stop)
+    du = out[model.nq : model.nq + model.nu] - u
+    M, J = model.mass_matrix(q, p), model.gap_jacobian(q, p)[[0, 1]]
+    impulses = np.linalg.solve(J @ np.linalg.solve(M, J.T), J @ du)
+    expected = _statics(TRIANGLE, TRIANGLE_MASSES) / G * v
+    np.testing.assert_allclose(impulses, expected, rtol=1e-12)
+    np.testing.assert_allclose(out[model.nq : model.nq + model.nu], 0.0, atol=1e-14)
+    assert loss == pytest.approx(0.5 * np.sum(TRIANGLE_MASSES) * v**2, rel=1e-12)
+
+
+@needs_cc
+def test_a_3d_rigid_tetrahedron_landing_on_its_base_rests_on_the_barycentric_forces_of_statics():
+    # The three base forces hold the weight with no moment: F_k = M g b_k, where b are the
+    # barycentric coordinates of the centre of mass's projection in the base triangle.
+    tet = [[0.0, 0.0, 0.0], [0.4, 0.0, 0.0], [0.1, 0.3, 0.0], [0.25, 0.1, 0.2]]
+    masses = [0.1, 0.2, 0.15, 0.3]
+    scene = rigid_scene(tet, masses, position=[0.0, 0.0, 0.3], gravity=(0.0, 0.0, -G))
+    r = simulate(scene, **TIGHT)
+    assert r.success, r.message
+    assert sorted(r.events_particle) == [0, 1, 2] and set(r.events_kind) == {"impact"}
+    np.testing.assert_allclose(r.events_time, np.sqrt(2 * 0.3 / G), rtol=1e-10)
+    m = np.asarray(masses)
+    c = (m @ np.asarray(tet))[:2] / m.sum()
+    base = np.asarray(tet)[:3, :2]
+    b = np.linalg.solve(np.vstack([base.T, np.ones(3)]), np.append(c, 1.0))
+    np.testing.assert_allclose(r.contact_force[-1, :3], m.sum() * G * b, rtol=1e-9)
+    assert r.contact_force[-1, 3] == 0.0
+
+
+@needs_cc
+def test_a_flexible_and_a_rigid_body_in_one_scene_move_as_each_does_alone():
+    flexible = {"name": "dumbbell", "particles": [[-0.1, 0.0], [0.1, 0.0]], "links": [[0, 1]], "mass": 0.05,
+                "stiffness": 2000.0, "damping": 0.5, "position": [2.0, 0.3], "angle": 0.3}
+    rigid = {"name": "bar", "rigid": True, "particles": TRIANGLE, "masses": TRIANGLE_MASSES,
+             "links": [[0, 1], [1, 2]], "position": [0.0, 0.5], "angle": 0.1}
+
+    def run(*bodies):
+        return simulate(flexbody.load_scene({"name": "mix", "bodies": list(bodies),
+                                             "simulation": {"t_end": 0.8, "output_dt": 1e-3}}), **TIGHT)
+
+    both, alone_flexible, alone_rigid = run(flexible, rigid), run(flexible), run(rigid)
+    assert both.success and alone_flexible.success and alone_rigid.success
+    # the flexible body alone runs on the assembled particles formulation, in the mix on the floating one
+    np.testing.assert_allclose(both.positions[:, :2], alone_flexible.positions, atol=1e-8)
+    np.testing.assert_allclose(both.positions[:, 2:], alone_rigid.positions, atol=1e-8)
+    assert both.stats["impacts"] == alone_flexible.stats["impacts"] + alone_rigid.stats["impacts"]
+
+
+@needs_cc
+def test_the_bundled_rigid_bar_lands_flat_on_both_ends_at_once_and_rests_on_statics():
+    r = simulate("rigid_bar", **TIGHT)
+    assert r.success, r.message
+    t1 = np.sqrt(2 * 0.5 / G)
+    assert list(r.events_kind) == ["impact", "impact"] and sorted(r.events_particle) == [0, 1]
+    np.testing.assert_allclose(r.events_time, t1, rtol=1e-10)
+    masses = np.array([0.3, 0.7])
+    assert r.impact_loss[-1] == pytest.approx(0.5 * masses.sum() * (G * t1) ** 2, rel=1e-9)
+    xc = masses @ np.array([-0.5, 0.5]) / masses.sum()  # forces M g (x2 - xc, xc - x1) / L
+    np.testing.assert_allclose(r.contact_force[-1], masses.sum() * G * np.array([0.5 - xc, xc + 0.5]), rtol=1e-9)
+
+
+# ----------------------------------------------------------------- input
+
+
+def test_a_rigid_body_asked_to_run_on_the_particles_formulation_is_refused():
+    scene = rigid_scene(TRIANGLE, TRIANGLE_MASSES, position=[0.0, 0.5])
+    with pytest.raises(InputError, match="only the floating formulation"):
+        simulate(scene, formulation="particles")
+
+
+def test_a_rigid_body_with_particle_velocities_that_are_not_a_rigid_motion_is_refused():
+    table = {"name": "r", "bodies": [{"name": "bar", "rigid": True, "particles": [[-0.5, 0.0], [0.5, 0.0]],
+                                      "masses": [0.5, 0.5], "links": [[0, 1]],
+                                      "position": [0.0, 1.0], "particle_velocities": [[0.0, 0.0], [1.0, 0.0]]}],
+             "simulation": {"t_end": 0.1}}
+    with pytest.raises(InputError, match="not a rigid motion"):
+        simulate(flexbody.load_scene(table))
+
+
+def test_a_rigid_body_on_a_ground_with_friction_or_restitution_is_refused_until_the_lcp_solver_runs():
+    table = {"name": "r", "grounds": [{"point": [0.0, 0.0], "normal": [0.0, 1.0], "restitution": 0.5}],
+             "bodies": [{"name": "bar", "rigid": True, "particles": [[-0.5, 0.0], [0.5, 0.0]], "masses": [0.5, 0.5],
+                         "links": [[0, 1]], "position": [0.0, 1.0]}],
+             "simulation": {"t_end": 0.1}}
+    with pytest.raises(InputError, match="linear complementarity solver"):
+        simulate(flexbody.load_scene(table))
