@@ -126,7 +126,8 @@ def solve_lcp(
         Relative pivot tolerance (:data:`PIVOT_TOL`).
     check_tol : float
         Relative tolerance of the final check (:data:`CHECK_TOL`): row ``i`` may violate
-        ``w_i >= 0`` or ``w_i z_i = 0`` by ``check_tol (|M| |z| + |q|)_i``.
+        ``w_i >= 0`` or ``w_i z_i = 0`` by ``check_tol (|M| |z| + |q|)_i`` plus the rounding
+        level ``16 n eps (max|M| max|z| + max|q|)``; basic values below that level count as 0.
 
     Returns
     -------
@@ -233,6 +234,10 @@ def _finish(M: np.ndarray, q: np.ndarray, T: np.ndarray, basis: np.ndarray, stat
     z = values[n:2 * n]
     if status != "solved":
         return LcpSolution(z, M @ z + q, status, pivots, message)
+    # Rounding level of the whole problem: a degenerate basic variable (exactly 0 in exact
+    # arithmetic) comes out as +-1e-16, and a row with small entries cannot resolve less.
+    floor = 16 * n * np.finfo(float).eps * (np.abs(M).max() * np.abs(z).max() + np.abs(q).max())
+    z = np.where(z > floor, z, 0.0)
     # The basic z solve M_SS z_S = -q_S exactly: re-solving this small system removes the
     # rounding the pivots accumulated (order independence to 1e-12 depends on it).
     S = np.flatnonzero(z > 0.0)
@@ -244,9 +249,8 @@ def _finish(M: np.ndarray, q: np.ndarray, T: np.ndarray, basis: np.ndarray, stat
         if polished is not None and np.all(polished >= 0.0):
             z = np.zeros(n)
             z[S] = polished
-    z = np.where(z > 0.0, z, 0.0)  # rounding can leave -1e-17 on a degenerate basic variable
     w = M @ z + q
-    scale = check_tol * (np.abs(M) @ z + np.abs(q))
+    scale = check_tol * (np.abs(M) @ z + np.abs(q)) + floor
     infeasible = np.maximum(-w - scale, 0.0).max()
     gap = np.where(z > 0.0, np.maximum(np.abs(w) - scale, 0.0), 0.0).max()
     if infeasible > 0.0 or gap > 0.0:
