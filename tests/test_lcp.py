@@ -289,6 +289,38 @@ def test_bar_separating_end_is_pushed_into_the_ground_and_takes_impulse():
     np.testing.assert_allclose(sol.normal_rate, [3.0, 0.0], atol=1e-12)
 
 
+def test_newton_law_can_add_energy_when_a_separating_contact_is_pushed():
+    # Same bar, w = 10, e = 1: q = [2 v1, v2] = [-12, 4], P = -(m/12) [[4, 2], [2, 4]] q = [20/3, 4/3],
+    # u+ = u + M^-1 J^T P = (-1, 10) + (8/2, (-20/6 + 4/6) 6) = (3, -6).  Kinetic energy
+    # (m y'^2 + I theta'^2)/2 with m = 2, I = 1/6: before (2 + 100/6)/2 = 28/3, after (18 + 6)/2 = 12.
+    J, M = bar(2.0, 1.0, (-0.5, 0.5))
+    u = np.array([-1.0, 10.0])
+    sol = solve_impact(delassus(J, M), J @ u, 1.0)
+    np.testing.assert_allclose(sol.normal, [20 / 3, 4 / 3], rtol=1e-12)
+    after = u + velocity_change(J, M, sol.normal)
+    np.testing.assert_allclose(after, [3.0, -6.0], rtol=1e-12)
+    np.testing.assert_allclose([u @ M @ u / 2, after @ M @ after / 2], [28 / 3, 12.0], rtol=1e-12)
+
+
+@pytest.mark.parametrize("seed", range(30))
+def test_newton_law_energy_where_it_is_consistent(seed):
+    # dKE = -(1 - e)/(2 (1 + e)) P^T W P when every contact taking impulse approaches with one e,
+    # and dKE = -P^T W P / 2 for e = 0 whatever the contacts do (see the module docstring).
+    rng = np.random.default_rng(6000 + seed)
+    nc = int(rng.integers(1, 4))
+    J, M = rigid_body_on_ground(rng, nc)
+    J = J[:nc]  # normal rows only
+    u = rng.normal(size=3) - [0.0, 2.0, 0.0]
+    e = 0.0 if seed % 3 == 0 else rng.uniform(0, 1)
+    W = delassus(J, M)
+    sol = solve_impact(W, J @ u, e)
+    after = u + velocity_change(J, M, sol.normal)
+    dke = (after @ M @ after - u @ M @ u) / 2
+    P = sol.normal
+    if e == 0.0 or np.all((J @ u)[P > 0] < 0):
+        np.testing.assert_allclose(dke, -(1 - e) / (2 * (1 + e)) * (P @ W @ P), rtol=1e-9, atol=1e-12)
+
+
 @pytest.mark.parametrize("w", [0.5, 10.0, 20.0])
 def test_bar_landing_impulses_independent_of_particle_order(w):
     J, M = bar(2.0, 1.0, (-0.5, 0.5))
@@ -325,6 +357,25 @@ def test_two_equal_particles_head_on(e):
             np.testing.assert_allclose(after, [v2, v1], rtol=1e-13)
         if e == 0.0:
             np.testing.assert_allclose(after, [(v1 + v2) / 2] * 2, atol=1e-13)
+
+
+@pytest.mark.parametrize("e", [0.0, 1.0])
+def test_three_particle_chain_both_contacts_closed(e):
+    # Equal particles in a row, touching (gaps x2 - x1 and x3 - x2), velocities (2, 0, -1):
+    # W = (1/m) [[2, -1], [-1, 2]] couples the contacts.  Both take impulse, so v+ = -e v- per contact,
+    # and momentum (sum = 1) closes it:  e = 0: all at 1/3;  e = 1: relative velocities (-2, -1) become
+    # (2, 1): v1+ = a, v2+ = a + 2, v3+ = a + 3, 3 a + 5 = 1 -> (-4/3, 2/3, 5/3), kinetic energy kept.
+    m = 0.2
+    J, M = np.array([[-1.0, 1.0, 0.0], [0.0, -1.0, 1.0]]), m * np.eye(3)
+    W = delassus(J, M)
+    np.testing.assert_allclose(W, np.array([[2.0, -1.0], [-1.0, 2.0]]) / m, rtol=1e-14)
+    u = np.array([2.0, 0.0, -1.0])
+    sol = solve_impact(W, J @ u, e)
+    after = u + velocity_change(J, M, sol.normal)
+    expected = [1 / 3] * 3 if e == 0.0 else [-4 / 3, 2 / 3, 5 / 3]
+    np.testing.assert_allclose(after, expected, rtol=1e-13)
+    if e == 1.0:
+        np.testing.assert_allclose(after @ after, u @ u, rtol=1e-13)
 
 
 @pytest.mark.parametrize("x", [-0.2, 0.0, 0.3])
@@ -470,7 +521,9 @@ def test_friction_impact_independent_of_contact_order(seed):
     rows = np.concatenate([perm, nc + perm])
     a = solve_impact_friction(delassus(J, M), J @ u, e, mu)
     b = solve_impact_friction(delassus(J[rows], M), J[rows] @ u, e[perm], mu[perm])
-    # the generalized velocity after is unique even if impulses were not; here W is definite (nc = 3 < ...)
+    # W (6 x 6) has rank 3 here, so the impulses need not be unique; compare the velocity they produce.
+    # (Its uniqueness is a theorem for frictionless contacts only; with friction this checks that the
+    # pivoting, not the problem, brings in no dependence on the order.)
     ua = u + velocity_change(J, M, np.concatenate([a.normal, a.tangent]))
     ub = u + velocity_change(J[rows], M, np.concatenate([b.normal, b.tangent]))
     np.testing.assert_allclose(ub, ua, atol=1e-12)

@@ -24,9 +24,13 @@ of the contact points along these directions.
   only gets ``v+ >= 0``.  Including the non-approaching ones is necessary: a bar landing on
   one end can drive its other, resting or even separating end into the ground.  Contacts
   with a gap (``touching`` False) take none.  With several contacts this is one choice
-  among impact laws (the thesis's "indeterminate multiple simultaneous impact"): it is
-  not energy-consistent in general (with ``e > 0`` coupled contacts can end with more
-  kinetic energy than the one-contact law suggests), and it is not Poisson's law.
+  among impact laws (the thesis's "indeterminate multiple simultaneous impact"), and it is
+  not energy-consistent in general.  The kinetic energy changes by
+  ``dKE = P . (v+ + v-) / 2 = P . v+ - P^T W P / 2``: with ``e = 0`` (``P . v+ = 0``) it
+  never grows; when every contact taking impulse approaches and all share one ``e``,
+  ``dKE = -(1 - e) / (2 (1 + e)) P^T W P <= 0``; but a touching contact that does not
+  approach and is pushed (``v+ = 0`` while ``v- > 0``), or unequal ``e``, can make it
+  *grow* (a bar landing on one end with ``e = 1``: 28/3 J -> 12 J, in the tests).
 * **Contact forces** (held contacts): accelerations ``a = a_free + W lam >= 0``
   complementary to ``lam >= 0``.
 * **Friction in 2D** (Stewart & Trinkle 1996; Anitescu & Potra 1997): the tangential
@@ -76,7 +80,7 @@ class ContactSolution:
     normal_rate : ndarray, shape (nc,)
         Normal velocity after the impact ``v_n+`` (m/s), or normal acceleration ``a_n`` (m/s^2).
     tangent_rate : ndarray, shape (nc,)
-        The same along the tangents (empty-free: zeros for a frictionless problem).
+        The same along the tangents (zeros for a frictionless problem).
     status : str
         ``"solved"``, or an :data:`flexbody.lcp.STATUSES` value saying why not.
     message : str
