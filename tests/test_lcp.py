@@ -12,6 +12,16 @@ import numpy as np
 import pytest
 from scipy.optimize import linprog
 
+import flexbody.lcp
+from flexbody.contact_problems import (
+    delassus,
+    is_decoupled,
+    solve_forces,
+    solve_forces_friction,
+    solve_impact,
+    solve_impact_friction,
+    velocity_change,
+)
 from flexbody.lcp import solve_lcp
 
 
@@ -168,8 +178,6 @@ def test_lexicographic_rule_ends_where_a_naive_tie_break_cycles(seed, monkeypatc
         assert_solves(sol, M, q)
     else:  # M is not copositive-plus, so a ray proves nothing; but no basic solution exists here
         assert not brute_force(M, q)
-    import flexbody.lcp
-
     monkeypatch.setattr(flexbody.lcp, "_lex_min_row", _naive_tie_break)
     assert solve_lcp(M, q, max_pivots=500).status == "iterations"  # the same path without the rule cycles
 
@@ -219,16 +227,6 @@ def test_bad_arguments_are_named(M, q, match):
 
 
 # --- contact problems ---------------------------------------------------------------------
-
-from flexbody.contact_problems import (  # noqa: E402
-    delassus,
-    is_decoupled,
-    solve_forces,
-    solve_forces_friction,
-    solve_impact,
-    solve_impact_friction,
-    velocity_change,
-)
 
 G = 9.81
 
@@ -562,6 +560,26 @@ def test_painleve_rod_above_critical_friction_has_no_force(mu):
     sol = solve_forces_friction(delassus(J, M), [-G, 0.0], mu, [-1.0])
     assert sol.status == "ray" and not sol.solved
     assert sol.message.startswith("Painlevé: no consistent contact force")
+
+
+def test_painleve_rod_indeterminate_case_is_flagged():
+    # mu = 2 > 5/3, sliding toward -x, but spinning: a_n_free = -g + l sin(theta) omega^2 > 0.
+    # A = (1 + 3 cos^2 - 3 mu sin cos)/m < 0, so lam = 0 (a_n = a_free > 0) and lam = -a_free/A > 0
+    # (a_n = 0) are both consistent.  Lemke returns the first (q >= 0); the message says so.
+    theta, m, half, omega = np.pi / 4, 1.0, 0.5, 8.0
+    J, M = painleve_rod(theta, m, half)
+    a_n = -G + half * np.sin(theta) * omega**2
+    a_t = half * np.cos(theta) * omega**2  # x_c'' = x'' + l sin th th'' + l cos th th'^2
+    sol = solve_forces_friction(delassus(J, M), [a_n, a_t], 2.0, [-1.0])
+    assert a_n > 0 and sol.solved
+    np.testing.assert_allclose(sol.normal, [0.0], atol=1e-15)
+    assert sol.message.startswith("Painlevé: the contact force may not be unique")
+    c, s = np.cos(theta), np.sin(theta)
+    A = (1 + 3 * c**2 - 3 * 2.0 * s * c) / m
+    other = -a_n / A
+    assert other > 0  # the second solution, lam_n = -a_n_free / A, is a push too
+    # below the critical mu the same spinning rod is flagged by nothing
+    assert "Painlevé" not in solve_forces_friction(delassus(J, M), [a_n, a_t], 0.5, [-1.0]).message
 
 
 def test_sticking_contact_with_enough_friction_holds():

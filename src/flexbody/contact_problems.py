@@ -261,7 +261,11 @@ def solve_forces_friction(W: np.ndarray, a_free: np.ndarray, mu: np.ndarray | fl
     -------
     ContactSolution
         Forces and accelerations; status ``"ray"`` with the message "Painlevé: no consistent
-        contact force" when none exists.
+        contact force" when none exists.  When one is found but the normal matrix with the
+        sliding friction, ``W_nn + W_nt D`` (``D = diag(-mu sign(v_t))``), is not a P-matrix
+        (Painlevé's indeterminate case: other forces may also be consistent), the status
+        stays ``"solved"`` and the message starts "Painlevé: the contact force may not be
+        unique".
     """
     W, a, _, on = _impact_args(W, a_free, 0.0, None, 2)
     nc = on.size
@@ -282,7 +286,24 @@ def solve_forces_friction(W: np.ndarray, a_free: np.ndarray, mu: np.ndarray | fl
     if status == "ray":
         message = ("Painlevé: no consistent contact force (friction of a sliding contact would "
                    f"need the contact to pull; {message})")
+    elif status == "solved" and sliding.any() and not _is_p_matrix(W[:nc, :nc] + W[:nc, nc:] @ drag):
+        message = ("Painlevé: the contact force may not be unique (with the sliding friction the "
+                   f"normal matrix W_nn + W_nt D is not a P-matrix); one solution returned, {message}")
     return _friction_solution(W, a, lam, status, message, "lcp", pivots)
+
+
+def _is_p_matrix(A: np.ndarray, largest: int = 12) -> bool:
+    """True when every principal minor of ``A`` (shape (n, n)) is > 0 (checked for n <= ``largest``;
+    beyond that, 2^n minors are too many and True is returned: no claim of ill-posedness)."""
+    n = A.shape[0]
+    if n > largest:
+        return True
+    scale = np.abs(A).max()
+    for mask in range(1, 2**n):
+        S = [i for i in range(n) if mask >> i & 1]
+        if np.linalg.det(A[np.ix_(S, S)]) <= 1e-12 * scale ** len(S):
+            return False
+    return True
 
 
 def _normal_lcp(W: np.ndarray, q: np.ndarray, on: np.ndarray, fast: bool
