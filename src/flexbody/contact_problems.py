@@ -262,8 +262,9 @@ def solve_forces_friction(W: np.ndarray, a_free: np.ndarray, mu: np.ndarray | fl
     ContactSolution
         Forces and accelerations; status ``"ray"`` with the message "Painlevé: no consistent
         contact force" when none exists.  When one is found but the normal matrix with the
-        sliding friction, ``W_nn + W_nt D`` (``D = diag(-mu sign(v_t))``), is not a P-matrix
-        (Painlevé's indeterminate case: other forces may also be consistent), the status
+        sliding friction, ``W_nn + W_nt D`` (``D = diag(-mu sign(v_t))``), has a negative
+        principal minor (Painlevé's indeterminate case: other forces may also be consistent;
+        zero minors are redundant contacts, not flagged), the status
         stays ``"solved"`` and the message starts "Painlevé: the contact force may not be
         unique".
     """
@@ -286,18 +287,29 @@ def solve_forces_friction(W: np.ndarray, a_free: np.ndarray, mu: np.ndarray | fl
     if status == "ray":
         message = ("Painlevé: no consistent contact force (friction of a sliding contact would "
                    f"need the contact to pull; {message})")
-    elif status == "solved" and sliding.any() and not _is_p_matrix(W[:nc, :nc] + W[:nc, nc:] @ drag):
+    elif status == "solved" and sliding.any() and not _is_p0_matrix(W[:nc, :nc] + W[:nc, nc:] @ drag):
         message = ("Painlevé: the contact force may not be unique (with the sliding friction the "
-                   f"normal matrix W_nn + W_nt D is not a P-matrix); one solution returned, {message}")
+                   f"normal matrix W_nn + W_nt D has a negative principal minor); one solution returned, "
+                   f"{message}")
     return _friction_solution(W, a, lam, status, message, "lcp", pivots)
 
 
-def _is_p_matrix(A: np.ndarray, largest: int = 12) -> bool:
-    """True when every principal minor of ``A`` (shape (n, n)) is > 0 (checked for n <= ``largest``;
-    beyond that, 2^n minors are too many and True is returned: no claim of ill-posedness)."""
+def _is_p0_matrix(A: np.ndarray, largest: int = 12) -> bool:
+    """True when no principal minor of ``A`` (shape (n, n)) is negative (a P0-matrix).
+
+    Zero minors are redundant contacts (forces indeterminate even without friction), not
+    Painlevé's case; a negative one is.  Checked for n <= ``largest`` (2^n minors); beyond
+    that True is returned (no claim of ill-posedness).
+    """
     n = A.shape[0]
     if n > largest:
         return True
+    scale = np.abs(A).max()
+    for mask in range(1, 2**n):
+        S = [i for i in range(n) if mask >> i & 1]
+        if np.linalg.det(A[np.ix_(S, S)]) < -1e-10 * scale ** len(S):
+            return False
+    return True
     scale = np.abs(A).max()
     for mask in range(1, 2**n):
         S = [i for i in range(n) if mask >> i & 1]
