@@ -582,6 +582,23 @@ def test_painleve_rod_indeterminate_case_is_flagged():
     assert "Painlevé" not in solve_forces_friction(delassus(J, M), [a_n, a_t], 0.5, [-1.0]).message
 
 
+def test_redundant_sliding_supports_are_not_called_painleve():
+    # A flat bar (x, y, theta) sliding on three collinear supports at its centre line (r_y = 0): friction
+    # is horizontal through the line of the supports, W_nt = 0, so the normal matrix is W_nn, singular
+    # (rank 2) but with no negative minor: forces indeterminate as without friction, not Painlevé.
+    # Balance: sum lam_n = m g, moment sum r_x lam_n = 0 (centred), lam_t = -mu lam_n.
+    m, inertia, mu = 2.0, 2.0 / 12, 0.3
+    rx = np.array([-0.5, 0.0, 0.5])
+    Jn = np.column_stack([np.zeros(3), np.ones(3), rx])
+    Jt = np.column_stack([np.ones(3), np.zeros(3), np.zeros(3)])
+    J, M = np.vstack([Jn, Jt]), np.diag([m, m, inertia])
+    sol = solve_forces_friction(delassus(J, M), J @ np.array([0.0, -G, 0.0]), mu, np.full(3, 0.7))
+    assert sol.solved and "Painlevé" not in sol.message
+    np.testing.assert_allclose([sol.normal.sum(), rx @ sol.normal], [m * G, 0.0], atol=1e-12)
+    np.testing.assert_allclose(sol.tangent, -mu * sol.normal, atol=1e-12)
+    np.testing.assert_allclose(sol.normal_rate, 0.0, atol=1e-12)
+
+
 def test_sticking_contact_with_enough_friction_holds():
     # A rod leaning at 45 deg, end at rest (v_t = 0), no spin: with large mu it sticks (a_n = a_t = 0).
     # Then lam solves W [lam_n, lam_t] = -a_free, i.e. the end's acceleration vanishes.
