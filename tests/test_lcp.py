@@ -507,6 +507,37 @@ def test_coupled_friction_impact_obeys_coulomb_and_dissipates(seed):
         assert after @ M @ after <= u @ M @ u + 1e-9
 
 
+@pytest.mark.parametrize("seed", range(25))
+def test_coupled_friction_forces_obey_coulomb(seed):
+    # Held contacts of a rigid body, some sliding (v_t != 0), some at rest along the ground: check the
+    # laws on the answer.  Normal: lam_n >= 0, a_n >= 0, lam_n a_n = 0.  Sliding: lam_t = -mu lam_n sign(v_t).
+    # At rest: |lam_t| <= mu lam_n, and where the contact starts to slip (a_t != 0) lam_t = -mu lam_n sign(a_t).
+    rng = np.random.default_rng(7000 + seed)
+    nc = int(rng.integers(1, 5))
+    J, M = rigid_body_on_ground(rng, nc)
+    mu = rng.uniform(0.0, 0.6, nc)
+    v_t = np.where(rng.uniform(size=nc) > 0.5, rng.normal(size=nc), 0.0)
+    a_free = J @ np.array([0.0, -G, 0.0]) + rng.normal(size=2 * nc)
+    sol = solve_forces_friction(delassus(J, M), a_free, mu, v_t)
+    if sol.status == "ray":  # Painlevé: nothing to check but the message
+        assert sol.message.startswith("Painlevé")
+        return
+    assert sol.solved, sol.message
+    lam = np.concatenate([sol.normal, sol.tangent])
+    rates = np.concatenate([sol.normal_rate, sol.tangent_rate])
+    np.testing.assert_allclose(rates, a_free + delassus(J, M) @ lam, atol=1e-10)
+    tol = 1e-9 * (1 + np.abs(lam).max() + np.abs(a_free).max())
+    assert np.all(sol.normal >= 0) and np.all(sol.normal_rate >= -tol)
+    assert np.all(np.abs(sol.normal * sol.normal_rate) <= tol * (1 + sol.normal))
+    slide = (v_t != 0) & (mu > 0)
+    np.testing.assert_allclose(sol.tangent[slide], -mu[slide] * np.sign(v_t[slide]) * sol.normal[slide], atol=tol)
+    rest = ~slide
+    assert np.all(np.abs(sol.tangent[rest]) <= mu[rest] * sol.normal[rest] + tol)
+    slip = rest & (np.abs(sol.tangent_rate) > 1e-8)
+    np.testing.assert_allclose(sol.tangent[slip], -mu[slip] * np.sign(sol.tangent_rate[slip]) * sol.normal[slip],
+                               atol=tol)
+
+
 @pytest.mark.parametrize("seed", range(8))
 def test_friction_impact_independent_of_contact_order(seed):
     rng = np.random.default_rng(5000 + seed)
