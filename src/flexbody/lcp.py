@@ -1,0 +1,260 @@
+"""Linear complementarity problems, solved exactly by Lemke's complementary pivoting.
+
+The problem ``LCP(M, q)``: find ``z`` with
+
+    w = M z + q,   w >= 0,   z >= 0,   w . z = 0          (M: (n, n), q, z, w: (n,))
+
+Coupled contacts (DESIGN §6) lead to it: the impulses of a simultaneous impact and the forces
+of held contacts, with ``M`` the Delassus matrix ``W = J M^-1 J^T`` (see
+:mod:`flexbody.contact_problems`).  :func:`solve_lcp` is a finite pivoting method, so its
+answer is exact up to rounding (no iteration tolerance), and the answer does not depend on
+the order in which the contacts are listed wherever the solution is unique.
+
+What it guarantees, by the class of ``M`` (Cottle, Pang & Stone, *The Linear Complementarity
+Problem*, 1992, ch. 4):
+
+* **P-matrix** (every principal minor > 0; e.g. ``W`` of independent contacts, which is
+  symmetric positive definite): the solution exists and is unique for every ``q``, and
+  Lemke's method finds it.
+* **copositive-plus** (includes every positive semidefinite ``M``; e.g. ``W`` of redundant
+  contacts, a bar on three collinear supports): when the method ends on a secondary ray,
+  the problem has no feasible point, so no solution; otherwise it finds one.  With a
+  symmetric positive semidefinite ``M`` the solution ``z`` need not be unique, but ``w`` is:
+  for two solutions, ``(z1 - z2) . (w1 - w2) = -z1 . w2 - z2 . w1 <= 0`` and also
+  ``= (z1 - z2)^T M (z1 - z2) >= 0``, so ``M (z1 - z2) = 0``.  For contacts this means the
+  impulses may be indeterminate but the velocities they produce are not.
+* other matrices (friction, :mod:`flexbody.contact_problems`): a secondary ray says that the
+  method found no solution; for the frictional force problem that is Painlevé's paradox.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["STATUSES", "LcpSolution", "solve_lcp"]
+
+#: Status values of :class:`LcpSolution` and what each means.
+STATUSES = {
+    "solved": "z solves the LCP (checked: feasibility and complementarity to the check tolerance).",
+    "ray": "Lemke's method ended on a secondary ray: no solution was found (none exists for a "
+           "copositive-plus M); z is the last almost-complementary point, not a solution.",
+    "iterations": "The pivot limit was reached before a solution; z is the last point.",
+    "inaccurate": "A complementary basis was found, but its z fails the feasibility or "
+                  "complementarity check (an ill-conditioned M).",
+}  # fmt: skip
+
+#: Relative pivot tolerance: an entry of the entering column counts as positive only above
+#: this fraction of the column's largest magnitude.
+PIVOT_TOL = 1e-11
+#: Relative tolerance of the final check, scaled per row by ``|M| |z| + |q|``.
+CHECK_TOL = 1e-9
+#: Relative tolerance for ties in the lexicographic ratio test.
+TIE_TOL = 1e-12
+
+
+@dataclass(frozen=True)
+class LcpSolution:
+    """The answer of :func:`solve_lcp`.
+
+    Attributes
+    ----------
+    z : ndarray, shape (n,)
+        The solution (meaningful only when ``status == "solved"``).
+    w : ndarray, shape (n,)
+        ``M z + q``, recomputed from ``z``.
+    status : str
+        One of :data:`STATUSES`.
+    pivots : int
+        Number of pivots performed (0 when ``q >= 0``).
+    message : str
+        What happened, in a sentence.
+    """
+
+    z: np.ndarray
+    w: np.ndarray
+    status: str
+    pivots: int
+    message: str
+
+    @property
+    def solved(self) -> bool:
+        """True when ``z`` is a checked solution."""
+        return self.status == "solved"
+
+
+def solve_lcp(
+    M: np.ndarray,
+    q: np.ndarray,
+    *,
+    covering: np.ndarray | None = None,
+    max_pivots: int | None = None,
+    pivot_tol: float = PIVOT_TOL,
+    check_tol: float = CHECK_TOL,
+) -> LcpSolution:
+    """Solve ``w = M z + q, w >= 0, z >= 0, w . z = 0`` by Lemke's method.
+
+    The method augments the problem with an artificial variable ``z0`` and a covering vector
+    ``d > 0``: ``w = M z + q + d z0``.  Starting from ``w = q + d z0`` with ``z0`` just large
+    enough to make ``w >= 0``, it pivots along a path of almost-complementary feasible bases
+    (at most one complementary pair both basic): the variable that enters is always the
+    complement of the one that left.  The path ends when ``z0`` leaves the basis (a
+    solution) or when the entering column has no positive entry (a secondary ray).
+
+    **Termination.**  The leaving row is chosen by the *lexicographic* minimum ratio test:
+    among rows ``i`` with a positive entry ``a_i`` of the entering column, the smallest
+    vector ``(b_i, (B^-1)_i) / a_i`` (``b`` the basic values, ``B^-1`` the basis inverse).
+    The rows of ``B^-1`` are linearly independent, so there is never a tie: this is
+    Lemke's method on the perturbed problem ``q + (eps, eps^2, ..., eps^n)``, which is
+    non-degenerate for small ``eps``.  On a non-degenerate problem each almost-complementary
+    basis has at most two neighbours on the path and the start has one, so the path never
+    revisits a basis; there are finitely many bases, so it ends after finitely many pivots
+    even when ``q`` has zeros or ``M`` repeated rows.  (The pivot limit guards against
+    rounding only; exact arithmetic needs none.)
+
+    Parameters
+    ----------
+    M : array_like, shape (n, n)
+        The matrix (need not be symmetric).
+    q : array_like, shape (n,)
+    covering : array_like, shape (n,), optional
+        The covering vector ``d`` (all > 0); default ones.
+    max_pivots : int, optional
+        Pivot limit; default ``100 (n + 1)``.  Reaching it gives status ``"iterations"``.
+    pivot_tol : float
+        Relative pivot tolerance (:data:`PIVOT_TOL`).
+    check_tol : float
+        Relative tolerance of the final check (:data:`CHECK_TOL`): row ``i`` may violate
+        ``w_i >= 0`` or ``w_i z_i = 0`` by ``check_tol (|M| |z| + |q|)_i`` plus the rounding
+        level ``16 n eps (max|M| max|z| + max|q|)``; basic values below that level count as 0.
+
+    Returns
+    -------
+    LcpSolution
+        ``z``, ``w``, status (:data:`STATUSES`), pivot count and a message.
+
+    Raises
+    ------
+    ValueError
+        When ``M`` is not square, ``q`` does not match it, or either is not finite.
+    """
+    M, q, d = _checked(M, q, covering)
+    n = q.size
+    if np.all(q >= 0.0):  # z = 0 already solves it
+        return LcpSolution(np.zeros(n), q.copy(), "solved", 0, "q >= 0: z = 0 with no pivots.")
+    limit = 100 * (n + 1) if max_pivots is None else int(max_pivots)
+
+    # Tableau of  w - M z - d z0 = q:  columns w (0..n-1), z (n..2n-1), z0 (2n), right side (2n+1).
+    # Its first n columns are always the basis inverse (the start basis is w, the identity).
+    T = np.hstack([np.eye(n), -M, -d[:, None], q[:, None]])
+    basis = np.arange(n)  # variable held in each row
+    z0, rhs = 2 * n, 2 * n + 1
+
+    # First pivot: z0 enters at the row where q_i / d_i is (lexicographically) smallest.
+    row = _lex_min_row(T, np.arange(n), d, n, rhs)
+    _pivot(T, row, z0)
+    leaving, basis[row] = basis[row], z0
+    pivots = 1
+    while True:
+        entering = leaving + n if leaving < n else leaving - n  # the complement of what left
+        column = T[:, entering]
+        top = np.abs(column).max()
+        rows = np.flatnonzero(column > pivot_tol * top) if top > 0.0 else np.empty(0, int)
+        if rows.size == 0:
+            return _finish(M, q, T, basis, "ray", pivots, check_tol,
+                           f"secondary ray after {pivots} pivots: no solution found.")
+        if pivots >= limit:
+            return _finish(M, q, T, basis, "iterations", pivots, check_tol,
+                           f"pivot limit {limit} reached before a solution.")
+        row = _lex_min_row(T, rows, column[rows], n, rhs, prefer=np.flatnonzero(basis == z0))
+        _pivot(T, row, entering)
+        leaving, basis[row] = basis[row], entering
+        pivots += 1
+        if leaving == z0:
+            return _finish(M, q, T, basis, "solved", pivots, check_tol, f"solved in {pivots} pivots.")
+
+
+def _checked(M, q, covering) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``M``, ``q`` and the covering vector as float arrays, or one ValueError that says why."""
+    M = np.asarray(M, dtype=float)
+    q = np.asarray(q, dtype=float)
+    if M.ndim != 2 or M.shape[0] != M.shape[1]:
+        raise ValueError(f"`M` must be a square matrix, got shape {M.shape}.")
+    if q.shape != (M.shape[0],):
+        raise ValueError(f"`q` must have shape ({M.shape[0]},) to match `M`, got shape {q.shape}.")
+    if not (np.all(np.isfinite(M)) and np.all(np.isfinite(q))):
+        raise ValueError("`M` and `q` must be finite (found inf or nan).")
+    d = np.ones_like(q) if covering is None else np.asarray(covering, dtype=float)
+    if d.shape != q.shape or not np.all(d > 0.0) or not np.all(np.isfinite(d)):
+        raise ValueError(f"`covering` must have shape {q.shape} with finite entries > 0, got {d!r}.")
+    return M, q, d
+
+
+def _lex_min_row(T: np.ndarray, rows: np.ndarray, a: np.ndarray, n: int, rhs: int,
+                 prefer: np.ndarray | None = None) -> int:
+    """The row among ``rows`` whose ``(b_i, (B^-1)_i) / a_i`` is lexicographically smallest.
+
+    ``a`` (shape ``(len(rows),)``, > 0) are the divisors.  Ties in the first component (a
+    degenerate step) are broken by the basis inverse's rows, except that a row in ``prefer``
+    (the one holding ``z0``) wins a first-component tie at once: letting ``z0`` leave there
+    ends the path on a solution.
+    """
+    keys = np.column_stack([T[rows, rhs], T[rows, :n]]) / a[:, None]
+    alive = np.arange(rows.size)
+    for k in range(keys.shape[1]):
+        values = keys[alive, k]
+        low = values.min()
+        alive = alive[values <= low + TIE_TOL * max(1.0, np.abs(values).max())]
+        if k == 0 and prefer is not None and prefer.size:
+            hit = np.flatnonzero(np.isin(rows[alive], prefer))
+            if hit.size:
+                return int(rows[alive[hit[0]]])
+        if alive.size == 1:
+            break
+    return int(rows[alive[0]])  # several left only if B^-1 lost rank to rounding
+
+
+def _pivot(T: np.ndarray, row: int, col: int) -> None:
+    """Gauss-Jordan pivot of the tableau ``T`` in place on entry ``(row, col)``."""
+    T[row] /= T[row, col]
+    factors = T[:, col].copy()
+    factors[row] = 0.0
+    T -= np.outer(factors, T[row])
+    T[:, col] = 0.0
+    T[row, col] = 1.0
+
+
+def _finish(M: np.ndarray, q: np.ndarray, T: np.ndarray, basis: np.ndarray, status: str, pivots: int,
+            check_tol: float, message: str) -> LcpSolution:
+    """Read ``z`` off the final basis, polish it, check it and wrap it up."""
+    n = q.size
+    values = np.zeros(2 * n + 1)
+    values[basis] = T[:, -1]
+    z = values[n:2 * n]
+    if status != "solved":
+        return LcpSolution(z, M @ z + q, status, pivots, message)
+    # Rounding level of the whole problem: a degenerate basic variable (exactly 0 in exact
+    # arithmetic) comes out as +-1e-16, and a row with small entries cannot resolve less.
+    floor = 16 * n * np.finfo(float).eps * (np.abs(M).max() * np.abs(z).max() + np.abs(q).max())
+    z = np.where(z > floor, z, 0.0)
+    # The basic z solve M_SS z_S = -q_S exactly: re-solving this small system removes the
+    # rounding the pivots accumulated (order independence to 1e-12 depends on it).
+    S = np.flatnonzero(z > 0.0)
+    if S.size:
+        try:
+            polished = np.linalg.solve(M[np.ix_(S, S)], -q[S])
+        except np.linalg.LinAlgError:
+            polished = None
+        if polished is not None and np.all(polished >= 0.0):
+            z = np.zeros(n)
+            z[S] = polished
+    w = M @ z + q
+    scale = check_tol * (np.abs(M) @ z + np.abs(q)) + floor
+    infeasible = np.maximum(-w - scale, 0.0).max()
+    gap = np.where(z > 0.0, np.maximum(np.abs(w) - scale, 0.0), 0.0).max()
+    if infeasible > 0.0 or gap > 0.0:
+        return LcpSolution(z, w, "inaccurate", pivots,
+                           f"{message[:-1]}, but the check fails: w below 0 by {infeasible:.3g} "
+                           f"beyond tolerance, complementarity off by {gap:.3g}.")
+    return LcpSolution(z, w, "solved", pivots, message)

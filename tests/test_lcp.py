@@ -1,0 +1,656 @@
+"""Lemke's method (flexbody.lcp) and the contact problems built on it (flexbody.contact_problems).
+
+References are independent of the code under test: brute-force enumeration of complementary
+bases, a linear program for feasibility, closed forms derived by hand in the comments.
+"""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+import pytest
+from scipy.optimize import linprog
+
+import flexbody.lcp
+from flexbody.contact_problems import (
+    delassus,
+    is_decoupled,
+    solve_forces,
+    solve_forces_friction,
+    solve_impact,
+    solve_impact_friction,
+    velocity_change,
+)
+from flexbody.lcp import solve_lcp
+
+
+def brute_force(M, q):
+    """Every basic solution of LCP(M, q): for each index set S with M_SS invertible,
+    z_S = -M_SS^-1 q_S, z = 0 elsewhere, kept when z >= 0 and w = M z + q >= 0."""
+    n = q.size
+    found = []
+    scale = 1e-9 * (np.abs(M).sum() + np.abs(q).sum() + 1.0)
+    for k in range(n + 1):
+        for S in itertools.combinations(range(n), k):
+            S = list(S)
+            z = np.zeros(n)
+            if S:
+                block = M[np.ix_(S, S)]
+                if np.linalg.cond(block) > 1e10:
+                    continue
+                z[S] = np.linalg.solve(block, -q[S])
+            w = M @ z + q
+            if z.min() >= -scale and w.min() >= -scale:
+                found.append((z, w))
+    return found
+
+
+def feasible(M, q):
+    """Is there z >= 0 with M z + q >= 0?  (a linear program; for copositive-plus M this is
+    equivalent to LCP(M, q) having a solution, Lemke's theorem)."""
+    n = q.size
+    res = linprog(np.zeros(n), A_ub=-M, b_ub=q, bounds=[(0, None)] * n, method="highs")
+    return res.status == 0
+
+
+def random_p_matrix(rng, n):
+    """Positive definite (not necessarily symmetric) or strictly row-diagonally dominant with a
+    positive diagonal: both are P-matrices."""
+    kind = rng.integers(3)
+    A = rng.normal(size=(n, n))
+    if kind == 0:
+        return A @ A.T + 0.05 * np.eye(n)  # symmetric positive definite (a Delassus matrix)
+    if kind == 1:
+        return A @ A.T + 0.05 * np.eye(n) + (A - A.T)  # positive definite + skew: x^T M x > 0
+    M = rng.normal(size=(n, n))
+    np.fill_diagonal(M, np.abs(M).sum(axis=1) + rng.uniform(0.1, 1.0, n))
+    return M
+
+
+def assert_solves(sol, M, q, tol=1e-9):
+    assert sol.status == "solved", sol.message
+    scale = tol * (np.abs(M) @ np.abs(sol.z) + np.abs(q) + 1e-300)
+    assert np.all(sol.z >= 0.0)
+    np.testing.assert_allclose(sol.w, M @ sol.z + q, rtol=0, atol=1e-12 * (1 + np.abs(q).max()))
+    assert np.all(sol.w >= -scale)
+    assert np.all(np.abs(sol.w * sol.z) <= scale * np.maximum(sol.z, 1.0))
+
+
+# --- Lemke against references -------------------------------------------------------------
+
+
+@pytest.mark.parametrize("n", range(1, 9))
+def test_p_matrix_unique_solution_equals_brute_force(n):
+    rng = np.random.default_rng(100 + n)
+    for _ in range(25 if n <= 6 else 6):
+        M = random_p_matrix(rng, n)
+        q = rng.normal(size=n)
+        sol = solve_lcp(M, q)
+        assert_solves(sol, M, q)
+        found = brute_force(M, q)
+        assert len(found) == 1  # a P-matrix: exactly one solution (checks the reference too)
+        np.testing.assert_allclose(sol.z, found[0][0], rtol=1e-9, atol=1e-10)
+
+
+def test_trivial_q_nonnegative_needs_no_pivot():
+    M = np.array([[2.0, 1.0], [1.0, 2.0]])
+    sol = solve_lcp(M, [0.0, 3.0])
+    assert sol.status == "solved" and sol.pivots == 0
+    np.testing.assert_array_equal(sol.z, [0.0, 0.0])
+
+
+@pytest.mark.parametrize("seed", range(40))
+def test_symmetric_psd_w_unique_or_ray_when_infeasible(seed):
+    # M = A A^T with rank k < n: positive semidefinite, singular (redundant contacts).
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(2, 7))
+    A = rng.normal(size=(n, int(rng.integers(1, n))))
+    M = A @ A.T
+    q = rng.normal(size=n)
+    sol = solve_lcp(M, q)
+    if not feasible(M, q):
+        assert sol.status == "ray"
+        return
+    assert_solves(sol, M, q)
+    found = brute_force(M, q)
+    assert found  # Lemke's final basis is one of them
+    for _, w in found:  # z may differ between solutions; w may not
+        np.testing.assert_allclose(sol.w, w, rtol=1e-8, atol=1e-9)
+
+
+def test_psd_infeasible_ends_on_a_ray():
+    # w1 = z1 - z2 - 1, w2 = -z1 + z2 - 1: w1 + w2 = -2 < 0 for every z, infeasible.
+    M = np.array([[1.0, -1.0], [-1.0, 1.0]])
+    sol = solve_lcp(M, [-1.0, -1.0])
+    assert sol.status == "ray" and not sol.solved
+
+
+@pytest.mark.parametrize("seed", range(30))
+def test_degenerate_problems_terminate_with_a_valid_solution(seed):
+    # Small integer data: q with zeros and ties, repeated rows of M (a repeated contact).
+    rng = np.random.default_rng(1000 + seed)
+    n = int(rng.integers(2, 7))
+    A = rng.integers(-2, 3, size=(n, n)).astype(float)
+    M = A @ A.T + np.eye(n)
+    q = rng.integers(-2, 2, size=n).astype(float)
+    if seed % 2:  # duplicate the first contact: rows/cols 0 and 1 equal, M singular PSD
+        J = rng.integers(-2, 3, size=(n, 3)).astype(float)
+        J[1] = J[0]
+        M = J @ J.T
+        q[1] = q[0]
+    sol = solve_lcp(M, q)
+    if not feasible(M, q):
+        assert sol.status == "ray"
+        return
+    assert_solves(sol, M, q)
+    for _, w in brute_force(M, q):
+        np.testing.assert_allclose(sol.w, w, atol=1e-9)
+
+
+#: Seeds of small integer problems (general M, degenerate q) on which Lemke's method with a
+#: plain minimum-ratio test, ties broken by the last row, cycles forever (found by a search).
+CYCLING_SEEDS = [39, 127, 592, 943, 1174, 2830]
+
+
+def integer_problem(seed):
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(2, 6))
+    return rng.integers(-2, 3, size=(n, n)).astype(float), rng.integers(-1, 2, size=n).astype(float)
+
+
+def _naive_tie_break(T, rows, a, n, rhs, prefer=None):
+    """Minimum ratio of the right-hand side only; ties to the last row (no lexicographic rule)."""
+    ratio = T[rows, rhs] / a
+    tied = rows[ratio <= ratio.min() + 1e-12]
+    if prefer is not None and prefer.size and np.isin(prefer, tied).any():
+        return int(prefer[0])
+    return int(tied[-1])
+
+
+@pytest.mark.parametrize("seed", CYCLING_SEEDS)
+def test_lexicographic_rule_ends_where_a_naive_tie_break_cycles(seed, monkeypatch):
+    M, q = integer_problem(seed)
+    sol = solve_lcp(M, q)
+    assert sol.status in ("solved", "ray")  # cycling would end at the pivot limit: "iterations"
+    if sol.status == "solved":
+        assert_solves(sol, M, q)
+    else:  # M is not copositive-plus, so a ray proves nothing; but no basic solution exists here
+        assert not brute_force(M, q)
+    monkeypatch.setattr(flexbody.lcp, "_lex_min_row", _naive_tie_break)
+    assert solve_lcp(M, q, max_pivots=500).status == "iterations"  # the same path without the rule cycles
+
+
+def test_all_zero_q_and_tied_q_rows():
+    # q = 0 is solved by z = 0; q = -1 everywhere with an identity-like M ties every first ratio.
+    M = np.array([[2.0, 1.0, 1.0], [1.0, 2.0, 1.0], [1.0, 1.0, 2.0]])
+    assert solve_lcp(M, np.zeros(3)).pivots == 0
+    sol = solve_lcp(M, -np.ones(3))
+    assert_solves(sol, M, -np.ones(3))
+    np.testing.assert_allclose(sol.z, np.full(3, 0.25), rtol=1e-12)  # 4 z = 1 by symmetry
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_permuting_the_rows_permutes_the_solution(seed):
+    rng = np.random.default_rng(2000 + seed)
+    n = int(rng.integers(2, 9))
+    M = random_p_matrix(rng, n)
+    q = rng.normal(size=n)
+    perm = rng.permutation(n)
+    a = solve_lcp(M, q)
+    b = solve_lcp(M[np.ix_(perm, perm)], q[perm])
+    np.testing.assert_allclose(b.z, a.z[perm], rtol=0, atol=1e-12 * (1 + np.abs(a.z).max()))
+
+
+def test_pivot_limit_gives_iterations_status():
+    rng = np.random.default_rng(7)
+    M = random_p_matrix(rng, 6)
+    q = -np.abs(rng.normal(size=6)) - 1.0
+    full = solve_lcp(M, q)
+    assert full.pivots > 2
+    short = solve_lcp(M, q, max_pivots=2)
+    assert short.status == "iterations"
+
+
+@pytest.mark.parametrize(
+    ("M", "q", "match"),
+    [
+        (np.ones((2, 3)), np.ones(2), "`M` must be a square"),
+        (np.eye(2), np.ones(3), "`q` must have shape"),
+        (np.eye(2), np.array([np.nan, 1.0]), "finite"),
+    ],
+)
+def test_bad_arguments_are_named(M, q, match):
+    with pytest.raises(ValueError, match=match):
+        solve_lcp(M, q)
+
+
+# --- contact problems ---------------------------------------------------------------------
+
+G = 9.81
+
+
+def bar(m=2.0, L=1.0, ends=(-0.5, 0.5), inertia=None):
+    """A flat rigid bar in coordinates u = (y, theta) of its centre of mass: contact rows
+    [1, d] for supports at horizontal offsets d from the centre (small angle: gap = y + d theta).
+    Returns (J, M)."""
+    inertia = m * L**2 / 12 if inertia is None else inertia
+    J = np.array([[1.0, d] for d in ends])
+    return J, np.diag([m, inertia])
+
+
+def test_bar_delassus_by_hand():
+    # W_ii = 1/m + (L/2)^2 12/(m L^2) = 4/m;  W_12 = 1/m - 3/m = -2/m.
+    m, L = 2.0, 1.0
+    W = delassus(*bar(m, L, (-L / 2, L / 2)))
+    np.testing.assert_allclose(W, np.array([[4.0, -2.0], [-2.0, 4.0]]) / m, rtol=1e-14)
+    assert not is_decoupled(W)
+
+
+@pytest.mark.parametrize("e", [0.0, 0.5])
+def test_bar_flat_landing_both_ends(e):
+    # v1 = v - L w/2, v2 = v + L w/2, both < 0; W P = -(1 + e) v- with W^-1 = m/12 [[4, 2], [2, 4]]:
+    #   P1 = -(1 + e) m (v/2 - L w/12),  P2 = -(1 + e) m (v/2 + L w/12).
+    m, L, v, w = 2.0, 1.0, -1.0, 0.5
+    J, M = bar(m, L, (-L / 2, L / 2))
+    u = np.array([v, w])
+    sol = solve_impact(delassus(J, M), J @ u, e)
+    assert sol.method == "lcp" and sol.solved
+    expected = -(1 + e) * m * np.array([v / 2 - L * w / 12, v / 2 + L * w / 12])
+    np.testing.assert_allclose(sol.normal, expected, rtol=1e-12)
+    np.testing.assert_allclose(sol.normal_rate, -e * (J @ u), rtol=1e-12)
+    if e == 0.0:  # a plastic flat landing stops the bar: y' = theta' = 0
+        np.testing.assert_allclose(u + velocity_change(J, M, sol.normal), 0.0, atol=1e-14)
+
+
+@pytest.mark.parametrize("e", [0.0, 0.5])
+def test_bar_landing_on_one_end_the_other_separates(e):
+    # w = 20: v1 = -11, v2 = +9.  Only end 1 takes impulse: P1 = -(1 + e) v1 / W11 = -(1 + e) m v1 / 4;
+    # end 2 then moves at v2 + W21 P1 = v2 + (1 + e) v1 / 2 = 3.5 (e = 0), 0.75 (e = 0.5): >= 0, consistent.
+    m, L, v, w = 2.0, 1.0, -1.0, 20.0
+    J, M = bar(m, L, (-L / 2, L / 2))
+    v1, v2 = J @ np.array([v, w])
+    sol = solve_impact(delassus(J, M), [v1, v2], e)
+    np.testing.assert_allclose(sol.normal, [-(1 + e) * m * v1 / 4, 0.0], rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(sol.normal_rate, [-e * v1, v2 + (1 + e) * v1 / 2], rtol=1e-12)
+
+
+def test_bar_separating_end_is_pushed_into_the_ground_and_takes_impulse():
+    # w = 10, e = 0.5: v1 = -6, v2 = +4.  End 1 alone (P1 = 4.5) would leave v2+ = 4 - 1.5 * 6 / 2 = -0.5:
+    # end 2 must take impulse too, with v2+ = 0 (it does not approach, so no restitution):
+    # q = [(1 + e) v1, v2] = [-9, 4], P = -W^-1 q = -(m/12) [[4, 2], [2, 4]] q = [14/3, 1/3].
+    m, L = 2.0, 1.0
+    J, M = bar(m, L, (-L / 2, L / 2))
+    sol = solve_impact(delassus(J, M), J @ np.array([-1.0, 10.0]), 0.5)
+    np.testing.assert_allclose(sol.normal, [14 / 3, 1 / 3], rtol=1e-12)
+    np.testing.assert_allclose(sol.normal_rate, [3.0, 0.0], atol=1e-12)
+
+
+def test_newton_law_can_add_energy_when_a_separating_contact_is_pushed():
+    # Same bar, w = 10, e = 1: q = [2 v1, v2] = [-12, 4], P = -(m/12) [[4, 2], [2, 4]] q = [20/3, 4/3],
+    # u+ = u + M^-1 J^T P = (-1, 10) + (8/2, (-20/6 + 4/6) 6) = (3, -6).  Kinetic energy
+    # (m y'^2 + I theta'^2)/2 with m = 2, I = 1/6: before (2 + 100/6)/2 = 28/3, after (18 + 6)/2 = 12.
+    J, M = bar(2.0, 1.0, (-0.5, 0.5))
+    u = np.array([-1.0, 10.0])
+    sol = solve_impact(delassus(J, M), J @ u, 1.0)
+    np.testing.assert_allclose(sol.normal, [20 / 3, 4 / 3], rtol=1e-12)
+    after = u + velocity_change(J, M, sol.normal)
+    np.testing.assert_allclose(after, [3.0, -6.0], rtol=1e-12)
+    np.testing.assert_allclose([u @ M @ u / 2, after @ M @ after / 2], [28 / 3, 12.0], rtol=1e-12)
+
+
+@pytest.mark.parametrize("seed", range(30))
+def test_newton_law_energy_where_it_is_consistent(seed):
+    # dKE = -(1 - e)/(2 (1 + e)) P^T W P when every contact taking impulse approaches with one e,
+    # and dKE = -P^T W P / 2 for e = 0 whatever the contacts do (see the module docstring).
+    rng = np.random.default_rng(6000 + seed)
+    nc = int(rng.integers(1, 4))
+    J, M = rigid_body_on_ground(rng, nc)
+    J = J[:nc]  # normal rows only
+    u = rng.normal(size=3) - [0.0, 2.0, 0.0]
+    e = 0.0 if seed % 3 == 0 else rng.uniform(0, 1)
+    W = delassus(J, M)
+    sol = solve_impact(W, J @ u, e)
+    after = u + velocity_change(J, M, sol.normal)
+    dke = (after @ M @ after - u @ M @ u) / 2
+    P = sol.normal
+    if e == 0.0 or np.all((J @ u)[P > 0] < 0):
+        np.testing.assert_allclose(dke, -(1 - e) / (2 * (1 + e)) * (P @ W @ P), rtol=1e-9, atol=1e-12)
+
+
+@pytest.mark.parametrize("w", [0.5, 10.0, 20.0])
+def test_bar_landing_impulses_independent_of_particle_order(w):
+    J, M = bar(2.0, 1.0, (-0.5, 0.5))
+    u = np.array([-1.0, w])
+    a = solve_impact(delassus(J, M), J @ u, 0.5)
+    b = solve_impact(delassus(J[::-1], M), J[::-1] @ u, 0.5)
+    np.testing.assert_allclose(b.normal, a.normal[::-1], rtol=0, atol=1e-12)
+
+
+def test_untouching_contact_takes_no_impulse():
+    J, M = bar(2.0, 1.0, (-0.5, 0.5))
+    W = delassus(J, M)
+    sol = solve_impact(W, [-1.0, -1.0], 0.0, touching=[True, False])
+    assert sol.normal[1] == 0.0
+    np.testing.assert_allclose(sol.normal[0], 1.0 / W[0, 0], rtol=1e-12)  # P1 = -v1 / W11
+
+
+@pytest.mark.parametrize("e", [0.0, 1.0, 0.3])
+def test_two_equal_particles_head_on(e):
+    # Particles on a line, x1 < x2, gap x2 - x1: J = [-1, 1], W = 2/m, v- = v2 - v1.
+    # P = -(1 + e) v- / W; v1+ = v1 - P/m, v2+ = v2 + P/m: e = 1 exchanges the velocities,
+    # e = 0 leaves both at the common velocity (v1 + v2)/2.
+    m, v1, v2 = 0.3, 3.0, -1.0
+    J, M = np.array([[-1.0, 1.0]]), m * np.eye(2)
+    W = delassus(J, M)
+    np.testing.assert_allclose(W, [[2 / m]], rtol=1e-14)
+    u = np.array([v1, v2])
+    for fast in (True, False):
+        sol = solve_impact(W, J @ u, e, fast=fast)
+        after = u + velocity_change(J, M, sol.normal)
+        np.testing.assert_allclose(sol.normal, [(1 + e) * m * (v1 - v2) / 2], rtol=1e-13)
+        np.testing.assert_allclose(after.sum(), v1 + v2, rtol=1e-13)  # momentum
+        if e == 1.0:
+            np.testing.assert_allclose(after, [v2, v1], rtol=1e-13)
+        if e == 0.0:
+            np.testing.assert_allclose(after, [(v1 + v2) / 2] * 2, atol=1e-13)
+
+
+@pytest.mark.parametrize("e", [0.0, 1.0])
+def test_three_particle_chain_both_contacts_closed(e):
+    # Equal particles in a row, touching (gaps x2 - x1 and x3 - x2), velocities (2, 0, -1):
+    # W = (1/m) [[2, -1], [-1, 2]] couples the contacts.  Both take impulse, so v+ = -e v- per contact,
+    # and momentum (sum = 1) closes it:  e = 0: all at 1/3;  e = 1: relative velocities (-2, -1) become
+    # (2, 1): v1+ = a, v2+ = a + 2, v3+ = a + 3, 3 a + 5 = 1 -> (-4/3, 2/3, 5/3), kinetic energy kept.
+    m = 0.2
+    J, M = np.array([[-1.0, 1.0, 0.0], [0.0, -1.0, 1.0]]), m * np.eye(3)
+    W = delassus(J, M)
+    np.testing.assert_allclose(W, np.array([[2.0, -1.0], [-1.0, 2.0]]) / m, rtol=1e-14)
+    u = np.array([2.0, 0.0, -1.0])
+    sol = solve_impact(W, J @ u, e)
+    after = u + velocity_change(J, M, sol.normal)
+    expected = [1 / 3] * 3 if e == 0.0 else [-4 / 3, 2 / 3, 5 / 3]
+    np.testing.assert_allclose(after, expected, rtol=1e-13)
+    if e == 1.0:
+        np.testing.assert_allclose(after @ after, u @ u, rtol=1e-13)
+
+
+@pytest.mark.parametrize("x", [-0.2, 0.0, 0.3])
+def test_bar_on_two_supports_forces_equal_statics(x):
+    # Supports at the bar's ends +-L/2, centre of mass at x: offsets d = -L/2 - x, L/2 - x.
+    # Statics: lam1 + lam2 = m g, lam1 d1 + lam2 d2 = 0  =>  lam1,2 = m g (L/2 -+ x) / L.
+    m, L = 1.5, 1.0
+    J, M = bar(m, L, (-L / 2 - x, L / 2 - x), inertia=0.07 * m)
+    a_free = J @ np.array([-G, 0.0])
+    sol = solve_forces(delassus(J, M), a_free)
+    assert sol.solved and sol.method == "lcp"
+    np.testing.assert_allclose(sol.normal, m * G * np.array([L / 2 - x, L / 2 + x]) / L, rtol=1e-12)
+    np.testing.assert_allclose(sol.normal_rate, 0.0, atol=1e-12)
+
+
+def test_bar_with_centre_beyond_a_support_tips_over():
+    # x = 0.7 > L/2: holding both would need lam1 = m g (L/2 - x)/L < 0.  Only support 2 holds:
+    # lam2 = g / W22 with W22 = 1/m + d2^2/I, d2 = L/2 - x; support 1 accelerates upward.
+    m, L, x, inertia = 1.5, 1.0, 0.7, 0.1
+    J, M = bar(m, L, (-L / 2 - x, L / 2 - x), inertia=inertia)
+    sol = solve_forces(delassus(J, M), J @ np.array([-G, 0.0]))
+    d2 = L / 2 - x
+    np.testing.assert_allclose(sol.normal, [0.0, G / (1 / m + d2**2 / inertia)], rtol=1e-12, atol=1e-12)
+    assert sol.normal_rate[0] > 0.0 and abs(sol.normal_rate[1]) < 1e-12
+
+
+@pytest.mark.parametrize("perm", list(itertools.permutations(range(3))))
+def test_bar_on_three_collinear_supports_psd(perm):
+    # W (3 x 3) has rank 2: the forces are statically indeterminate (lam1 = lam3, lam2 = m g - 2 lam1
+    # for a centred bar), Lemke returns one of them; the accelerations (all 0) are unique.  Landing flat
+    # with e = 0 stops the bar whatever impulses are chosen: u+ = 0, total impulse = -m v.
+    m, L = 2.0, 1.0
+    J, M = bar(m, L, (-L / 2, 0.0, L / 2))
+    J = J[list(perm)]
+    W = delassus(J, M)
+    assert np.linalg.matrix_rank(W) == 2
+    forces = solve_forces(W, J @ np.array([-G, 0.0]))
+    assert forces.solved
+    np.testing.assert_allclose(forces.normal_rate, 0.0, atol=1e-12)
+    np.testing.assert_allclose(J.T @ forces.normal, [m * G, 0.0], atol=1e-12)  # force and moment balance
+    assert np.all(forces.normal >= 0.0)
+    u = np.array([-1.5, 0.0])
+    impact = solve_impact(W, J @ u, 0.0)
+    assert impact.solved
+    np.testing.assert_allclose(u + velocity_change(J, M, impact.normal), 0.0, atol=1e-12)
+    np.testing.assert_allclose(impact.normal.sum(), 1.5 * m, rtol=1e-12)
+
+
+def ground_particles(masses):
+    """Point masses each touching a flat ground: rows [normals; tangents] in (x1, y1, x2, y2, ...)."""
+    n = len(masses)
+    Jn, Jt = np.zeros((n, 2 * n)), np.zeros((n, 2 * n))
+    Jn[np.arange(n), 2 * np.arange(n) + 1] = 1.0
+    Jt[np.arange(n), 2 * np.arange(n)] = 1.0
+    return Jn, Jt, np.diag(np.repeat(masses, 2))
+
+
+@pytest.mark.parametrize("seed", range(10))
+def test_decoupled_fast_path_equals_the_lcp(seed):
+    rng = np.random.default_rng(3000 + seed)
+    n = int(rng.integers(1, 7))
+    Jn, Jt, M = ground_particles(rng.uniform(0.01, 2.0, n))
+    Wn, W2 = delassus(Jn, M), delassus(np.vstack([Jn, Jt]), M)
+    assert is_decoupled(Wn) and is_decoupled(W2)
+    v = rng.normal(size=2 * n)
+    e, mu = rng.uniform(0, 1, n), rng.uniform(0, 1, n) * (rng.uniform(size=n) > 0.3)
+    touching = rng.uniform(size=n) > 0.2
+    pairs = [
+        lambda fast: solve_impact(Wn, v[:n], e, touching=touching, fast=fast),
+        lambda fast: solve_forces(Wn, v[:n], fast=fast),
+        lambda fast: solve_impact_friction(W2, v, e, mu, touching=touching, fast=fast),
+        lambda fast: solve_forces_friction(W2, v, mu, np.where(rng.uniform(size=n) > 0.5, v[n:], 0.0),
+                                           fast=fast),
+    ]
+    for solve in pairs:
+        state = rng.bit_generator.state
+        quick = solve(True)
+        rng.bit_generator.state = state  # the same sliding pattern for both paths
+        slow = solve(False)
+        assert quick.method == "decoupled" and slow.method == "lcp" and slow.solved
+        for field in ("normal", "tangent", "normal_rate", "tangent_rate"):
+            np.testing.assert_allclose(getattr(quick, field), getattr(slow, field), rtol=1e-12, atol=1e-12)
+
+
+@pytest.mark.parametrize(("vt", "mu"), [(0.5, 0.8), (-0.5, 0.8), (3.0, 0.2), (-3.0, 0.2), (0.0, 0.5)])
+def test_friction_impact_of_one_particle_equals_design_law(vt, mu):
+    # DESIGN §6: P_n = (1 + e) m |v_n|, tangential impulse of size min(m |v_t|, mu P_n) against v_t.
+    m, vn, e = 0.05, -2.0, 0.4
+    Jn, Jt, M = ground_particles([m])
+    W = delassus(np.vstack([Jn, Jt]), M)
+    sol = solve_impact_friction(W, [vn, vt], e, mu, fast=False)
+    assert sol.method == "lcp" and sol.solved
+    Pn = (1 + e) * m * abs(vn)
+    np.testing.assert_allclose(sol.normal, [Pn], rtol=1e-12)
+    np.testing.assert_allclose(sol.tangent, [-np.sign(vt) * min(m * abs(vt), mu * Pn)], rtol=1e-12, atol=1e-15)
+
+
+def rigid_body_on_ground(rng, nc):
+    """A 2D rigid body (x, y, theta) touching a flat ground at nc points: its [normal; tangent] rows."""
+    m, inertia = rng.uniform(0.5, 2.0), rng.uniform(0.05, 0.5)
+    r = rng.uniform(-1, 1, size=(nc, 2)) * [1.0, 0.3] - [0.0, 0.3]  # contact points from the centre
+    # velocity of point r: (x' - r_y theta', y' + r_x theta')
+    Jn = np.column_stack([np.zeros(nc), np.ones(nc), r[:, 0]])
+    Jt = np.column_stack([np.ones(nc), np.zeros(nc), -r[:, 1]])
+    return np.vstack([Jn, Jt]), np.diag([m, m, inertia])
+
+
+@pytest.mark.parametrize("seed", range(25))
+def test_coupled_friction_impact_obeys_coulomb_and_dissipates(seed):
+    # Anitescu-Potra: the impulse LCP is always solvable.  Check the laws themselves: no penetration,
+    # |P_t| <= mu P_n, a sliding contact's friction opposes its slip at mu P_n, and (e = 0) the kinetic
+    # energy does not grow: dKE = P.v+ - P^T W P / 2 with P.v+ = -mu P_n |v_t+| <= 0.
+    rng = np.random.default_rng(4000 + seed)
+    nc = int(rng.integers(1, 4))
+    J, M = rigid_body_on_ground(rng, nc)
+    u = rng.normal(size=3) - [0.0, 1.5, 0.0]
+    mu = rng.uniform(0.0, 1.2, nc)
+    e = 0.0 if seed % 2 == 0 else rng.uniform(0, 1)
+    sol = solve_impact_friction(delassus(J, M), J @ u, e, mu)
+    assert sol.solved, sol.message
+    vn = (J @ u)[:nc]
+    P = np.concatenate([sol.normal, sol.tangent])
+    after = u + velocity_change(J, M, P)
+    np.testing.assert_allclose(J @ after, np.concatenate([sol.normal_rate, sol.tangent_rate]), atol=1e-10)
+    tol = 1e-9 * (1 + np.abs(P).max())
+    assert np.all(sol.normal_rate + e * np.minimum(vn, 0.0) >= -1e-9)
+    assert np.all(np.abs(sol.tangent) <= mu * sol.normal + tol)
+    sliding = np.abs(sol.tangent_rate) > 1e-9
+    np.testing.assert_allclose(sol.tangent[sliding], -mu[sliding] * sol.normal[sliding]
+                               * np.sign(sol.tangent_rate[sliding]), atol=tol)
+    if e == 0.0:
+        assert after @ M @ after <= u @ M @ u + 1e-9
+
+
+@pytest.mark.parametrize("seed", range(25))
+def test_coupled_friction_forces_obey_coulomb(seed):
+    # Held contacts of a rigid body, some sliding (v_t != 0), some at rest along the ground: check the
+    # laws on the answer.  Normal: lam_n >= 0, a_n >= 0, lam_n a_n = 0.  Sliding: lam_t = -mu lam_n sign(v_t).
+    # At rest: |lam_t| <= mu lam_n, and where the contact starts to slip (a_t != 0) lam_t = -mu lam_n sign(a_t).
+    rng = np.random.default_rng(7000 + seed)
+    nc = int(rng.integers(1, 5))
+    J, M = rigid_body_on_ground(rng, nc)
+    mu = rng.uniform(0.0, 0.6, nc)
+    v_t = np.where(rng.uniform(size=nc) > 0.5, rng.normal(size=nc), 0.0)
+    a_free = J @ np.array([0.0, -G, 0.0]) + rng.normal(size=2 * nc)
+    sol = solve_forces_friction(delassus(J, M), a_free, mu, v_t)
+    if sol.status == "ray":  # Painlevé: nothing to check but the message
+        assert sol.message.startswith("Painlevé")
+        return
+    assert sol.solved, sol.message
+    lam = np.concatenate([sol.normal, sol.tangent])
+    rates = np.concatenate([sol.normal_rate, sol.tangent_rate])
+    np.testing.assert_allclose(rates, a_free + delassus(J, M) @ lam, atol=1e-10)
+    tol = 1e-9 * (1 + np.abs(lam).max() + np.abs(a_free).max())
+    assert np.all(sol.normal >= 0) and np.all(sol.normal_rate >= -tol)
+    assert np.all(np.abs(sol.normal * sol.normal_rate) <= tol * (1 + sol.normal))
+    slide = (v_t != 0) & (mu > 0)
+    np.testing.assert_allclose(sol.tangent[slide], -mu[slide] * np.sign(v_t[slide]) * sol.normal[slide], atol=tol)
+    rest = ~slide
+    assert np.all(np.abs(sol.tangent[rest]) <= mu[rest] * sol.normal[rest] + tol)
+    slip = rest & (np.abs(sol.tangent_rate) > 1e-8)
+    np.testing.assert_allclose(sol.tangent[slip], -mu[slip] * np.sign(sol.tangent_rate[slip]) * sol.normal[slip],
+                               atol=tol)
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_friction_impact_independent_of_contact_order(seed):
+    rng = np.random.default_rng(5000 + seed)
+    nc = 3
+    J, M = rigid_body_on_ground(rng, nc)
+    u = rng.normal(size=3) - [0.0, 1.5, 0.0]
+    mu, e = rng.uniform(0.1, 1.0, nc), rng.uniform(0, 1, nc)
+    perm = rng.permutation(nc)
+    rows = np.concatenate([perm, nc + perm])
+    a = solve_impact_friction(delassus(J, M), J @ u, e, mu)
+    b = solve_impact_friction(delassus(J[rows], M), J[rows] @ u, e[perm], mu[perm])
+    # W (6 x 6) has rank 3 here, so the impulses need not be unique; compare the velocity they produce.
+    # (Its uniqueness is a theorem for frictionless contacts only; with friction this checks that the
+    # pivoting, not the problem, brings in no dependence on the order.)
+    ua = u + velocity_change(J, M, np.concatenate([a.normal, a.tangent]))
+    ub = u + velocity_change(J[rows], M, np.concatenate([b.normal, b.tangent]))
+    np.testing.assert_allclose(ub, ua, atol=1e-12)
+
+
+def painleve_rod(theta, m=1.0, half=0.5):
+    """A rod (coordinates x, y, theta of its centre), lower end on the ground at
+    (x - l cos theta, y - l sin theta), I = m (2 l)^2 / 12: rows [normal; tangent] of that end."""
+    Jn = np.array([[0.0, 1.0, -half * np.cos(theta)]])
+    Jt = np.array([[1.0, 0.0, half * np.sin(theta)]])
+    return np.vstack([Jn, Jt]), np.diag([m, m, m * half**2 / 3])
+
+
+@pytest.mark.parametrize(("mu", "v_t"), [(0.5, -1.0), (1.6, -1.0), (2.0, 1.0), (0.0, -1.0)])
+def test_painleve_rod_below_critical_friction_is_solved(mu, v_t):
+    # Stewart (2000, SIAM Review 42) rod at rest in rotation (a_free = [-g, 0]), end sliding.  By hand:
+    # W_nn = (1 + 3 cos^2)/m, W_nt = -3 sin cos / m; friction lam_t = -mu sign(v_t) lam_n, so
+    # a_n = -g + (1 + 3 cos^2 + 3 mu sign(v_t) sin cos) lam_n / m = 0:
+    #   lam_n = m g / (1 + 3 cos^2 + 3 mu sign(v_t) sin cos)   (sliding toward -x: critical mu = 5/3 at 45 deg)
+    theta, m = np.pi / 4, 1.0
+    J, M = painleve_rod(theta, m)
+    sol = solve_forces_friction(delassus(J, M), [-G, 0.0], mu, [v_t])
+    assert sol.solved, sol.message
+    c, s = np.cos(theta), np.sin(theta)
+    lam_n = m * G / (1 + 3 * c**2 + 3 * mu * np.sign(v_t) * s * c)
+    np.testing.assert_allclose(sol.normal, [lam_n], rtol=1e-12)
+    np.testing.assert_allclose(sol.tangent, [-mu * np.sign(v_t) * lam_n], rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(sol.normal_rate, [0.0], atol=1e-12)
+
+
+@pytest.mark.parametrize("mu", [1.7, 2.0, 5.0])
+def test_painleve_rod_above_critical_friction_has_no_force(mu):
+    # mu > 5/3 with the end sliding toward -x: W_nn - mu W_nt sign... < 0 and a_free < 0: no lam_n >= 0
+    # keeps a_n >= 0 (every push makes the end fall faster).
+    J, M = painleve_rod(np.pi / 4)
+    sol = solve_forces_friction(delassus(J, M), [-G, 0.0], mu, [-1.0])
+    assert sol.status == "ray" and not sol.solved
+    assert sol.message.startswith("Painlevé: no consistent contact force")
+
+
+def test_painleve_rod_indeterminate_case_is_flagged():
+    # mu = 2 > 5/3, sliding toward -x, but spinning: a_n_free = -g + l sin(theta) omega^2 > 0.
+    # A = (1 + 3 cos^2 - 3 mu sin cos)/m < 0, so lam = 0 (a_n = a_free > 0) and lam = -a_free/A > 0
+    # (a_n = 0) are both consistent.  Lemke returns the first (q >= 0); the message says so.
+    theta, m, half, omega = np.pi / 4, 1.0, 0.5, 8.0
+    J, M = painleve_rod(theta, m, half)
+    a_n = -G + half * np.sin(theta) * omega**2
+    a_t = half * np.cos(theta) * omega**2  # x_c'' = x'' + l sin th th'' + l cos th th'^2
+    sol = solve_forces_friction(delassus(J, M), [a_n, a_t], 2.0, [-1.0])
+    assert a_n > 0 and sol.solved
+    np.testing.assert_allclose(sol.normal, [0.0], atol=1e-15)
+    assert sol.message.startswith("Painlevé: the contact force may not be unique")
+    c, s = np.cos(theta), np.sin(theta)
+    A = (1 + 3 * c**2 - 3 * 2.0 * s * c) / m
+    other = -a_n / A
+    assert other > 0  # the second solution, lam_n = -a_n_free / A, is a push too
+    # below the critical mu the same spinning rod is flagged by nothing
+    assert "Painlevé" not in solve_forces_friction(delassus(J, M), [a_n, a_t], 0.5, [-1.0]).message
+
+
+def test_redundant_sliding_supports_are_not_called_painleve():
+    # A flat bar (x, y, theta) sliding on three collinear supports at its centre line (r_y = 0): friction
+    # is horizontal through the line of the supports, W_nt = 0, so the normal matrix is W_nn, singular
+    # (rank 2) but with no negative minor: forces indeterminate as without friction, not Painlevé.
+    # Balance: sum lam_n = m g, moment sum r_x lam_n = 0 (centred), lam_t = -mu lam_n.
+    m, inertia, mu = 2.0, 2.0 / 12, 0.3
+    rx = np.array([-0.5, 0.0, 0.5])
+    Jn = np.column_stack([np.zeros(3), np.ones(3), rx])
+    Jt = np.column_stack([np.ones(3), np.zeros(3), np.zeros(3)])
+    J, M = np.vstack([Jn, Jt]), np.diag([m, m, inertia])
+    sol = solve_forces_friction(delassus(J, M), J @ np.array([0.0, -G, 0.0]), mu, np.full(3, 0.7))
+    assert sol.solved and "Painlevé" not in sol.message
+    np.testing.assert_allclose([sol.normal.sum(), rx @ sol.normal], [m * G, 0.0], atol=1e-12)
+    np.testing.assert_allclose(sol.tangent, -mu * sol.normal, atol=1e-12)
+    np.testing.assert_allclose(sol.normal_rate, 0.0, atol=1e-12)
+
+
+def test_sticking_contact_with_enough_friction_holds():
+    # A rod leaning at 45 deg, end at rest (v_t = 0), no spin: with large mu it sticks (a_n = a_t = 0).
+    # Then lam solves W [lam_n, lam_t] = -a_free, i.e. the end's acceleration vanishes.
+    J, M = painleve_rod(np.pi / 4)
+    W = delassus(J, M)
+    sol = solve_forces_friction(W, [-G, 0.0], 10.0, [0.0])
+    assert sol.solved
+    np.testing.assert_allclose(np.concatenate([sol.normal, sol.tangent]), np.linalg.solve(W, [G, 0.0]),
+                               rtol=1e-12)
+    np.testing.assert_allclose([sol.normal_rate[0], sol.tangent_rate[0]], 0.0, atol=1e-12)
+
+
+@pytest.mark.parametrize(
+    ("call", "match"),
+    [
+        (lambda: solve_impact(np.eye(2), [-1.0, -1.0], 1.5), "`restitution` must be in"),
+        (lambda: solve_impact(np.eye(2), [-1.0], 0.0), "must have shape"),
+        (lambda: solve_impact(np.eye(2), [-1.0, -1.0], [0.1, -0.2]), "`restitution` must be a finite"),
+        (lambda: solve_impact_friction(np.eye(3), [-1.0, 0, 0], 0.0, 0.1), "2 row"),
+        (lambda: solve_forces_friction(np.eye(2), [-1.0, 0.0], 0.3, [0.0, 1.0]), "`v_t` must be"),
+    ],
+)
+def test_bad_contact_arguments_are_named(call, match):
+    with pytest.raises(ValueError, match=match):
+        call()
