@@ -34,6 +34,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .constants import FREE, HELD, KEEP, PUSHED, REBOUND, SETTLE, SLIDING, STOP
+from .coupled import coupled_impact
 from .model import Model
 
 __all__ = ["FREE", "HELD", "PUSHED", "SLIDING", "Event", "Phases", "Resolution", "UnsettledInstant", "friction_phases",
@@ -220,7 +221,8 @@ def resolve(
     Resolution
     """
     phases = phases.copy()
-    touching = touching.copy()
+    touching = np.array(touching, bool)  # the compiled path hands its int buffers
+    leaving = np.asarray(leaving, bool)
     nc = model.n_contacts
     e = np.zeros(nc) if restitution is None else np.asarray(restitution, float)
     slowest = np.zeros(nc) if min_rebound is None else np.asarray(min_rebound, float)
@@ -255,7 +257,20 @@ def resolve(
             hit = np.zeros_like(hit)
         # After a window, what velocity is left towards the ground is stopped instantly.
         instant = hit | (ending & (vn < 0.0))
-        if instant.any():
+        if instant.any() and getattr(model, "coupled", False):
+            # Coupled contacts (a rigid body's): one LCP over every touching contact.
+            touching_now = instant | phases.on_ground
+            out = coupled_impact(model, y, p, touching_now, np.where(hit & rebounds, e, 0.0),
+                                 max(speed_tolerance, 1e-12))
+            y, loss = out.y, loss + out.loss
+            gaps = model.gaps(y[: model.nq], p)
+            left = out.leaving
+            events += [Event(t, int(c), "liftoff") for c in np.flatnonzero(left & phases.on_ground & ~settled)]
+            phases.phase[touching_now & ~left] = HELD
+            phases.phase[left] = FREE
+            phases.floor[left] = np.minimum(0.0, gaps[left]) - gap_tolerance
+            not_held |= left & impacted
+        elif instant.any():
             stop = np.where(instant | phases.on_ground, STOP, KEEP)
             stop[hit & rebounds] = REBOUND
             y, lost = model.impact(y, p, stop.astype(np.intc))

@@ -24,6 +24,7 @@ from .constants import (EVENT, IMPACT, LIFTOFF, NON_FINITE, SINGULAR, SLIP, STEP
                         ZENO_RISE)
 from .assembly import AssembledModel
 from .contact import HELD, PUSHED, Event, Phases, UnsettledInstant, resolve
+from .coupled import CoupledImpactError
 from .events import EventFunctions, locate
 from .model import Model, load_model
 from .result import STATUSES, SimulationResult
@@ -175,12 +176,15 @@ def _contact_law_problems(scene: Scene, values: dict) -> list[str]:
     restitution = [j for j, g in enumerate(scene.grounds) if g.restitution > 0.0]
     out = []
     rigid = [b.name for b in scene.bodies if getattr(b, "rigid", False)]
-    if (friction or restitution) and rigid:
-        out.append(f"bodies {rigid} are rigid: grounds {sorted(set(friction + restitution))} have friction or "
-                   "restitution, but a rigid body's contacts couple (J M^-1 J^T is not diagonal), and the "
-                   "linear complementarity solver those laws need there is not in the runtime yet; rigid "
-                   "bodies land plastically on frictionless grounds for now")
-    elif (friction or restitution) and values["formulation"] == "floating":
+    if friction and rigid:
+        out.append(f"bodies {rigid} are rigid: grounds {friction} have friction, but a rigid body's contacts couple "
+                   "(J M^-1 J^T is not diagonal), and coupled sticking and sliding are not in the runtime yet "
+                   "(its impacts with restitution are); rigid bodies run on frictionless grounds for now")
+    if rigid and values["impact"] == "thesis":
+        out.append(f"`impact` = 'thesis': bodies {rigid} are rigid, and the thesis's window force -m v_n / dT "
+                   "(eq. 4.6) takes the particle's own mass, not the effective mass 1 / (J M^-1 J^T) of a rigid "
+                   "body's coupled contact; use impact = 'instant' (the default)")
+    elif (friction or restitution) and values["formulation"] == "floating" and not rigid:
         out.append(f"`formulation` = 'floating': grounds {sorted(set(friction + restitution))} have friction or "
                    "restitution, which only the particles formulation (the default) applies")
     return out
@@ -410,7 +414,7 @@ class _Run:
         """Apply the fixed point at instant ``t`` to ``y`` and the phases; return the new events."""
         s = self.settings
         was_pushed = self.phases.phase == PUSHED
-        if self.compiled:  # the compiled twin of contact.resolve
+        if self.compiled and not getattr(self.model, "coupled", False):  # the compiled twin of contact.resolve
             found, not_held, loss = self.compiled.resolve(t, touching, leaving, s.impact == "thesis", s.impact_dt)
             new = [Event(t, c, EVENT_KINDS[kind], speed) for c, kind, speed in found]
         else:
@@ -498,6 +502,8 @@ class _Run:
             return "blow_up", f"at t = {t:.9g} s: {exc}; the contacts at this instant are not independent."
         except UnsettledInstant as exc:
             return "no_progress", str(exc)
+        except CoupledImpactError as exc:
+            return "unsupported", f"at t = {t:.9g} s: {exc}"
         return "success", STATUSES["success"]
 
     def check_deadline(self, t: float) -> None:

@@ -140,6 +140,8 @@ class GeneratedModel(Model):
         if not np.array_equal(self.contacts, np.indices((self.n_particles, n_grounds)).reshape(2, -1).T):
             raise ModelError(f"{self.directory}: contacts must be every (particle, ground) pair, particle-major")
         self.shapes = {name: tuple(f["shape"]) for name, f in m["functions"].items()}
+        #: A rigid body's contacts couple: instants are solved as one LCP (flexbody.coupled).
+        self.coupled = any(b.get("rigid") for b in m["topology"]["bodies"])
 
     def parameters(self, scene: Scene) -> FloatArray:
         """The parameter vector ``p (np,)`` of ``scene`` in this model's order."""

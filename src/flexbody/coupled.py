@@ -1,0 +1,88 @@
+"""Impacts of coupled contacts, solved exactly as one linear complementarity problem.
+
+A rigid body's contacts couple: its Delassus matrix ``W = J M^-1 J^T`` is not diagonal, so
+stopping each hit contact on its own, or all of them jointly, is not the impact law. At an
+instant the touching contacts (those hit and those held) take impulses ``P >= 0`` with
+Newton's law per contact, ``v+ + e v-  >= 0`` complementary to ``P``
+(:func:`flexbody.contact_problems.solve_impact`, Lemke's method: exact, finite and
+independent of the order of the contacts).  A contact left at ``v+ = 0`` with a plastic law
+is held; one that leaves (a rebound, or an end lifted by the others' impulses) is free.
+Used for whole-scene models with rigid bodies (:attr:`flexbody.model.GeneratedModel.coupled`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .contact_problems import delassus, solve_impact, velocity_change
+
+
+class CoupledImpactError(RuntimeError):
+    """The impact problem has no solution the solver could find (its status and message)."""
+
+
+@dataclass(frozen=True)
+class CoupledImpact:
+    """The outcome of one instant's impacts.
+
+    Attributes
+    ----------
+    y : ndarray, shape (ny,)
+        The state after the impulses.
+    loss : float
+        Kinetic energy the impulses removed (J).
+    impulses : ndarray, shape (nc,)
+        Normal impulse of every contact (N s; 0 where it took none).
+    leaving : ndarray of bool, shape (nc,)
+        Touching contacts that separate after the impulses (normal velocity > ``speed_floor``).
+    """
+
+    y: np.ndarray
+    loss: float
+    impulses: np.ndarray
+    leaving: np.ndarray
+
+
+def coupled_impact(model, y: np.ndarray, p: np.ndarray, touching: np.ndarray, restitution: np.ndarray,
+                   speed_floor: float) -> CoupledImpact:
+    """Impulses on the ``touching`` contacts (bool, shape (nc,)) by Newton's law per contact.
+
+    Parameters
+    ----------
+    model : GeneratedModel
+        Gives ``mass_matrix``, ``gap_jacobian`` and ``energies``.
+    y : ndarray, shape (ny,)
+    p : ndarray, shape (np,)
+    touching : ndarray of bool, shape (nc,)
+        Contacts at the ground (hit now, or held): the only ones that may take impulse.
+    restitution : ndarray, shape (nc,)
+        Newton's e per contact (0 where a rebound would be too slow: plastic).
+    speed_floor : float
+        A normal velocity after the impulses above this (m/s) separates; at or below, the
+        contact stays (round-off of ``v+ = 0``).
+
+    Raises
+    ------
+    CoupledImpactError
+        When the solver reports no solution (its message).
+    """
+    nq, nu = model.nq, model.nu
+    q, u = y[:nq], y[nq : nq + nu]
+    rows = np.flatnonzero(touching)
+    impulses = np.zeros(model.n_contacts)
+    leaving = np.zeros(model.n_contacts, bool)
+    if not len(rows):
+        return CoupledImpact(np.array(y, float), 0.0, impulses, leaving)
+    M, J = model.mass_matrix(q, p), model.gap_jacobian(q, p)[rows]
+    solution = solve_impact(delassus(J, M), J @ u, restitution[rows])
+    if not solution.solved:
+        raise CoupledImpactError(f"the impact of contacts {rows.tolist()} has no solution found: {solution.message}")
+    out = np.array(y, float)
+    out[nq : nq + nu] = u + velocity_change(J, M, solution.normal)
+    before = float(model.energies(q, u, p)[0])
+    after = float(model.energies(q, out[nq : nq + nu], p)[0])
+    impulses[rows] = solution.normal
+    leaving[rows] = solution.normal_rate > speed_floor
+    return CoupledImpact(out, before - after, impulses, leaving)
