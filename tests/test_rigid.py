@@ -284,6 +284,27 @@ def test_an_instant_of_coupled_contacts_satisfies_newtons_law_and_lifts_a_pushed
             assert res.phases.phase[c] == (FREE if v_plus[c] > 1e-9 else HELD)
 
 
+@needs_cc
+def test_a_body_resting_with_its_centre_beyond_a_corner_lifts_the_other_and_pivots_with_the_closed_form_force():
+    # Resting on both base corners with its centre of mass beyond corner 1: Signorini's law
+    # (one LCP over both held contacts) keeps corner 1 and lifts corner 0 at t = 0.  From
+    # rest on a frictionless point, the centre falls straight and the body turns about it:
+    # N = M g I_c / (I_c + M d^2), d the horizontal distance from the centre to the corner.
+    particles = [[-0.4, 0.0], [0.6, 0.0], [1.5, 0.3]]
+    masses = [0.1, 0.1, 0.5]
+    scene = rigid_scene(particles, masses, position=[0.0, 0.0], t_end=0.05, output_dt=1e-3)
+    r = simulate(scene, **TIGHT)
+    assert r.success, r.message
+    assert (r.events_kind[0], r.events_particle[0], r.events_time[0]) == ("liftoff", 0, 0.0)
+    m, x = np.asarray(masses), np.asarray(particles)
+    c = m @ x / m.sum()
+    I_c = float(m @ np.sum((x - c) ** 2, axis=1))
+    d = x[1, 0] - c[0]
+    N = m.sum() * G * I_c / (I_c + m.sum() * d**2)
+    assert r.contact_force[0, 0] == 0.0
+    assert r.contact_force[0, 1] == pytest.approx(N, rel=1e-10)
+
+
 # ----------------------------------------------------------------- input
 
 

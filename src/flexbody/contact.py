@@ -34,7 +34,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .constants import FREE, HELD, KEEP, PUSHED, REBOUND, SETTLE, SLIDING, STOP
-from .coupled import coupled_impact
+from .coupled import coupled_impact, coupled_release
 from .model import Model
 
 __all__ = ["FREE", "HELD", "PUSHED", "SLIDING", "Event", "Phases", "Resolution", "UnsettledInstant", "friction_phases",
@@ -291,17 +291,22 @@ def resolve(
         phases.floor[away] = np.minimum(0.0, gaps[away]) - gap_tolerance
         if (started | instant | away).any():
             continue  # the dampers saw the velocity jump: recompute the forces before holding anyone
-        pulling = phases.on_ground & ((lam < 0.0) | (leaving & (lam <= force_tolerance)))
-        if not pulling.any():
-            break
-        # Release the most pulling contact, then recompute: exact also for coupled contacts.
-        c = int(np.flatnonzero(pulling)[np.argmin(lam[pulling])])
-        phases.phase[c] = FREE
-        phases.floor[c] = min(0.0, gaps[c]) - gap_tolerance
-        if settled[c]:
-            not_held[c] = True  # its (latest) impact did not hold it: it leaves at once
+        if getattr(model, "coupled", False):  # Signorini's law over all held contacts at once
+            pulling = coupled_release(model, y, p, phases.on_ground, phases.push, leaving, force_tolerance)
+            released = np.flatnonzero(pulling)
         else:
-            events.append(Event(t, c, "liftoff"))
+            pulling = phases.on_ground & ((lam < 0.0) | (leaving & (lam <= force_tolerance)))
+            # Release the most pulling contact, then recompute.
+            released = np.flatnonzero(pulling)[np.argmin(lam[pulling])][None] if pulling.any() else []
+        if not len(released):
+            break
+        for c in map(int, released):
+            phases.phase[c] = FREE
+            phases.floor[c] = min(0.0, gaps[c]) - gap_tolerance
+            if settled[c]:
+                not_held[c] = True  # its (latest) impact did not hold it: it leaves at once
+            else:
+                events.append(Event(t, c, "liftoff"))
     else:
         raise UnsettledInstant(t, iterations)
     if hasattr(model, "friction") and getattr(model, "laws", np.zeros((0, 2)))[:, 0].any():

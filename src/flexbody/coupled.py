@@ -7,7 +7,10 @@ Newton's law per contact, ``v+ + e v-  >= 0`` complementary to ``P``
 (:func:`flexbody.contact_problems.solve_impact`, Lemke's method: exact, finite and
 independent of the order of the contacts).  A contact left at ``v+ = 0`` with a plastic law
 is held; one that leaves (a rebound, or an end lifted by the others' impulses) is free.
-Used for whole-scene models with rigid bodies (:attr:`flexbody.model.GeneratedModel.coupled`).
+The held contacts' forces are decided the same way (:func:`coupled_release`): Signorini's
+law ``a = a_free + W lam >= 0`` complementary to ``lam >= 0`` as one LCP, so which contacts
+lift off does not depend on the order they are tried in.  Used for whole-scene models with
+rigid bodies (:attr:`flexbody.model.GeneratedModel.coupled`).
 """
 
 from __future__ import annotations
@@ -16,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .contact_problems import delassus, solve_impact, velocity_change
+from .contact_problems import delassus, solve_forces, solve_impact, velocity_change
 
 
 class CoupledImpactError(RuntimeError):
@@ -86,3 +89,47 @@ def coupled_impact(model, y: np.ndarray, p: np.ndarray, touching: np.ndarray, re
     impulses[rows] = solution.normal
     leaving[rows] = solution.normal_rate > speed_floor
     return CoupledImpact(out, before - after, impulses, leaving)
+
+
+def coupled_release(model, y: np.ndarray, p: np.ndarray, held: np.ndarray, push: np.ndarray, leaving: np.ndarray,
+                    force_tolerance: np.ndarray) -> np.ndarray:
+    """Held contacts that lift off: Signorini's law over the ``held`` contacts as one LCP.
+
+    Parameters
+    ----------
+    held : ndarray of bool, shape (nc,)
+    push : ndarray, shape (nc,)
+        Prescribed normal forces (the thesis mode's windows), as for the right-hand side.
+    leaving : ndarray of bool, shape (nc,)
+        Held contacts whose force event fired: released where the LCP's force is at most
+        ``force_tolerance`` (the crossing itself, where force and acceleration are both ~0).
+    force_tolerance : ndarray, shape (nc,)
+
+    Returns
+    -------
+    ndarray of bool, shape (nc,)
+        The held contacts to release (none when every held contact is pushed on).
+
+    Raises
+    ------
+    CoupledImpactError
+        When the held contacts admit no consistent force.
+    """
+    nq, nu = model.nq, model.nu
+    release = np.zeros(model.n_contacts, bool)
+    rows = np.flatnonzero(held)
+    if not len(rows):
+        return release
+    q, u = y[:nq], y[nq : nq + nu]
+    free, _ = model.rhs(y, p, np.zeros(model.n_contacts, np.intc), push)
+    J = model.gap_jacobian(q, p)[rows]
+    a_free = J @ free[nq : nq + nu] + model.gap_bias(q, u, p)[rows]
+    solution = solve_forces(delassus(J, model.mass_matrix(q, p)), a_free)
+    if not solution.solved:
+        raise CoupledImpactError(f"the forces of held contacts {rows.tolist()} have no solution found: "
+                                 f"{solution.message}")
+    # a contact without force leaves where it accelerates away beyond round-off of the others' terms
+    floor = 1e-10 * max(1.0, float(np.abs(a_free).max()))
+    lifted = (solution.normal == 0.0) & (solution.normal_rate > floor)
+    release[rows] = lifted | (leaving[rows] & (solution.normal <= force_tolerance[rows]))
+    return release
