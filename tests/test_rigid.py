@@ -305,6 +305,74 @@ def test_a_body_resting_with_its_centre_beyond_a_corner_lifts_the_other_and_pivo
     assert r.contact_force[0, 1] == pytest.approx(N, rel=1e-10)
 
 
+BOX = [[x, y, z] for z in (0.0, 0.2) for y in (0.0, 0.3) for x in (0.0, 0.5)]
+BOX_MASSES = [0.1, 0.2, 0.1, 0.3, 0.1, 0.1, 0.2, 0.1]
+
+
+@needs_cc
+@pytest.mark.parametrize("e", [0.0, 0.5])
+def test_a_3d_rigid_box_landing_flat_on_four_corners_is_solved_though_its_forces_are_not_unique(e):
+    # Four coplanar corners, three freedoms they constrain: W = J M^-1 J^T is singular, the
+    # impact and the resting forces are not unique.  The LCP gives impulses that stop the
+    # box whole (e = 0) or send it up at e v without spin, like a point (so the same impact
+    # times), and resting forces >= 0 that hold its weight with no moment (statics).
+    h = 0.5
+    scene = flexbody.load_scene({
+        "name": "flat_box", "gravity": [0.0, 0.0, -G],
+        "grounds": [{"point": [0.0, 0.0, 0.0], "normal": [0.0, 0.0, 1.0], "restitution": e}],
+        "bodies": [{"name": "box", "rigid": True, "particles": BOX, "masses": BOX_MASSES,
+                    "links": [[i, i + 1] for i in range(7)], "position": [0.0, 0.0, h]}],
+        "simulation": {"t_end": 1.5, "output_dt": 1e-3}})
+    r = simulate(scene, **TIGHT)
+    assert r.success, r.message
+    t1 = np.sqrt(2 * h / G)
+    instants = r.events_time.reshape(-1, 4)  # the four bottom corners in every instant
+    assert set(r.events_particle) == {0, 1, 2, 3}
+    np.testing.assert_allclose(instants, instants[:, :1] * np.ones(4), rtol=0, atol=0)
+    if e == 0.0:
+        assert len(instants) == 1
+    else:
+        k = np.arange(min(len(instants), 8))
+        np.testing.assert_allclose(instants[k, 0], t1 + np.concatenate([[0.0], np.cumsum(2 * e ** k[1:] * t1)]),
+                                   rtol=1e-9)
+    np.testing.assert_allclose(instants[0, 0], t1, rtol=1e-10)
+    m, x = np.asarray(BOX_MASSES), np.asarray(BOX)
+    force = r.contact_force[-1]
+    assert np.all(force >= 0.0) and np.all(force[4:] == 0.0)
+    np.testing.assert_allclose(force.sum(), m.sum() * G, rtol=1e-10)
+    np.testing.assert_allclose(force @ x[:, :2], m.sum() * G * (m @ x[:, :2]) / m.sum(), rtol=1e-10)
+    total = r.total_energy
+    assert np.abs(total - total[0]).max() < 1e-9 * total[0]
+
+
+@needs_cc
+@pytest.mark.parametrize("e", [0.0, 0.3])
+def test_a_tumbling_3d_rigid_box_comes_to_rest_on_a_face(e):
+    # Corners land one after another, rock on edges (a corner that the others' impulses
+    # would lift slower than a 1e-9 m rise stays: no Zeno cascade) and the box ends on a
+    # face, still sliding and turning on the frictionless ground: vertical velocity 0, the
+    # face's four corners at gap 0 carrying the weight, the ledger closed.
+    scene = flexbody.load_scene({
+        "name": "tumbling_box", "gravity": [0.0, 0.0, -G],
+        "grounds": [{"point": [0.0, 0.0, 0.0], "normal": [0.0, 0.0, 1.0], "restitution": e}],
+        "bodies": [{"name": "box", "rigid": True, "particles": BOX, "masses": BOX_MASSES,
+                    "links": [[i, i + 1] for i in range(7)], "position": [0.0, 0.0, 0.5],
+                    "rotation": [0.2, 0.1, 0.0], "angular_velocity": [1.0, -0.5, 0.3]}],
+        "simulation": {"t_end": 2.0, "output_dt": 1e-3}})
+    r = simulate(scene, **TIGHT)
+    assert r.success, r.message
+    z = r.positions[-1, :, 2]
+    face = np.abs(z) < 1e-9
+    assert face.sum() == 4 and np.all(z[~face] > 0.1)
+    assert r.positions[:, :, 2].min() > -1e-9
+    np.testing.assert_allclose(r.velocities[-1, :, 2], 0.0, atol=1e-9)
+    force = r.contact_force[-1]
+    assert np.all(force >= 0.0) and np.all(force[~face] == 0.0)
+    np.testing.assert_allclose(force.sum(), np.sum(BOX_MASSES) * G, rtol=1e-9)
+    total = r.total_energy
+    assert np.abs(total - total[0]).max() < 1e-8 * total[0]
+
+
 # ----------------------------------------------------------------- input
 
 

@@ -260,8 +260,7 @@ def resolve(
         if instant.any() and getattr(model, "coupled", False):
             # Coupled contacts (a rigid body's): one LCP over every touching contact.
             touching_now = instant | phases.on_ground
-            out = coupled_impact(model, y, p, touching_now, np.where(hit & rebounds, e, 0.0),
-                                 max(speed_tolerance, 1e-12))
+            out = coupled_impact(model, y, p, touching_now, np.where(hit & rebounds, e, 0.0), slowest)
             y, loss = out.y, loss + out.loss
             gaps = model.gaps(y[: model.nq], p)
             left = out.leaving
@@ -292,8 +291,13 @@ def resolve(
         if (started | instant | away).any():
             continue  # the dampers saw the velocity jump: recompute the forces before holding anyone
         if getattr(model, "coupled", False):  # Signorini's law over all held contacts at once
-            pulling = coupled_release(model, y, p, phases.on_ground, phases.push, leaving, force_tolerance)
+            pulling, implied = coupled_release(model, y, p, phases.on_ground, phases.push, leaving,
+                                               force_tolerance)
+            phases.phase[implied] = FREE  # redundant and unloaded: the others hold it at gap 0
+            phases.floor[implied] = np.minimum(0.0, gaps[implied]) - gap_tolerance
             released = np.flatnonzero(pulling)
+            if implied.any() and not len(released):
+                continue  # recompute the forces of the independent held contacts
         else:
             pulling = phases.on_ground & ((lam < 0.0) | (leaving & (lam <= force_tolerance)))
             # Release the most pulling contact, then recompute.

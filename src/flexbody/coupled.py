@@ -20,6 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .contact_problems import delassus, solve_forces, solve_impact, velocity_change
+from .dynamics import contact_solve
 
 
 class CoupledImpactError(RuntimeError):
@@ -48,8 +49,15 @@ class CoupledImpact:
     leaving: np.ndarray
 
 
+def _rounded(rates: np.ndarray, J: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """Contact rates ``J x`` with what is round-off of their terms set to 0: a contact at rest
+    reads +-1e-17 m/s, and a solver asked to keep that sign exactly would fail its check."""
+    level = 1e-13 * float(np.abs(J).max(initial=0.0)) * float(np.abs(x).max(initial=0.0))
+    return np.where(np.abs(rates) <= level, 0.0, rates)
+
+
 def coupled_impact(model, y: np.ndarray, p: np.ndarray, touching: np.ndarray, restitution: np.ndarray,
-                   speed_floor: float) -> CoupledImpact:
+                   slowest: np.ndarray) -> CoupledImpact:
     """Impulses on the ``touching`` contacts (bool, shape (nc,)) by Newton's law per contact.
 
     Parameters
@@ -62,9 +70,12 @@ def coupled_impact(model, y: np.ndarray, p: np.ndarray, touching: np.ndarray, re
         Contacts at the ground (hit now, or held): the only ones that may take impulse.
     restitution : ndarray, shape (nc,)
         Newton's e per contact (0 where a rebound would be too slow: plastic).
-    speed_floor : float
-        A normal velocity after the impulses above this (m/s) separates; at or below, the
-        contact stays (round-off of ``v+ = 0``).
+    slowest : ndarray, shape (nc,)
+        A contact the impulses leave slower than this (m/s) is stopped with the held ones:
+        it would not rise 1e-9 of the scene's size (:data:`flexbody.constants.ZENO_RISE`),
+        as for rebounds.  Without it a block rocking on two corners would lift each off the
+        other's plastic impact, ever faster (an accumulation of impacts, Zeno).  The kinetic
+        energy this takes is at most that of those speeds.
 
     Raises
     ------
@@ -79,15 +90,23 @@ def coupled_impact(model, y: np.ndarray, p: np.ndarray, touching: np.ndarray, re
     if not len(rows):
         return CoupledImpact(np.array(y, float), 0.0, impulses, leaving)
     M, J = model.mass_matrix(q, p), model.gap_jacobian(q, p)[rows]
-    solution = solve_impact(delassus(J, M), J @ u, restitution[rows])
+    W = delassus(J, M)
+    solution = solve_impact(W, _rounded(J @ u, J, u), restitution[rows])
     if not solution.solved:
         raise CoupledImpactError(f"the impact of contacts {rows.tolist()} has no solution found: {solution.message}")
     out = np.array(y, float)
-    out[nq : nq + nu] = u + velocity_change(J, M, solution.normal)
-    before = float(model.energies(q, u, p)[0])
-    after = float(model.energies(q, out[nq : nq + nu], p)[0])
+    u_new = u + velocity_change(J, M, solution.normal)
     impulses[rows] = solution.normal
-    leaving[rows] = solution.normal_rate > speed_floor
+    leaves = solution.normal_rate > np.maximum(slowest[rows], 1e-12)
+    if (~leaves).any():  # what stays is stopped exactly (v+ = 0 up to round-off, or too slow to leave)
+        stay = ~leaves
+        extra = contact_solve(W[np.ix_(stay, stay)], -(J[stay] @ u_new))
+        u_new = u_new + velocity_change(J[stay], M, extra)
+        impulses[rows[stay]] += extra
+    out[nq : nq + nu] = u_new
+    before = float(model.energies(q, u, p)[0])
+    after = float(model.energies(q, u_new, p)[0])
+    leaving[rows] = leaves
     return CoupledImpact(out, before - after, impulses, leaving)
 
 
@@ -107,8 +126,14 @@ def coupled_release(model, y: np.ndarray, p: np.ndarray, held: np.ndarray, push:
 
     Returns
     -------
-    ndarray of bool, shape (nc,)
-        The held contacts to release (none when every held contact is pushed on).
+    release : ndarray of bool, shape (nc,)
+        The held contacts that lift off (their force would pull).
+    implied : ndarray of bool, shape (nc,)
+        Held contacts the LCP gives no force while they stay (acceleration 0): with more
+        contacts than the body has freedoms (a box flat on four corners) the forces are not
+        unique, and the LCP's answer carries the weight on the others.  They are set free
+        without an event: their gap stays 0 because the held ones imply it, and if that
+        changes, their gap event finds them.
 
     Raises
     ------
@@ -117,14 +142,15 @@ def coupled_release(model, y: np.ndarray, p: np.ndarray, held: np.ndarray, push:
     """
     nq, nu = model.nq, model.nu
     release = np.zeros(model.n_contacts, bool)
+    implied = np.zeros(model.n_contacts, bool)
     rows = np.flatnonzero(held)
     if not len(rows):
-        return release
+        return release, implied
     q, u = y[:nq], y[nq : nq + nu]
     free, _ = model.rhs(y, p, np.zeros(model.n_contacts, np.intc), push)
     J = model.gap_jacobian(q, p)[rows]
     a_free = J @ free[nq : nq + nu] + model.gap_bias(q, u, p)[rows]
-    solution = solve_forces(delassus(J, model.mass_matrix(q, p)), a_free)
+    solution = solve_forces(delassus(J, model.mass_matrix(q, p)), _rounded(a_free, J, free[nq : nq + nu]))
     if not solution.solved:
         raise CoupledImpactError(f"the forces of held contacts {rows.tolist()} have no solution found: "
                                  f"{solution.message}")
@@ -132,4 +158,6 @@ def coupled_release(model, y: np.ndarray, p: np.ndarray, held: np.ndarray, push:
     floor = 1e-10 * max(1.0, float(np.abs(a_free).max()))
     lifted = (solution.normal == 0.0) & (solution.normal_rate > floor)
     release[rows] = lifted | (leaving[rows] & (solution.normal <= force_tolerance[rows]))
-    return release
+    if len(rows) > 1 and np.linalg.matrix_rank(J, tol=1e-9 * max(1.0, float(np.abs(J).max()))) < len(rows):
+        implied[rows] = (solution.normal == 0.0) & ~release[rows]  # redundant: the others carry it
+    return release, implied

@@ -27,6 +27,42 @@ def mass_solver(model: Model, q, p):
     return lambda x: np.linalg.solve(M, x)
 
 
+#: A contact matrix pivot at or below this share of its largest diagonal entry is a redundant
+#: contact (the twin of REDUNDANT in model.c).
+REDUNDANT = 1e-12
+
+
+def contact_solve(A: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``x`` with ``A x = b`` for a contact matrix ``A (k, k)``, positive semidefinite.
+
+    A Cholesky factorisation that drops the columns of redundant contacts (pivot at or below
+    :data:`REDUNDANT` of the largest diagonal entry: their forces are 0, the others hold
+    them), in the order of model.c's ``cholesky`` so both give the same numbers.
+
+    Raises
+    ------
+    FloatingPointError
+        If ``A`` is not positive semidefinite (as the C models report it).
+    """
+    n = len(b)
+    L = np.zeros((n, n))
+    largest = float(np.max(np.diag(A))) if n else 0.0
+    for j in range(n):
+        d = A[j, j] - L[j, :j] @ L[j, :j]
+        if not d > -REDUNDANT * largest:
+            raise FloatingPointError("mass or contact matrix not positive definite at this state")
+        if d <= REDUNDANT * largest:
+            continue  # dependent: dropped
+        L[j, j] = np.sqrt(d)
+        L[j + 1 :, j] = (A[j + 1 :, j] - L[j + 1 :, :j] @ L[j, :j]) / L[j, j]
+    x = np.array(b, float)
+    for i in range(n):
+        x[i] = (x[i] - L[i, :i] @ x[:i]) / L[i, i] if L[i, i] > 0.0 else 0.0
+    for i in range(n - 1, -1, -1):
+        x[i] = (x[i] - L[i + 1 :, i] @ x[i + 1 :]) / L[i, i] if L[i, i] > 0.0 else 0.0
+    return x
+
+
 def constrained_rhs(model: Model, y, p, held, push) -> tuple[np.ndarray, np.ndarray]:
     """``(ydot (ny,), lam (nc,))`` for state ``y = [q, u, w]``; see :meth:`Model.rhs`."""
     q, u = y[: model.nq], y[model.nq : model.nq + model.nu]
@@ -45,7 +81,7 @@ def constrained_rhs(model: Model, y, p, held, push) -> tuple[np.ndarray, np.ndar
     if held.any():
         Js = J[held]
         X = solve(Js.T)
-        lam_s = np.linalg.solve(Js @ X, -(Js @ acc + bias[held]))
+        lam_s = contact_solve(Js @ X, -(Js @ acc + bias[held]))
         acc = acc + X @ lam_s
         lam[held] = lam_s
     ydot = np.concatenate([u, acc, [model._call("damping_power", q, u, p), impact_power]])
@@ -70,7 +106,7 @@ def impact(model: Model, y, p, stop) -> tuple[np.ndarray, float]:
     J = model.gap_jacobian(q, p)[stop]
     X = mass_solver(model, q, p)(J.T)
     out = y.copy()
-    out[nq : nq + nu] = u + X @ np.linalg.solve(J @ X, -(J @ u))
+    out[nq : nq + nu] = u + X @ contact_solve(J @ X, -(J @ u))
     loss = model.energies(q, u, p)[0] - model.energies(q, out[nq : nq + nu], p)[0]
     return out, float(loss)
 
