@@ -120,9 +120,9 @@ def test_gap_jacobians_equal_central_differences_and_the_closed_form(rng):
 def test_kernels_equal_their_sympy_expressions(rng):
     """The generated NumPy kernels evaluate the SymPy outputs of derivation.elements."""
     sp = pytest.importorskip("sympy")
-    from derivation.elements import all_kernels
+    from derivation.elements import _surface_kernels
 
-    kernels = {k.name: k for k in all_kernels() if k.name.startswith(("segment_", "triangle_"))}
+    kernels = {k.name: k for d in (2, 3) for k in _surface_kernels(d)}
     assert set(kernels) == {"segment_2d", "segment_2d_velocity", "triangle_3d", "triangle_3d_velocity"}
     for name, kernel in kernels.items():
         values = {arg: rng.normal(size=len(symbols)) for arg, symbols in kernel.inputs}
@@ -287,18 +287,15 @@ def _inside_polygon(points, vertices):
 def test_signed_gap_to_a_concave_polygon_matches_an_independent_reference(rng):
     """Near a concave (star) polygon, the gap's sign is point-in-polygon's and its size the
     distance to a fine sampling of the boundary, also at reflex vertices."""
-    angle = 2 * np.pi * np.arange(10) / 10
-    radius = np.where(np.arange(10) % 2 == 0, 1.0, 0.45)
-    vertices = np.column_stack([radius * np.cos(angle), radius * np.sin(angle)])
-    segments = np.column_stack([np.arange(10), (np.arange(10) + 1) % 10])
+    vertices, segments = star()
     points = rng.uniform(-1.2, 1.2, size=(400, 2))
     found = closest_features(points, vertices, segments)
     inside = _inside_polygon(points, vertices)
     np.testing.assert_array_equal(found.gap < 0, inside)
-    u = np.linspace(0, 1, 20001)
+    u = np.linspace(0, 1, 2001)
     boundary = np.concatenate([a + u[:, None] * (b - a) for a, b in zip(vertices, np.roll(vertices, -1, axis=0))])
     reference = np.array([np.min(np.linalg.norm(boundary - p, axis=1)) for p in points])
-    spacing = np.max(np.linalg.norm(np.roll(vertices, -1, axis=0) - vertices, axis=1)) / 20000
+    spacing = np.max(np.linalg.norm(np.roll(vertices, -1, axis=0) - vertices, axis=1)) / 2000
     assert np.all(np.abs(np.abs(found.gap) - reference) <= spacing)
     assert np.all(np.abs(found.gap) <= reference + 1e-15)  # never farther than a boundary point
     # The gap's gradient is its normal: central differences of the surface gap.
@@ -362,3 +359,48 @@ def test_point_edge_distance_and_gradient(rng):
         assert dist[0] == pytest.approx(np.min(np.linalg.norm(samples - x, axis=1)), abs=1e-4)
         fd = _central_difference(lambda z: point_edge(z[None], a, b)[0][0], x[0])
         np.testing.assert_allclose(direction[0], fd, atol=1e-7)
+
+
+def star():
+    """A concave, counter-clockwise 10-pointed star: vertices (10, 2) and segments (10, 2)."""
+    angle = 2 * np.pi * np.arange(10) / 10
+    radius = np.where(np.arange(10) % 2 == 0, 1.0, 0.45)
+    return np.column_stack([radius * np.cos(angle), radius * np.sin(angle)]), \
+        np.column_stack([np.arange(10), (np.arange(10) + 1) % 10])
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_feature_gaps_jacobian_is_their_derivative_in_every_coordinate_and_balances(rng, dim):
+    """Two bodies' particles in one array: a star (2D) or a cube (3D) whose corners are the
+    surface vertices, and particles near it.  The sparse gap Jacobian (normal on x,
+    -w normal on the feature's vertices) equals central differences of the surface gap in
+    every coordinate, for faces, edges and vertices; its forces sum to zero with zero moment."""
+    from flexbody.surface_contact import jacobian_entries
+
+    corners, elements = star() if dim == 2 else cube()
+    near = rng.uniform(-1.2, 1.2, size=(60, 2)) if dim == 2 else rng.uniform(-0.4, 1.4, size=(60, 3))
+    x = np.vstack([corners, near])  # the first particles are the surface's, then the other body's
+    pairs = np.indices((60, len(elements))).reshape(2, -1).T + [len(corners), 0]
+    found = closest_features(x, x, elements, pairs)
+    assert set(found.kind) == ({FACE, VERTEX} if dim == 2 else {FACE, EDGE, VERTEX})
+    rows, cols, vals = jacobian_entries(found, dim)
+    J = np.zeros((len(found.gap), x.size))
+    np.add.at(J, (rows, cols), vals)
+
+    def gaps(z):
+        return closest_features(z.reshape(-1, dim), z.reshape(-1, dim), elements, pairs).gap
+
+    h = 1e-7
+    fd = np.empty_like(J)
+    for c in range(x.size):
+        up, down = x.ravel().copy(), x.ravel().copy()
+        up[c] += h
+        down[c] -= h
+        fd[:, c] = (gaps(up) - gaps(down)) / (2 * h)
+    np.testing.assert_allclose(J, fd, atol=1e-6)
+    for r in range(len(found.gap)):
+        forces = J[r].reshape(-1, dim)  # lam = 1
+        np.testing.assert_allclose(forces.sum(axis=0), 0.0, atol=1e-14)
+        arm = x - rng.normal(size=dim)
+        moment = arm[:, 0] * forces[:, 1] - arm[:, 1] * forces[:, 0] if dim == 2 else np.cross(arm, forces)
+        np.testing.assert_allclose(moment.sum(axis=0), 0.0, atol=1e-12)

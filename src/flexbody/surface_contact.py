@@ -230,7 +230,9 @@ def closest_features(x: FloatArray, vertices: FloatArray, elements: IntArray,
     pairs : ndarray of int, shape (k, 2), optional
         Candidate ``(particle, element)`` pairs (from :mod:`flexbody.broadphase`); default:
         every particle against every element.  Each particle is answered once, from its
-        own candidates.
+        own candidates.  When the elements' vertices are particles (the broad phase's
+        numbering), pass ``x`` itself as ``vertices`` and leave a particle out of its own
+        elements' pairs.
 
     Returns
     -------
@@ -271,3 +273,34 @@ def closest_features(x: FloatArray, vertices: FloatArray, elements: IntArray,
     normal = np.where((kind == FACE)[:, None], face_normal, sign[:, None] * direction)
     return SurfaceContact(particle=particle, kind=kind, element=element, feature=feature, weights=weights,
                           gap=sign * distance, normal=normal)
+
+
+def jacobian_entries(contact: SurfaceContact, dim: int) -> tuple[IntArray, IntArray, FloatArray]:
+    """The gaps' Jacobian with respect to every coordinate, as sparse (row, column, value) entries.
+
+    Row r is contact r's gap; its entries are ``normal`` on the particle's coordinates and
+    ``-w_i normal`` on each feature vertex i's (column ``index * dim + axis``).  The
+    feature's vertex indices must be particle indices: call :func:`closest_features` with
+    the particles' positions as ``vertices``, as the broad phase numbers elements.
+
+    Parameters
+    ----------
+    contact : SurfaceContact
+        k contacts.
+    dim : int
+        2 or 3.
+
+    Returns
+    -------
+    rows, columns : ndarray of int, shape (k * (1 + d) * dim,)
+    values : ndarray, shape (k * (1 + d) * dim,)
+        Duplicates (a particle twice in a row) do not occur; padding entries are dropped.
+    """
+    k, width = contact.feature.shape
+    points = np.column_stack([contact.particle, contact.feature])  # (k, 1 + width)
+    scale = np.column_stack([np.ones(k), -contact.weights])
+    rows = np.repeat(np.arange(k), (1 + width) * dim)
+    columns = (points[:, :, None] * dim + np.arange(dim)).reshape(-1)
+    values = (scale[:, :, None] * contact.normal[:, None, :]).reshape(-1)
+    used = np.repeat(points.reshape(-1) >= 0, dim)
+    return rows[used], columns[used], values[used]
