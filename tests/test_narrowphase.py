@@ -404,3 +404,59 @@ def test_feature_gaps_jacobian_is_their_derivative_in_every_coordinate_and_balan
         arm = x - rng.normal(size=dim)
         moment = arm[:, 0] * forces[:, 1] - arm[:, 1] * forces[:, 0] if dim == 2 else np.cross(arm, forces)
         np.testing.assert_allclose(moment.sum(axis=0), 0.0, atol=1e-12)
+
+
+def square():
+    """The unit square, counter-clockwise."""
+    vertices = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
+    return vertices, np.array([[0, 1], [1, 2], [2, 3], [3, 0]])
+
+
+def test_passing_beside_a_segments_end_is_no_contact():
+    """A particle falling past the square's right side, 1 mm outside it: the top segment's
+    line gap changes sign (its line reaches beyond its end), the surface gap never does: it
+    goes from the corner (vertex) to the right side (face) at 1 mm."""
+    vertices, segments = square()
+    heights = np.linspace(1.5, 0.5, 201)
+    points = np.column_stack([np.full_like(heights, 1.001), heights])
+    line_gap, s, _, _ = K.segment_2d(points.T, vertices[2].T[:, None], vertices[3].T[:, None])
+    assert line_gap[0].min() < 0 < line_gap[0].max() and np.all(s[0] < 0)  # beside the top side's end
+    found = closest_features(points, vertices, segments)
+    assert np.all(found.gap > 0)
+    np.testing.assert_allclose(found.gap[heights <= 1.0], 0.001, rtol=1e-9)
+    kinds = found.kind[heights > 1.0]
+    assert set(kinds) == {VERTEX} and np.all(found.kind[heights <= 1.0] == FACE)
+
+
+@pytest.mark.parametrize("target", ["vertex", "face"])
+def test_contact_onset_is_a_sign_change_of_the_surface_gap_located_exactly(target):
+    """The signed surface gap is continuous through hand-overs and changes sign where a
+    particle reaches the surface, at a vertex too (the pseudo-normal signs it): root finding
+    on it gives the hit time of the closed form.  The square moves and turns meanwhile."""
+    from scipy.optimize import brentq
+
+    vertices, segments = square()
+    omega, drift = 0.7, np.array([0.3, -0.2])
+
+    def square_at(t):
+        c, s = np.cos(omega * t), np.sin(omega * t)
+        return (vertices - 0.5) @ np.array([[c, s], [-s, c]]) + 0.5 + drift * t
+
+    # The particle moves with the square's motion plus a closing speed toward the point it hits,
+    # so in the square's frame it travels straight in; the hit is at t = 1.
+    aim = np.array([1.0, 1.0]) if target == "vertex" else np.array([1.0, 0.4])
+    start = aim + (np.array([0.6, 0.8]) if target == "vertex" else np.array([0.5, 0.0]))
+
+    def particle_at(t):
+        in_frame = start + (aim - start) * t
+        c, s = np.cos(omega * t), np.sin(omega * t)
+        return (in_frame - 0.5) @ np.array([[c, s], [-s, c]]) + 0.5 + drift * t
+
+    def gap(t):
+        return closest_features(particle_at(t)[None], square_at(t), segments).gap[0]
+
+    assert gap(0.0) > 0 > gap(1.2)
+    hit = brentq(gap, 0.0, 1.2, xtol=1e-14)
+    assert hit == pytest.approx(1.0, abs=1e-12)
+    before = closest_features(particle_at(hit - 1e-6)[None], square_at(hit - 1e-6), segments)
+    assert before.kind[0] == (VERTEX if target == "vertex" else FACE)

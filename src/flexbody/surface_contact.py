@@ -16,6 +16,12 @@ weighted pseudonormal", IEEE TVCG 11(3), 2005): ``(x - closest point) . pseudo-n
 has the sign of the true inside/outside test for any closed, consistently oriented
 surface.
 
+That signed surface gap is the event function of contact onset: it is continuous where
+the contact passes from one feature to the next, and it changes sign where the particle
+reaches the surface, at a vertex or an edge too (an unsigned distance would only touch
+zero there), while an element's own line or plane gap also changes sign beside the
+element, where there is no contact.
+
 Every feature's gap has the gradient ``normal`` with respect to x and ``-w_i normal``
 with respect to its vertices (w: the closest point's weights on them), the element
 kernels' form: with the weights in [0, 1] the contact forces balance.
