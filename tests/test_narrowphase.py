@@ -460,3 +460,22 @@ def test_contact_onset_is_a_sign_change_of_the_surface_gap_located_exactly(targe
     assert hit == pytest.approx(1.0, abs=1e-12)
     before = closest_features(particle_at(hit - 1e-6)[None], square_at(hit - 1e-6), segments)
     assert before.kind[0] == (VERTEX if target == "vertex" else FACE)
+
+
+def test_a_particle_wedged_between_two_bodies_gets_one_contact_on_each():
+    """Two unit squares side by side 2 mm apart and a particle between them: with the bodies
+    named, one feature on each (the facing sides, 1 mm); without, the nearer one only."""
+    vertices, segments = square()
+    both = np.vstack([vertices, vertices + [1.002, 0.0]])
+    elements = np.vstack([segments, segments + 4])
+    body = np.repeat([0, 1], 4)
+    x = np.array([[1.001, 0.5], [1.0015, 0.5]])
+    found = closest_features(x, both, elements, element_body=body)
+    np.testing.assert_array_equal(found.particle, [0, 0, 1, 1])
+    np.testing.assert_array_equal(found.element, [1, 7, 1, 7])  # the right side of 0, the left side of 1
+    np.testing.assert_allclose(found.gap, [0.001, 0.001, 0.0015, 0.0005], rtol=1e-9)
+    np.testing.assert_allclose(found.normal, [[1, 0], [-1, 0], [1, 0], [-1, 0]], atol=1e-15)
+    one = closest_features(x, both, elements)
+    np.testing.assert_array_equal(one.particle, [0, 1])
+    np.testing.assert_allclose(one.gap, [0.001, 0.0005], rtol=1e-9)
+    assert len(closest_features(x, both, elements, pairs=np.zeros((0, 2), int)).gap) == 0

@@ -194,16 +194,16 @@ def _closest_on_elements(x: FloatArray, vertices: FloatArray, elements: IntArray
     distance = np.abs(gap[0])
     outside = np.flatnonzero((weights < 0).any(axis=1) | (weights > 1).any(axis=1))
     if len(outside):
-        # The projection leaves the element: its closest point is on its boundary, the nearest edge.
-        xo = x[outside]
-        best = np.full(len(outside), np.inf)
-        best_t = np.zeros(len(outside))
-        best_k = np.zeros(len(outside), int)
-        for k in range(d if d == 3 else 1):
-            dist, t, _ = point_edge(xo, corners[k][outside], corners[(k + 1) % d][outside])
+        # The projection leaves the element: its closest point is on its boundary, on the
+        # nearest of its edges (a segment's only edge is itself), inside it or at a vertex.
+        rows = outside
+        best = np.full(len(rows), np.inf)
+        best_t = np.zeros(len(rows))
+        best_k = np.zeros(len(rows), int)
+        for k in range(1 if d == 2 else 3):  # edge k runs from corner k to corner k + 1
+            dist, t, _ = point_edge(x[rows], corners[k][rows], corners[(k + 1) % d][rows])
             closer = dist < best
             best, best_t, best_k = np.where(closer, dist, best), np.where(closer, t, best_t), np.where(closer, k, best_k)
-        rows = outside
         i = elements[rows, best_k]
         j = elements[rows, (best_k + 1) % d]
         distance[rows] = best
@@ -222,8 +222,8 @@ def _closest_on_elements(x: FloatArray, vertices: FloatArray, elements: IntArray
 
 
 def closest_features(x: FloatArray, vertices: FloatArray, elements: IntArray,
-                     pairs: IntArray | None = None) -> SurfaceContact:
-    """Each particle's closest feature of a closed surface and its signed gap.
+                     pairs: IntArray | None = None, element_body: IntArray | None = None) -> SurfaceContact:
+    """Each particle's closest feature of a closed surface (or of each body's) and its signed gap.
 
     Parameters
     ----------
@@ -239,11 +239,15 @@ def closest_features(x: FloatArray, vertices: FloatArray, elements: IntArray,
         own candidates.  When the elements' vertices are particles (the broad phase's
         numbering), pass ``x`` itself as ``vertices`` and leave a particle out of its own
         elements' pairs.
+    element_body : ndarray of int, shape (m,), optional
+        The body of each element, when ``elements`` holds several bodies' surfaces: then a
+        particle gets one answer per body it has candidates on (it can touch two at once).
 
     Returns
     -------
     SurfaceContact
-        One row per particle that has a candidate.
+        One row per particle that has a candidate (per particle and body with
+        ``element_body``), ordered by particle (then body).
     """
     x, vertices = np.asarray(x, float), np.asarray(vertices, float)
     elements = np.asarray(elements, dtype=np.int64)
@@ -252,13 +256,18 @@ def closest_features(x: FloatArray, vertices: FloatArray, elements: IntArray,
         raise ValueError(f"`vertices` and `elements` must be of dimension {d} like `x`; got shapes "
                          f"{vertices.shape} and {elements.shape}")
     if pairs is None:
-        grid = np.indices((len(x), len(elements))).reshape(2, -1).T
-        pairs = grid
+        pairs = np.indices((len(x), len(elements))).reshape(2, -1).T
     pairs = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
+    if len(pairs) == 0:
+        empty = np.zeros((0, d))
+        return SurfaceContact(np.zeros(0, int), np.zeros(0, int), np.zeros(0, int), np.zeros((0, d), int), empty,
+                              np.zeros(0), empty)
     kind, feature, weights, distance = _closest_on_elements(x[pairs[:, 0]], vertices, elements[pairs[:, 1]])
-    # One answer per particle: its nearest candidate, ties to the lowest-numbered element.
-    order = np.lexsort((pairs[:, 1], distance, pairs[:, 0]))
-    first = order[np.r_[True, pairs[order[1:], 0] != pairs[order[:-1], 0]]]
+    # One answer per particle (and body): its nearest candidate, ties to the lowest-numbered element.
+    surface = np.zeros(len(pairs), int) if element_body is None else np.asarray(element_body)[pairs[:, 1]]
+    order = np.lexsort((pairs[:, 1], distance, surface, pairs[:, 0]))
+    group = np.column_stack([pairs[order, 0], surface[order]])
+    first = order[np.r_[True, np.any(group[1:] != group[:-1], axis=1)]]
     particle, element = pairs[first, 0], pairs[first, 1]
     kind, feature, weights, distance = kind[first], feature[first], weights[first], distance[first]
     xp = x[particle]
