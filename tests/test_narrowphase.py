@@ -106,12 +106,12 @@ def test_gap_jacobians_equal_central_differences_and_the_closed_form(rng):
     matches central differences of the gap."""
     for _ in range(20):
         x, a, b = rng.normal(size=(3, 2))
-        gap, s, n, jac = segment(x, a, b)
+        _, s, n, jac = segment(x, a, b)
         np.testing.assert_allclose(jac, np.concatenate([n, -(1 - s) * n, -s * n]), atol=1e-12)
         fd = _central_difference(lambda z: segment(z[:2], z[2:4], z[4:])[0], np.concatenate([x, a, b]))
         np.testing.assert_allclose(jac, fd, atol=1e-8)
         x, a, b, c = random_triangle(rng)
-        gap, bary, n, jac = triangle(x, a, b, c)
+        _, bary, n, jac = triangle(x, a, b, c)
         np.testing.assert_allclose(jac, np.concatenate([n, *(-w * n for w in bary)]), atol=1e-12)
         fd = _central_difference(lambda z: triangle(z[:3], z[3:6], z[6:9], z[9:])[0], np.concatenate([x, a, b, c]))
         np.testing.assert_allclose(jac, fd, atol=1e-8)
@@ -119,7 +119,7 @@ def test_gap_jacobians_equal_central_differences_and_the_closed_form(rng):
 
 def test_kernels_equal_their_sympy_expressions(rng):
     """The generated NumPy kernels evaluate the SymPy outputs of derivation.elements."""
-    sp = pytest.importorskip("sympy")
+    pytest.importorskip("sympy")
     from derivation.elements import _surface_kernels
 
     kernels = {k.name: k for d in (2, 3) for k in _surface_kernels(d)}
@@ -172,7 +172,7 @@ def test_gap_rate_is_the_time_derivative_of_the_gap(rng):
             v = rng.normal(size=q0.shape)
             acc = rng.normal(size=q0.shape)  # curved paths: the rate is not a secant by accident
 
-            def gap(t):
+            def gap(t, q0=q0, v=v, acc=acc, d=d):
                 q = q0 + v * t + acc * t**2 / 2
                 return (segment(*q) if d == 2 else triangle(*q))[0]
 
@@ -354,10 +354,10 @@ def test_signed_gap_to_a_cube_matches_its_closed_form(rng):
 def test_point_edge_distance_and_gradient(rng):
     for _ in range(10):
         x, a, b = rng.normal(size=(3, 1, 3))
-        dist, t, direction = point_edge(x, a, b)
+        dist, _, direction = point_edge(x, a, b)
         samples = a + np.linspace(0, 1, 100001)[:, None] * (b - a)
         assert dist[0] == pytest.approx(np.min(np.linalg.norm(samples - x, axis=1)), abs=1e-4)
-        fd = _central_difference(lambda z: point_edge(z[None], a, b)[0][0], x[0])
+        fd = _central_difference(lambda z, a=a, b=b: point_edge(z[None], a, b)[0][0], x[0])
         np.testing.assert_allclose(direction[0], fd, atol=1e-7)
 
 

@@ -203,7 +203,8 @@ def _closest_on_elements(x: FloatArray, vertices: FloatArray, elements: IntArray
         for k in range(1 if d == 2 else 3):  # edge k runs from corner k to corner k + 1
             dist, t, _ = point_edge(x[rows], corners[k][rows], corners[(k + 1) % d][rows])
             closer = dist < best
-            best, best_t, best_k = np.where(closer, dist, best), np.where(closer, t, best_t), np.where(closer, k, best_k)
+            best, best_t = np.where(closer, dist, best), np.where(closer, t, best_t)
+            best_k = np.where(closer, k, best_k)
         i = elements[rows, best_k]
         j = elements[rows, (best_k + 1) % d]
         distance[rows] = best
