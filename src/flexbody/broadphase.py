@@ -24,31 +24,33 @@ tests/test_broadphase.py checks against brute force:
 
 Why the k-d tree: ``python -m flexbody.broadphase`` measures one call (building its index
 from scratch) on a pile of 20 discs of 200 particles (60 of them on the boundary: 1200
-segments), one disc of 10 000 particles on a 320-segment body, and a pile of 20 balls of
-200 particles (their hulls: 3920 triangles of uneven size); margin 2 mm.  Median CPU time
-of 30 calls; "kept" is the mean per step of a :class:`CandidateList` (skin 4 mm) over 200
-steps of 0.1 mm (1 m/s at dt = 0.1 ms), builds included.  2 cores shared with other jobs
-(load average 8), 2026-11-23:
+segments), the same pile in a box of 4 long segments, one disc of 10 000 particles on a
+320-segment body, and a pile of 20 balls of 200 particles (their hulls: 3920 triangles of
+uneven size); margin 2 mm.  Median CPU time of 30 calls; "kept" is the mean per step of
+a :class:`CandidateList` (skin 4 mm) over 200 steps of 0.1 mm (1 m/s at dt = 0.1 ms),
+its builds included.  2 cores shared with other jobs (load average 8 to 10), 2026-11-23:
 
 ===============================================  =========  =========  =========  =====
 case                                             kdtree     grid       kept       pairs
 ===============================================  =========  =========  =========  =====
-2D, 20 bodies x 200 particles                    3.1 ms     2.9 ms     0.36 ms    583
-2D, the same with self contact (no pruning)      4.3 ms     4.7 ms     0.68 ms    892
-2D, 1 body of 10 000 particles + 320 segments    2.2 ms     2.2 ms     0.18 ms    16
-2D, the same with self contact                   4.3 ms     2.8 ms     0.25 ms    16
-3D, 20 bodies x 200 particles                    7.3 ms     6.9 ms     0.67 ms    279
-3D, the same with self contact (no pruning)      17.7 ms    74.5 ms    2.2 ms     2494
+2D, 20 bodies x 200 particles                    2.1 ms     2.6 ms     0.33 ms    583
+2D, the same with self contact (no pruning)      5.0 ms     3.4 ms     0.61 ms    892
+2D, the same pile in a 4-segment box             6.0 ms     699 ms     0.54 ms    622
+2D, the pile in the box with self contact        4.8 ms     472 ms     0.61 ms    931
+2D, 1 body of 10 000 particles + 320 segments    1.3 ms     1.7 ms     0.17 ms    16
+2D, the same with self contact                   4.3 ms     2.6 ms     0.24 ms    16
+3D, 20 bodies x 200 particles                    2.6 ms     2.4 ms     0.49 ms    279
+3D, the same with self contact (no pruning)      13.5 ms    33.9 ms    1.5 ms     2494
 ===============================================  =========  =========  =========  =====
 
-With the pruning the index hardly matters (the brute force would make 4.8 and 15.7
-million box tests in the piles); without it, the grid is as good as the tree on even
-2D elements (faster on the 10 000-particle disc: a sort is cheaper than a tree) but four
-times slower on the uneven triangles: its cells are set by the largest element, while
-the tree gives every element its own radius.  The tree needs no cell size and is
-maintained C code.  Between builds, :class:`CandidateList` keeps the pairs (a Verlet
-list): a step then costs a displacement check and a filter of the kept pairs, 5 to 10
-times less than a search.
+On elements of one size the two are alike (the grid a little faster where a sort beats
+building a tree), but the grid's cells are as large as the largest element: a box's
+four long sides put the whole pile in a few cells and it degrades towards the brute
+force (100 times slower), and the uneven triangles cost it 2.5 times the tree.  The tree
+gives every element its own radius, needs no cell size and is maintained C code.
+Between builds, :class:`CandidateList` keeps the pairs (a Verlet list): a step then
+costs a displacement check and a filter of the kept pairs, 5 to 10 times less than a
+search.
 """
 
 from __future__ import annotations
@@ -74,8 +76,8 @@ MAX_BODIES_PRUNED = 256
 
 def element_boxes(x: FloatArray, elements: IntArray, margin: float) -> tuple[FloatArray, FloatArray]:
     """Bounding boxes of the elements grown by ``margin``: lower and upper corners, each (m, d)."""
-    corners = x[elements]  # (m, vertices per element, d)
-    return corners.min(axis=1) - margin, corners.max(axis=1) + margin
+    corners = [x[vertex] for vertex in elements.T]  # per vertex: NumPy is slow at reducing short axes
+    return functools.reduce(np.minimum, corners) - margin, functools.reduce(np.maximum, corners) + margin
 
 
 def _keep(pairs: IntArray, x: FloatArray, elements: IntArray, lo: FloatArray, hi: FloatArray,
@@ -84,8 +86,11 @@ def _keep(pairs: IntArray, x: FloatArray, elements: IntArray, lo: FloatArray, hi
     if not self_contact:  # first: most raw pairs are a body's particles near its own elements
         pairs = pairs[particle_body[pairs[:, 0]] != element_body[pairs[:, 1]]]
     p, e = pairs[:, 0], pairs[:, 1]
-    keep = np.all((x[p] >= lo[e]) & (x[p] <= hi[e]), axis=1)
-    keep &= ~np.any(elements[e] == p[:, None], axis=1)  # a vertex never touches its own element
+    keep = np.ones(len(pairs), bool)
+    for k in range(x.shape[1]):
+        keep &= (x[p, k] >= lo[e, k]) & (x[p, k] <= hi[e, k])
+    for vertex in elements.T:
+        keep &= vertex[e] != p  # a vertex never touches its own element
     pairs = pairs[keep]
     return pairs[np.lexsort((pairs[:, 1], pairs[:, 0]))]
 
@@ -205,14 +210,16 @@ def _near_other_bodies(x: FloatArray, lo: FloatArray, hi: FloatArray, particle_b
     element_of = np.searchsorted(bodies, element_body)
     p_lo, p_hi = _group_boxes(x, x, particle_of, len(bodies))
     e_lo, e_hi = _group_boxes(lo, hi, element_of, len(bodies))
-    in_box = np.ones((len(x), len(bodies)), bool)  # (n, bodies); one axis at a time: contiguous and fast
-    meets = np.ones((len(lo), len(bodies)), bool)  # (m, bodies)
+    # (bodies, n) and (bodies, m), one axis at a time: NumPy's fast layout for these tests.
+    in_box = np.ones((len(bodies), len(x)), bool)
+    meets = np.ones((len(bodies), len(lo)), bool)
     for k in range(x.shape[1]):
-        in_box &= (x[:, k, None] >= e_lo[:, k]) & (x[:, k, None] <= e_hi[:, k])
-        meets &= (lo[:, k, None] <= p_hi[:, k]) & (hi[:, k, None] >= p_lo[:, k])
-    in_box[np.arange(len(x)), particle_of] = False
-    meets[np.arange(len(lo)), element_of] = False
-    return np.flatnonzero(in_box.any(axis=1)), np.flatnonzero(meets.any(axis=1))
+        xk, lok, hik = (np.ascontiguousarray(a[:, k]) for a in (x, lo, hi))
+        in_box &= (xk >= e_lo[:, k, None]) & (xk <= e_hi[:, k, None])
+        meets &= (lok <= p_hi[:, k, None]) & (hik >= p_lo[:, k, None])
+    in_box[particle_of, np.arange(len(x))] = False
+    meets[element_of, np.arange(len(lo))] = False
+    return np.flatnonzero(in_box.any(axis=0)), np.flatnonzero(meets.any(axis=0))
 
 
 def brute_force_pairs(x: FloatArray, elements: IntArray, particle_body: IntArray, margin: float = 0.0,
@@ -326,6 +333,10 @@ def benchmark_scenes(seed: int = 0) -> dict[str, tuple[FloatArray, IntArray, Int
     scenes = {}
     parts = [_disc_body(200, 0.05, np.array([0.1 * (b % 5), 0.099 * (b // 5)]), 60, rng) for b in range(20)]
     scenes["2D, 20 bodies x 200 particles"] = _stack(parts, 0.002)
+    # The same pile in a box: 4 long segments beside 1200 short ones (the pile touches 3 sides).
+    box = np.array([[-0.051, -0.051], [0.451, -0.051], [0.451, 0.6], [-0.051, 0.6]])
+    container = (box, np.array([[0, 1], [1, 2], [2, 3], [3, 0]]))
+    scenes["2D, the same pile in a 4-segment box"] = _stack(parts + [container], 0.002)
     ground = _disc_body(320, 2.0, np.array([0.0, -2.0]), 320, rng)
     disc = _disc_body(10_000, 0.5, np.array([0.0, 0.499]), 400, rng)
     x, elements, body, margin = _stack([disc, ground], 0.002)
