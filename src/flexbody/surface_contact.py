@@ -156,21 +156,23 @@ def vertex_pseudonormals(vertices: FloatArray, elements: IntArray) -> FloatArray
     return pseudo
 
 
-def edge_pseudonormals(vertices: FloatArray, triangles: IntArray) -> dict[tuple[int, int], FloatArray]:
+def edge_pseudonormals(vertices: FloatArray, triangles: IntArray) -> tuple[IntArray, FloatArray]:
     """Pseudo-normal of every edge of a closed 3D surface: the sum of its two triangles' normals.
 
     Returns
     -------
-    dict of (i, j) -> ndarray, shape (3,)
-        Keyed by the edge's vertices sorted (i < j).
+    edges : ndarray of int, shape (ne, 2)
+        Each edge's vertices, sorted (i < j); the rows sorted too.
+    pseudo : ndarray, shape (ne, 3)
     """
+    triangles = np.asarray(triangles, dtype=np.int64)
     normal = triangle_normals(vertices, triangles)
-    pseudo: dict[tuple[int, int], FloatArray] = {}
-    for e, tri in enumerate(np.asarray(triangles)):
-        for k in range(3):
-            key = tuple(sorted((int(tri[k]), int(tri[(k + 1) % 3]))))
-            pseudo[key] = pseudo.get(key, 0.0) + normal[e]
-    return pseudo
+    ends = np.concatenate([triangles[:, [k, (k + 1) % 3]] for k in range(3)])
+    ends.sort(axis=1)
+    edges, which = np.unique(ends, axis=0, return_inverse=True)
+    pseudo = np.zeros((len(edges), 3))
+    np.add.at(pseudo, which.ravel(), np.tile(normal, (3, 1)))
+    return edges, pseudo
 
 
 def _closest_on_elements(x: FloatArray, vertices: FloatArray, elements: IntArray):
@@ -236,8 +238,8 @@ def closest_features(x: FloatArray, vertices: FloatArray, elements: IntArray,
         Its segments (d = 2) or triangles (d = 3), oriented as in the module docstring.
     pairs : ndarray of int, shape (k, 2), optional
         Candidate ``(particle, element)`` pairs (from :mod:`flexbody.broadphase`); default:
-        every particle against every element.  Each particle is answered once, from its
-        own candidates.  When the elements' vertices are particles (the broad phase's
+        every particle against every element.  Each particle is answered once (once per
+        body with ``element_body``), from its own candidates.  When the elements' vertices are particles (the broad phase's
         numbering), pass ``x`` itself as ``vertices`` and leave a particle out of its own
         elements' pairs.
     element_body : ndarray of int, shape (m,), optional
@@ -280,8 +282,10 @@ def closest_features(x: FloatArray, vertices: FloatArray, elements: IntArray,
     pseudo[vertex_rows] = vertex_pseudonormals(vertices, elements)[feature[vertex_rows, 0]]
     edge_rows = np.flatnonzero(kind == EDGE)
     if len(edge_rows):
-        edges = edge_pseudonormals(vertices, elements)
-        pseudo[edge_rows] = [edges[(int(feature[r, 0]), int(feature[r, 1]))] for r in edge_rows]
+        edges, edge_pseudo = edge_pseudonormals(vertices, elements)
+        code = edges[:, 0] * len(vertices) + edges[:, 1]  # sorted, as the edges are
+        pseudo[edge_rows] = edge_pseudo[np.searchsorted(code, feature[edge_rows, 0] * len(vertices)
+                                                        + feature[edge_rows, 1])]
     sign = np.where(np.einsum("kd,kd->k", offset, pseudo) < 0, -1.0, 1.0)
     with np.errstate(invalid="ignore", divide="ignore"):
         direction = np.where(distance[:, None] > 0, offset / distance[:, None],
