@@ -25,6 +25,21 @@ Elements
     normal component ``w . n``, its tangential part ``w - (w . n) n`` and that part's
     length.  Coulomb friction (DESIGN §6) acts on the tangential part: the impulse at an
     impact, the sticking force and the slip direction.
+``segment`` (2D) and ``triangle`` (3D)
+    A particle x against a surface element of another body whose vertices move (DESIGN
+    §6, several bodies).  Orientation: a 2D body's boundary runs counter-clockwise, so a
+    segment a -> b has the outward normal ``n = (b - a) x z / |b - a|``, the right-hand
+    perpendicular of b - a; a 3D body's triangles a, b, c run counter-clockwise seen from
+    outside, ``n = (b - a) x (c - a) / |(b - a) x (c - a)|``.  The signed gap is
+    ``(x - a) . n`` (< 0 inside); the projection's weights are ``[1 - s, s]`` with
+    ``s = (x - a) . (b - a) / |b - a|^2`` (segment) or the barycentric coordinates
+    (triangle), unclamped: a weight outside [0, 1] means the contact belongs to a
+    neighbour or a vertex (:mod:`flexbody.surface_contact`).  The gap's Jacobian with
+    respect to every coordinate is ``[n, -w_1 n, -w_2 n, ...]``, so with the weights in
+    [0, 1] a contact force ``lam n`` on x comes with ``-w_i lam n`` on the vertices: zero
+    net force and moment.  Their ``_velocity`` twins give the gap rate (the Jacobian times
+    the velocities) and the tangential part of the velocity of x relative to the
+    material point of the element under it (for friction).
 
 Every kernel is a :class:`Kernel`: named inputs (flat arrays of given sizes) and named
 outputs (SymPy matrices of those inputs only).
@@ -197,6 +212,55 @@ def split_kernel(d: int) -> Kernel:
     )
 
 
+def _surface_kernels(d: int) -> list[Kernel]:
+    """Gap, projection weights, normal and gap Jacobian of a particle against a segment (2D)
+    or a triangle (3D) whose vertices move; and their gap rate and tangential velocity."""
+    N = ReferenceFrame("N")
+    corners = "ab" if d == 2 else "abc"
+    x, v = _vector_symbols("x", d), _vector_symbols("v", d)
+    X = {c: _vector_symbols(c, d) for c in corners}
+    V = {c: _vector_symbols(f"v{c}", d) for c in corners}
+    a, b, p = _frame_vector(N, X["a"]), _frame_vector(N, X["b"]), _frame_vector(N, x)
+    if d == 2:  # counter-clockwise boundary: the outward normal is the right-hand perpendicular
+        outward = (b - a).cross(N.z)
+        weights = [1 - (p - a).dot(b - a) / (b - a).dot(b - a)]
+        weights.append(1 - weights[0])
+    else:  # counter-clockwise seen from outside; barycentrics: signed sub-areas over the whole
+        c = _frame_vector(N, X["c"])
+        outward = (b - a).cross(c - a)
+        area2 = outward.dot(outward)
+        weights = [(b - p).cross(c - p).dot(outward) / area2, (c - p).cross(a - p).dot(outward) / area2,
+                   (a - p).cross(b - p).dot(outward) / area2]
+    normal = outward / sp.sqrt(outward.dot(outward))
+    gap = sp.Matrix([(p - a).dot(normal)])
+    jacobian = gap.jacobian(x + [q for c in corners for q in X[c]])
+    velocities = sp.Matrix(v + [u for c in corners for u in V[c]])
+    material = sum((w * _frame_vector(N, V[c]) for w, c in zip(weights, corners)), 0 * N.x)
+    relative = _frame_vector(N, v) - material
+    tangential = relative - relative.dot(normal) * normal
+    axes = (N.x, N.y, N.z)[:d]
+    positions = [("x", x)] + [(c, X[c]) for c in corners]
+    if d == 2:
+        name, element, projection = "segment_2d", "segment a, b", {"s": sp.Matrix([weights[1]])}
+        what = "the closest-point parameter s on the line (0..1 on the segment, unclamped)"
+    else:
+        name, element, projection = "triangle_3d", "triangle a, b, c", {"barycentric": sp.Matrix(weights)}
+        what = "the barycentrics of x's projection (unclamped)"
+    return [
+        Kernel(name, f"Particle x against the {element} of another body: signed gap (x - a) . n (m, < 0 "
+               f"inside), {what}, the outward unit normal n and d gap / d[x, {', '.join(corners)}].",
+               positions,
+               {"gap": gap, **projection, "normal": sp.Matrix([normal.dot(e) for e in axes]),
+                "gap_jacobian": jacobian}),
+        Kernel(f"{name}_velocity", f"Gap rate (m/s) of particle x against the {element}: d gap / dt, the gap "
+               "Jacobian times the velocities; and the tangential part (m/s) of x's velocity relative to the "
+               "element's material point under x.",
+               positions + [("v", v)] + [(f"v{c}", V[c]) for c in corners],
+               {"gap_rate": jacobian * velocities,
+                "tangential_velocity": sp.Matrix([tangential.dot(e) for e in axes])}),
+    ]
+
+
 def all_kernels() -> list[Kernel]:
     """Every element kernel, in the order they are generated."""
     kernels: list[Kernel] = []
@@ -204,4 +268,6 @@ def all_kernels() -> list[Kernel]:
         for damper in DAMPERS:
             kernels += link_kernels(d, damper)
         kernels += [particle_kernel(d), ground_kernel(d), split_kernel(d)]
+    for d in DIMENSIONS:  # after the round-1 kernels: their generated text does not move
+        kernels += _surface_kernels(d)
     return kernels

@@ -538,4 +538,280 @@ static inline void fb_k_split_3d(const double *restrict w, const double *restric
     tangential_norm[0] = sqrt(w1*w1 + w2*w2 + w3*w3);
 }
 
+/* Particle x against the segment a, b of another body: signed gap (x - a) . n (m, < 0 inside), the closest-point parameter s on the line (0..1 on the segment, unclamped), the outward unit normal n and d gap / d[x, a, b].
+ * in: x[2], a[2], b[2]; out: gap[1], s[1], normal[2], gap_jacobian[1x6]. Operations after CSE: 52. */
+static inline void fb_k_segment_2d(const double *restrict x, const double *restrict a, const double *restrict b, double *restrict gap, double *restrict s, double *restrict normal, double *restrict gap_jacobian)
+{
+(void)x; (void)a; (void)b; 
+    const double w0 = -a[1] + x[1];
+    const double w1 = a[0] - b[0];
+    const double w2 = w1*w1;
+    const double w3 = a[1] - b[1];
+    const double w4 = -w3;
+    const double w5 = w4*w4;
+    const double w6 = w2 + w5;
+    const double w7 = 1.0/sqrt(w6);
+    const double w8 = w1*w7;
+    const double w9 = -a[0] + x[0];
+    const double w10 = w4*w7;
+    const double w11 = -w1;
+    const double w12 = w11*w9;
+    const double w13 = w0*w4;
+    const double w14 = w0*w7;
+    const double w15 = 1.0/(w6*sqrt(w6));
+    const double w16 = w0*w15;
+    const double w17 = w1*w16;
+    const double w18 = w7*w9;
+    const double w19 = w15*w9;
+    const double w20 = w19*w4;
+    gap[0] = w0*w8 + w10*w9;
+    s[0] = (w12 + w13)/(w11*w11 + w5);
+    normal[0] = w10;
+    normal[1] = w8;
+    gap_jacobian[0] = w10;
+    gap_jacobian[1] = w8;
+    gap_jacobian[2] = -w10 + w11*w17 + w12*w15*w4 + w14;
+    gap_jacobian[3] = w1*w13*w15 - w18 + w19*w5 - w8;
+    gap_jacobian[4] = w1*w20 - w14 + w16*w2;
+    gap_jacobian[5] = w17*w3 + w18 + w20*w3;
+}
+
+/* Gap rate (m/s) of particle x against the segment a, b: d gap / dt, the gap Jacobian times the velocities; and the tangential part (m/s) of x's velocity relative to the element's material point under x.
+ * in: x[2], a[2], b[2], v[2], va[2], vb[2]; out: gap_rate[1], tangential_velocity[2]. Operations after CSE: 79. */
+static inline void fb_k_segment_2d_velocity(const double *restrict x, const double *restrict a, const double *restrict b, const double *restrict v, const double *restrict va, const double *restrict vb, double *restrict gap_rate, double *restrict tangential_velocity)
+{
+(void)x; (void)a; (void)b; (void)v; (void)va; (void)vb; 
+    const double w0 = a[0] - b[0];
+    const double w1 = w0*w0;
+    const double w2 = a[1] - b[1];
+    const double w3 = -w2;
+    const double w4 = w3*w3;
+    const double w5 = w1 + w4;
+    const double w6 = 1.0/sqrt(w5);
+    const double w7 = -a[1] + x[1];
+    const double w8 = w6*w7;
+    const double w9 = w3*w6;
+    const double w10 = -w0;
+    const double w11 = 1.0/(w5*sqrt(w5));
+    const double w12 = w11*w7;
+    const double w13 = w0*w12;
+    const double w14 = -a[0] + x[0];
+    const double w15 = w10*w14;
+    const double w16 = w0*w6;
+    const double w17 = w14*w6;
+    const double w18 = w11*w14;
+    const double w19 = w3*w7;
+    const double w20 = w18*w3;
+    const double w21 = (w15 + w19)/(w10*w10 + w4);
+    const double w22 = 1 - w21;
+    const double w23 = -v[1] + va[1]*w22 + vb[1]*w21;
+    const double w24 = -v[0] + va[0]*w22 + vb[0]*w21;
+    const double w25 = -w16*w23 - w24*w9;
+    gap_rate[0] = v[0]*w9 + v[1]*w16 + va[0]*(w10*w13 + w11*w15*w3 + w8 - w9) + va[1]*(w0*w11*w19 - w16 - w17 + w18*w4) + vb[0]*(w0*w20 + w1*w12 - w8) + vb[1]*(w13*w2 + w17 + w2*w20);
+    tangential_velocity[0] = -w24 - w25*w9;
+    tangential_velocity[1] = -w16*w25 - w23;
+}
+
+/* Particle x against the triangle a, b, c of another body: signed gap (x - a) . n (m, < 0 inside), the barycentrics of x's projection (unclamped), the outward unit normal n and d gap / d[x, a, b, c].
+ * in: x[3], a[3], b[3], c[3]; out: gap[1], barycentric[3], normal[3], gap_jacobian[1x12]. Operations after CSE: 257. */
+static inline void fb_k_triangle_3d(const double *restrict x, const double *restrict a, const double *restrict b, const double *restrict c, double *restrict gap, double *restrict barycentric, double *restrict normal, double *restrict gap_jacobian)
+{
+(void)x; (void)a; (void)b; (void)c; 
+    const double w0 = -x[0];
+    const double w1 = a[0] + w0;
+    const double w2 = -w1;
+    const double w3 = a[0] - b[0];
+    const double w4 = -w3;
+    const double w5 = -c[1];
+    const double w6 = a[1] + w5;
+    const double w7 = -w6;
+    const double w8 = a[1] - b[1];
+    const double w9 = -w8;
+    const double w10 = -c[0];
+    const double w11 = a[0] + w10;
+    const double w12 = -w11;
+    const double w13 = -w12*w9 + w4*w7;
+    const double w14 = -c[2];
+    const double w15 = a[2] + w14;
+    const double w16 = -w15;
+    const double w17 = a[2] - b[2];
+    const double w18 = -w17;
+    const double w19 = w16*w9 - w18*w7;
+    const double w20 = w12*w18 - w16*w4;
+    const double w21 = w13*w13 + w19*w19 + w20*w20;
+    const double w22 = 1.0/sqrt(w21);
+    const double w23 = w19*w22;
+    const double w24 = -x[1];
+    const double w25 = a[1] + w24;
+    const double w26 = -w25;
+    const double w27 = w20*w22;
+    const double w28 = -x[2];
+    const double w29 = a[2] + w28;
+    const double w30 = -w29;
+    const double w31 = w13*w22;
+    const double w32 = 1.0/w21;
+    const double w33 = b[0] + w0;
+    const double w34 = c[1] + w24;
+    const double w35 = b[1] + w24;
+    const double w36 = c[0] + w0;
+    const double w37 = c[2] + w28;
+    const double w38 = b[2] + w28;
+    const double w39 = b[1] + w5;
+    const double w40 = w22*w30;
+    const double w41 = b[2] + w14;
+    const double w42 = w22*w26;
+    const double w43 = 1.0/(w21*sqrt(w21));
+    const double w44 = -2*c[2];
+    const double w45 = 2*b[2];
+    const double w46 = w44 + w45;
+    const double w47 = (1.0/2.0)*w20;
+    const double w48 = -2*c[1];
+    const double w49 = 2*b[1];
+    const double w50 = w48 + w49;
+    const double w51 = (1.0/2.0)*w13;
+    const double w52 = w43*(w46*w47 - w50*w51);
+    const double w53 = w19*w2;
+    const double w54 = w20*w26;
+    const double w55 = w13*w30;
+    const double w56 = w2*w22;
+    const double w57 = b[0] + w10;
+    const double w58 = -2*c[0];
+    const double w59 = 2*b[0];
+    const double w60 = w58 + w59;
+    const double w61 = (1.0/2.0)*w19;
+    const double w62 = w43*(-w46*w61 + w51*w60);
+    const double w63 = w43*(-w47*w60 + w50*w61);
+    const double w64 = 2*a[1];
+    const double w65 = w48 + w64;
+    const double w66 = 2*a[2];
+    const double w67 = w44 + w66;
+    const double w68 = w43*(-w47*w67 + w51*w65);
+    const double w69 = 2*a[0];
+    const double w70 = w58 + w69;
+    const double w71 = w43*(-w51*w70 + w61*w67);
+    const double w72 = w43*(w47*w70 - w61*w65);
+    const double w73 = -w45 + w66;
+    const double w74 = -w49 + w64;
+    const double w75 = w43*(w47*w73 - w51*w74);
+    const double w76 = -w59 + w69;
+    const double w77 = w43*(w51*w76 - w61*w73);
+    const double w78 = w43*(-w47*w76 + w61*w74);
+    gap[0] = w2*w23 + w26*w27 + w30*w31;
+    barycentric[0] = w32*(w13*(w33*w34 - w35*w36) + w19*(-w34*w38 + w35*w37) + w20*(-w33*w37 + w36*w38));
+    barycentric[1] = w32*(w13*(-w1*w34 + w25*w36) + w19*(-w25*w37 + w29*w34) + w20*(w1*w37 - w29*w36));
+    barycentric[2] = w32*(w13*(w1*w35 - w25*w33) + w19*(w25*w38 - w29*w35) + w20*(-w1*w38 + w29*w33));
+    normal[0] = w23;
+    normal[1] = w27;
+    normal[2] = w31;
+    gap_jacobian[0] = w23;
+    gap_jacobian[1] = w27;
+    gap_jacobian[2] = w31;
+    gap_jacobian[3] = -w23 + w39*w40 - w41*w42 + w52*w53 + w52*w54 + w52*w55;
+    gap_jacobian[4] = -w27 - w40*w57 + w41*w56 + w53*w62 + w54*w62 + w55*w62;
+    gap_jacobian[5] = -w31 - w39*w56 + w42*w57 + w53*w63 + w54*w63 + w55*w63;
+    gap_jacobian[6] = w15*w42 + w40*w7 + w53*w68 + w54*w68 + w55*w68;
+    gap_jacobian[7] = w11*w40 + w16*w56 + w53*w71 + w54*w71 + w55*w71;
+    gap_jacobian[8] = w12*w42 + w53*w72 + w54*w72 + w55*w72 + w56*w6;
+    gap_jacobian[9] = w18*w42 + w40*w8 + w53*w75 + w54*w75 + w55*w75;
+    gap_jacobian[10] = w17*w56 + w4*w40 + w53*w77 + w54*w77 + w55*w77;
+    gap_jacobian[11] = w3*w42 + w53*w78 + w54*w78 + w55*w78 + w56*w9;
+}
+
+/* Gap rate (m/s) of particle x against the triangle a, b, c: d gap / dt, the gap Jacobian times the velocities; and the tangential part (m/s) of x's velocity relative to the element's material point under x.
+ * in: x[3], a[3], b[3], c[3], v[3], va[3], vb[3], vc[3]; out: gap_rate[1], tangential_velocity[3]. Operations after CSE: 308. */
+static inline void fb_k_triangle_3d_velocity(const double *restrict x, const double *restrict a, const double *restrict b, const double *restrict c, const double *restrict v, const double *restrict va, const double *restrict vb, const double *restrict vc, double *restrict gap_rate, double *restrict tangential_velocity)
+{
+(void)x; (void)a; (void)b; (void)c; (void)v; (void)va; (void)vb; (void)vc; 
+    const double w0 = a[0] - b[0];
+    const double w1 = -w0;
+    const double w2 = -c[1];
+    const double w3 = a[1] + w2;
+    const double w4 = -w3;
+    const double w5 = a[1] - b[1];
+    const double w6 = -w5;
+    const double w7 = -c[0];
+    const double w8 = a[0] + w7;
+    const double w9 = -w8;
+    const double w10 = w1*w4 - w6*w9;
+    const double w11 = -c[2];
+    const double w12 = a[2] + w11;
+    const double w13 = -w12;
+    const double w14 = a[2] - b[2];
+    const double w15 = -w14;
+    const double w16 = w13*w6 - w15*w4;
+    const double w17 = -w1*w13 + w15*w9;
+    const double w18 = w10*w10 + w16*w16 + w17*w17;
+    const double w19 = 1.0/sqrt(w18);
+    const double w20 = w16*w19;
+    const double w21 = b[1] + w2;
+    const double w22 = -x[2];
+    const double w23 = a[2] + w22;
+    const double w24 = -w23;
+    const double w25 = w19*w24;
+    const double w26 = b[2] + w11;
+    const double w27 = -x[1];
+    const double w28 = a[1] + w27;
+    const double w29 = -w28;
+    const double w30 = w19*w29;
+    const double w31 = 1.0/(w18*sqrt(w18));
+    const double w32 = -2*c[2];
+    const double w33 = 2*b[2];
+    const double w34 = w32 + w33;
+    const double w35 = (1.0/2.0)*w17;
+    const double w36 = -2*c[1];
+    const double w37 = 2*b[1];
+    const double w38 = w36 + w37;
+    const double w39 = (1.0/2.0)*w10;
+    const double w40 = w31*(w34*w35 - w38*w39);
+    const double w41 = -x[0];
+    const double w42 = a[0] + w41;
+    const double w43 = -w42;
+    const double w44 = w16*w43;
+    const double w45 = w17*w29;
+    const double w46 = w10*w24;
+    const double w47 = w17*w19;
+    const double w48 = w19*w43;
+    const double w49 = b[0] + w7;
+    const double w50 = -2*c[0];
+    const double w51 = 2*b[0];
+    const double w52 = w50 + w51;
+    const double w53 = (1.0/2.0)*w16;
+    const double w54 = w31*(-w34*w53 + w39*w52);
+    const double w55 = w10*w19;
+    const double w56 = w31*(-w35*w52 + w38*w53);
+    const double w57 = 2*a[1];
+    const double w58 = w36 + w57;
+    const double w59 = 2*a[2];
+    const double w60 = w32 + w59;
+    const double w61 = w31*(-w35*w60 + w39*w58);
+    const double w62 = 2*a[0];
+    const double w63 = w50 + w62;
+    const double w64 = w31*(-w39*w63 + w53*w60);
+    const double w65 = w31*(w35*w63 - w53*w58);
+    const double w66 = -w33 + w59;
+    const double w67 = -w37 + w57;
+    const double w68 = w31*(w35*w66 - w39*w67);
+    const double w69 = -w51 + w62;
+    const double w70 = w31*(w39*w69 - w53*w66);
+    const double w71 = w31*(-w35*w69 + w53*w67);
+    const double w72 = 1.0/w18;
+    const double w73 = b[0] + w41;
+    const double w74 = c[1] + w27;
+    const double w75 = b[1] + w27;
+    const double w76 = c[0] + w41;
+    const double w77 = c[2] + w22;
+    const double w78 = b[2] + w22;
+    const double w79 = w72*(w10*(w73*w74 - w75*w76) + w16*(-w74*w78 + w75*w77) + w17*(-w73*w77 + w76*w78));
+    const double w80 = w72*(w10*(w28*w76 - w42*w74) + w16*(w23*w74 - w28*w77) + w17*(-w23*w76 + w42*w77));
+    const double w81 = w72*(w10*(-w28*w73 + w42*w75) + w16*(-w23*w75 + w28*w78) + w17*(w23*w73 - w42*w78));
+    const double w82 = -v[2] + va[2]*w79 + vb[2]*w80 + vc[2]*w81;
+    const double w83 = -v[0] + va[0]*w79 + vb[0]*w80 + vc[0]*w81;
+    const double w84 = -v[1] + va[1]*w79 + vb[1]*w80 + vc[1]*w81;
+    const double w85 = -w20*w83 - w47*w84 - w55*w82;
+    gap_rate[0] = v[0]*w20 + v[1]*w47 + v[2]*w55 + va[0]*(-w20 + w21*w25 - w26*w30 + w40*w44 + w40*w45 + w40*w46) + va[1]*(-w25*w49 + w26*w48 + w44*w54 + w45*w54 + w46*w54 - w47) + va[2]*(-w21*w48 + w30*w49 + w44*w56 + w45*w56 + w46*w56 - w55) + vb[0]*(w12*w30 + w25*w4 + w44*w61 + w45*w61 + w46*w61) + vb[1]*(w13*w48 + w25*w8 + w44*w64 + w45*w64 + w46*w64) + vb[2]*(w3*w48 + w30*w9 + w44*w65 + w45*w65 + w46*w65) + vc[0]*(w15*w30 + w25*w5 + w44*w68 + w45*w68 + w46*w68) + vc[1]*(w1*w25 + w14*w48 + w44*w70 + w45*w70 + w46*w70) + vc[2]*(w0*w30 + w44*w71 + w45*w71 + w46*w71 + w48*w6);
+    tangential_velocity[0] = -w20*w85 - w83;
+    tangential_velocity[1] = -w47*w85 - w84;
+    tangential_velocity[2] = -w55*w85 - w82;
+}
+
 #endif

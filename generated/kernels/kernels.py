@@ -705,3 +705,328 @@ def split_3d(w, n):
     tangential_norm = numpy.zeros((1,) + batch)
     tangential_norm[0] = numpy.sqrt(w1*w1 + w2*w2 + w3*w3)
     return normal, tangential, tangential_norm
+
+
+def segment_2d(x, a, b):
+    """Particle x against the segment a, b of another body: signed gap (x - a) . n (m, < 0 inside), the closest-point parameter s on the line (0..1 on the segment, unclamped), the outward unit normal n and d gap / d[x, a, b].
+
+    Inputs: x (2, m), a (2, m), b (2, m).
+    Returns: gap (1, m), s (1, m), normal (2, m), gap_jacobian (1, 6, m).
+    Operations after CSE: 52.
+    """
+    x_x, x_y = x
+    a_x, a_y = a
+    b_x, b_y = b
+    w0 = -a_y + x_y
+    w1 = a_x - b_x
+    w2 = w1*w1
+    w3 = a_y - b_y
+    w4 = -w3
+    w5 = w4*w4
+    w6 = w2 + w5
+    w7 = 1/numpy.sqrt(w6)
+    w8 = w1*w7
+    w9 = -a_x + x_x
+    w10 = w4*w7
+    w11 = -w1
+    w12 = w11*w9
+    w13 = w0*w4
+    w14 = w0*w7
+    w15 = w6**(-3/2)
+    w16 = w0*w15
+    w17 = w1*w16
+    w18 = w7*w9
+    w19 = w15*w9
+    w20 = w19*w4
+    batch = numpy.shape(x)[1:]
+    gap = numpy.zeros((1,) + batch)
+    gap[0] = w0*w8 + w10*w9
+    s = numpy.zeros((1,) + batch)
+    s[0] = (w12 + w13)/(w11*w11 + w5)
+    normal = numpy.zeros((2,) + batch)
+    normal[0] = w10
+    normal[1] = w8
+    gap_jacobian = numpy.zeros((1, 6) + batch)
+    gap_jacobian[0, 0] = w10
+    gap_jacobian[0, 1] = w8
+    gap_jacobian[0, 2] = -w10 + w11*w17 + w12*w15*w4 + w14
+    gap_jacobian[0, 3] = w1*w13*w15 - w18 + w19*w5 - w8
+    gap_jacobian[0, 4] = w1*w20 - w14 + w16*w2
+    gap_jacobian[0, 5] = w17*w3 + w18 + w20*w3
+    return gap, s, normal, gap_jacobian
+
+
+def segment_2d_velocity(x, a, b, v, va, vb):
+    """Gap rate (m/s) of particle x against the segment a, b: d gap / dt, the gap Jacobian times the velocities; and the tangential part (m/s) of x's velocity relative to the element's material point under x.
+
+    Inputs: x (2, m), a (2, m), b (2, m), v (2, m), va (2, m), vb (2, m).
+    Returns: gap_rate (1, m), tangential_velocity (2, m).
+    Operations after CSE: 79.
+    """
+    x_x, x_y = x
+    a_x, a_y = a
+    b_x, b_y = b
+    v_x, v_y = v
+    va_x, va_y = va
+    vb_x, vb_y = vb
+    w0 = a_x - b_x
+    w1 = w0*w0
+    w2 = a_y - b_y
+    w3 = -w2
+    w4 = w3*w3
+    w5 = w1 + w4
+    w6 = 1/numpy.sqrt(w5)
+    w7 = -a_y + x_y
+    w8 = w6*w7
+    w9 = w3*w6
+    w10 = -w0
+    w11 = w5**(-3/2)
+    w12 = w11*w7
+    w13 = w0*w12
+    w14 = -a_x + x_x
+    w15 = w10*w14
+    w16 = w0*w6
+    w17 = w14*w6
+    w18 = w11*w14
+    w19 = w3*w7
+    w20 = w18*w3
+    w21 = (w15 + w19)/(w10*w10 + w4)
+    w22 = 1 - w21
+    w23 = -v_y + va_y*w22 + vb_y*w21
+    w24 = -v_x + va_x*w22 + vb_x*w21
+    w25 = -w16*w23 - w24*w9
+    batch = numpy.shape(x)[1:]
+    gap_rate = numpy.zeros((1,) + batch)
+    gap_rate[0] = v_x*w9 + v_y*w16 + va_x*(w10*w13 + w11*w15*w3 + w8 - w9) + va_y*(w0*w11*w19 - w16 - w17 + w18*w4) + vb_x*(w0*w20 + w1*w12 - w8) + vb_y*(w13*w2 + w17 + w2*w20)
+    tangential_velocity = numpy.zeros((2,) + batch)
+    tangential_velocity[0] = -w24 - w25*w9
+    tangential_velocity[1] = -w16*w25 - w23
+    return gap_rate, tangential_velocity
+
+
+def triangle_3d(x, a, b, c):
+    """Particle x against the triangle a, b, c of another body: signed gap (x - a) . n (m, < 0 inside), the barycentrics of x's projection (unclamped), the outward unit normal n and d gap / d[x, a, b, c].
+
+    Inputs: x (3, m), a (3, m), b (3, m), c (3, m).
+    Returns: gap (1, m), barycentric (3, m), normal (3, m), gap_jacobian (1, 12, m).
+    Operations after CSE: 257.
+    """
+    x_x, x_y, x_z = x
+    a_x, a_y, a_z = a
+    b_x, b_y, b_z = b
+    c_x, c_y, c_z = c
+    w0 = -x_x
+    w1 = a_x + w0
+    w2 = -w1
+    w3 = a_x - b_x
+    w4 = -w3
+    w5 = -c_y
+    w6 = a_y + w5
+    w7 = -w6
+    w8 = a_y - b_y
+    w9 = -w8
+    w10 = -c_x
+    w11 = a_x + w10
+    w12 = -w11
+    w13 = -w12*w9 + w4*w7
+    w14 = -c_z
+    w15 = a_z + w14
+    w16 = -w15
+    w17 = a_z - b_z
+    w18 = -w17
+    w19 = w16*w9 - w18*w7
+    w20 = w12*w18 - w16*w4
+    w21 = w13*w13 + w19*w19 + w20*w20
+    w22 = 1/numpy.sqrt(w21)
+    w23 = w19*w22
+    w24 = -x_y
+    w25 = a_y + w24
+    w26 = -w25
+    w27 = w20*w22
+    w28 = -x_z
+    w29 = a_z + w28
+    w30 = -w29
+    w31 = w13*w22
+    w32 = w21**(-1.0)
+    w33 = b_x + w0
+    w34 = c_y + w24
+    w35 = b_y + w24
+    w36 = c_x + w0
+    w37 = c_z + w28
+    w38 = b_z + w28
+    w39 = b_y + w5
+    w40 = w22*w30
+    w41 = b_z + w14
+    w42 = w22*w26
+    w43 = w21**(-3/2)
+    w44 = -2*c_z
+    w45 = 2*b_z
+    w46 = w44 + w45
+    w47 = (1/2)*w20
+    w48 = -2*c_y
+    w49 = 2*b_y
+    w50 = w48 + w49
+    w51 = (1/2)*w13
+    w52 = w43*(w46*w47 - w50*w51)
+    w53 = w19*w2
+    w54 = w20*w26
+    w55 = w13*w30
+    w56 = w2*w22
+    w57 = b_x + w10
+    w58 = -2*c_x
+    w59 = 2*b_x
+    w60 = w58 + w59
+    w61 = (1/2)*w19
+    w62 = w43*(-w46*w61 + w51*w60)
+    w63 = w43*(-w47*w60 + w50*w61)
+    w64 = 2*a_y
+    w65 = w48 + w64
+    w66 = 2*a_z
+    w67 = w44 + w66
+    w68 = w43*(-w47*w67 + w51*w65)
+    w69 = 2*a_x
+    w70 = w58 + w69
+    w71 = w43*(-w51*w70 + w61*w67)
+    w72 = w43*(w47*w70 - w61*w65)
+    w73 = -w45 + w66
+    w74 = -w49 + w64
+    w75 = w43*(w47*w73 - w51*w74)
+    w76 = -w59 + w69
+    w77 = w43*(w51*w76 - w61*w73)
+    w78 = w43*(-w47*w76 + w61*w74)
+    batch = numpy.shape(x)[1:]
+    gap = numpy.zeros((1,) + batch)
+    gap[0] = w2*w23 + w26*w27 + w30*w31
+    barycentric = numpy.zeros((3,) + batch)
+    barycentric[0] = w32*(w13*(w33*w34 - w35*w36) + w19*(-w34*w38 + w35*w37) + w20*(-w33*w37 + w36*w38))
+    barycentric[1] = w32*(w13*(-w1*w34 + w25*w36) + w19*(-w25*w37 + w29*w34) + w20*(w1*w37 - w29*w36))
+    barycentric[2] = w32*(w13*(w1*w35 - w25*w33) + w19*(w25*w38 - w29*w35) + w20*(-w1*w38 + w29*w33))
+    normal = numpy.zeros((3,) + batch)
+    normal[0] = w23
+    normal[1] = w27
+    normal[2] = w31
+    gap_jacobian = numpy.zeros((1, 12) + batch)
+    gap_jacobian[0, 0] = w23
+    gap_jacobian[0, 1] = w27
+    gap_jacobian[0, 2] = w31
+    gap_jacobian[0, 3] = -w23 + w39*w40 - w41*w42 + w52*w53 + w52*w54 + w52*w55
+    gap_jacobian[0, 4] = -w27 - w40*w57 + w41*w56 + w53*w62 + w54*w62 + w55*w62
+    gap_jacobian[0, 5] = -w31 - w39*w56 + w42*w57 + w53*w63 + w54*w63 + w55*w63
+    gap_jacobian[0, 6] = w15*w42 + w40*w7 + w53*w68 + w54*w68 + w55*w68
+    gap_jacobian[0, 7] = w11*w40 + w16*w56 + w53*w71 + w54*w71 + w55*w71
+    gap_jacobian[0, 8] = w12*w42 + w53*w72 + w54*w72 + w55*w72 + w56*w6
+    gap_jacobian[0, 9] = w18*w42 + w40*w8 + w53*w75 + w54*w75 + w55*w75
+    gap_jacobian[0, 10] = w17*w56 + w4*w40 + w53*w77 + w54*w77 + w55*w77
+    gap_jacobian[0, 11] = w3*w42 + w53*w78 + w54*w78 + w55*w78 + w56*w9
+    return gap, barycentric, normal, gap_jacobian
+
+
+def triangle_3d_velocity(x, a, b, c, v, va, vb, vc):
+    """Gap rate (m/s) of particle x against the triangle a, b, c: d gap / dt, the gap Jacobian times the velocities; and the tangential part (m/s) of x's velocity relative to the element's material point under x.
+
+    Inputs: x (3, m), a (3, m), b (3, m), c (3, m), v (3, m), va (3, m), vb (3, m), vc (3, m).
+    Returns: gap_rate (1, m), tangential_velocity (3, m).
+    Operations after CSE: 308.
+    """
+    x_x, x_y, x_z = x
+    a_x, a_y, a_z = a
+    b_x, b_y, b_z = b
+    c_x, c_y, c_z = c
+    v_x, v_y, v_z = v
+    va_x, va_y, va_z = va
+    vb_x, vb_y, vb_z = vb
+    vc_x, vc_y, vc_z = vc
+    w0 = a_x - b_x
+    w1 = -w0
+    w2 = -c_y
+    w3 = a_y + w2
+    w4 = -w3
+    w5 = a_y - b_y
+    w6 = -w5
+    w7 = -c_x
+    w8 = a_x + w7
+    w9 = -w8
+    w10 = w1*w4 - w6*w9
+    w11 = -c_z
+    w12 = a_z + w11
+    w13 = -w12
+    w14 = a_z - b_z
+    w15 = -w14
+    w16 = w13*w6 - w15*w4
+    w17 = -w1*w13 + w15*w9
+    w18 = w10*w10 + w16*w16 + w17*w17
+    w19 = 1/numpy.sqrt(w18)
+    w20 = w16*w19
+    w21 = b_y + w2
+    w22 = -x_z
+    w23 = a_z + w22
+    w24 = -w23
+    w25 = w19*w24
+    w26 = b_z + w11
+    w27 = -x_y
+    w28 = a_y + w27
+    w29 = -w28
+    w30 = w19*w29
+    w31 = w18**(-3/2)
+    w32 = -2*c_z
+    w33 = 2*b_z
+    w34 = w32 + w33
+    w35 = (1/2)*w17
+    w36 = -2*c_y
+    w37 = 2*b_y
+    w38 = w36 + w37
+    w39 = (1/2)*w10
+    w40 = w31*(w34*w35 - w38*w39)
+    w41 = -x_x
+    w42 = a_x + w41
+    w43 = -w42
+    w44 = w16*w43
+    w45 = w17*w29
+    w46 = w10*w24
+    w47 = w17*w19
+    w48 = w19*w43
+    w49 = b_x + w7
+    w50 = -2*c_x
+    w51 = 2*b_x
+    w52 = w50 + w51
+    w53 = (1/2)*w16
+    w54 = w31*(-w34*w53 + w39*w52)
+    w55 = w10*w19
+    w56 = w31*(-w35*w52 + w38*w53)
+    w57 = 2*a_y
+    w58 = w36 + w57
+    w59 = 2*a_z
+    w60 = w32 + w59
+    w61 = w31*(-w35*w60 + w39*w58)
+    w62 = 2*a_x
+    w63 = w50 + w62
+    w64 = w31*(-w39*w63 + w53*w60)
+    w65 = w31*(w35*w63 - w53*w58)
+    w66 = -w33 + w59
+    w67 = -w37 + w57
+    w68 = w31*(w35*w66 - w39*w67)
+    w69 = -w51 + w62
+    w70 = w31*(w39*w69 - w53*w66)
+    w71 = w31*(-w35*w69 + w53*w67)
+    w72 = w18**(-1.0)
+    w73 = b_x + w41
+    w74 = c_y + w27
+    w75 = b_y + w27
+    w76 = c_x + w41
+    w77 = c_z + w22
+    w78 = b_z + w22
+    w79 = w72*(w10*(w73*w74 - w75*w76) + w16*(-w74*w78 + w75*w77) + w17*(-w73*w77 + w76*w78))
+    w80 = w72*(w10*(w28*w76 - w42*w74) + w16*(w23*w74 - w28*w77) + w17*(-w23*w76 + w42*w77))
+    w81 = w72*(w10*(-w28*w73 + w42*w75) + w16*(-w23*w75 + w28*w78) + w17*(w23*w73 - w42*w78))
+    w82 = -v_z + va_z*w79 + vb_z*w80 + vc_z*w81
+    w83 = -v_x + va_x*w79 + vb_x*w80 + vc_x*w81
+    w84 = -v_y + va_y*w79 + vb_y*w80 + vc_y*w81
+    w85 = -w20*w83 - w47*w84 - w55*w82
+    batch = numpy.shape(x)[1:]
+    gap_rate = numpy.zeros((1,) + batch)
+    gap_rate[0] = v_x*w20 + v_y*w47 + v_z*w55 + va_x*(-w20 + w21*w25 - w26*w30 + w40*w44 + w40*w45 + w40*w46) + va_y*(-w25*w49 + w26*w48 + w44*w54 + w45*w54 + w46*w54 - w47) + va_z*(-w21*w48 + w30*w49 + w44*w56 + w45*w56 + w46*w56 - w55) + vb_x*(w12*w30 + w25*w4 + w44*w61 + w45*w61 + w46*w61) + vb_y*(w13*w48 + w25*w8 + w44*w64 + w45*w64 + w46*w64) + vb_z*(w3*w48 + w30*w9 + w44*w65 + w45*w65 + w46*w65) + vc_x*(w15*w30 + w25*w5 + w44*w68 + w45*w68 + w46*w68) + vc_y*(w1*w25 + w14*w48 + w44*w70 + w45*w70 + w46*w70) + vc_z*(w0*w30 + w44*w71 + w45*w71 + w46*w71 + w48*w6)
+    tangential_velocity = numpy.zeros((3,) + batch)
+    tangential_velocity[0] = -w20*w85 - w83
+    tangential_velocity[1] = -w47*w85 - w84
+    tangential_velocity[2] = -w55*w85 - w82
+    return gap_rate, tangential_velocity

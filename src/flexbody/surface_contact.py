@@ -1,0 +1,326 @@
+"""Which feature of another body's surface a particle touches, and its signed gap (NumPy).
+
+The generated kernels ``segment_2d`` and ``triangle_3d`` (:mod:`derivation.elements`) give
+the gap of a particle to an element's line or plane; that is its gap to the *surface*
+only while the projection falls inside the element (``0 <= s <= 1``, barycentrics
+``>= 0``).  Outside, the closest point of the surface is on an edge (3D) or a vertex, and
+the contact belongs there: a particle sliding off a segment's end goes around the shared
+vertex (gap ``|x - v|``) and onto the next segment, with a continuous gap, never lost
+between two elements.
+
+Surfaces are closed and oriented as in the kernels: a 2D boundary runs counter-clockwise
+(segments ``(a, b)``), a 3D surface's triangles ``(a, b, c)`` run counter-clockwise seen
+from outside.  The sign of an edge's or a vertex's gap comes from its angle-weighted
+pseudo-normal (Baerentzen and Aanaes, "Signed distance computation using the angle
+weighted pseudonormal", IEEE TVCG 11(3), 2005): ``(x - closest point) . pseudo-normal``
+has the sign of the true inside/outside test for any closed, consistently oriented
+surface.
+
+That signed surface gap is the event function of contact onset: it is continuous where
+the contact passes from one feature to the next, and it changes sign where the particle
+reaches the surface, at a vertex or an edge too (an unsigned distance would only touch
+zero there), while an element's own line or plane gap also changes sign beside the
+element, where there is no contact.
+
+Every feature's gap has the gradient ``normal`` with respect to x and ``-w_i normal``
+with respect to its vertices (w: the closest point's weights on them), the element
+kernels' form: with the weights in [0, 1] the contact forces balance.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+FloatArray = np.ndarray
+IntArray = np.ndarray
+
+#: Feature kinds of :class:`SurfaceContact`.
+FACE, EDGE, VERTEX = 0, 1, 2
+KIND_NAMES = {FACE: "face", EDGE: "edge", VERTEX: "vertex"}
+
+
+@dataclass(frozen=True)
+class SurfaceContact:
+    """One particle's closest feature of a surface, for each of k particles.
+
+    Attributes
+    ----------
+    particle : ndarray of int, shape (k,)
+        The particles, each once, ascending.
+    kind : ndarray of int, shape (k,)
+        ``FACE`` (a segment in 2D, a triangle in 3D), ``EDGE`` (3D only) or ``VERTEX``.
+    element : ndarray of int, shape (k,)
+        An element holding the closest point (the lowest-numbered of the closest ones).
+    feature : ndarray of int, shape (k, d)
+        The feature's vertices (a face: the element's d vertices; an edge: 2, a vertex: 1;
+        canonical: edges sorted), padded with -1.  Equal rows are the same feature.
+    weights : ndarray, shape (k, d)
+        The closest point's weights on those vertices (sum 1; 0 on the padding).
+    gap : ndarray, shape (k,)
+        Signed distance to the surface (m, < 0 inside).
+    normal : ndarray, shape (k, d)
+        Unit gradient of the gap with respect to the particle's position.
+    """
+
+    particle: IntArray
+    kind: IntArray
+    element: IntArray
+    feature: IntArray
+    weights: FloatArray
+    gap: FloatArray
+    normal: FloatArray
+
+
+def point_vertex(x: FloatArray, v: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Distance from points x to vertices v and its gradient with respect to x.
+
+    Parameters
+    ----------
+    x, v : ndarray, shape (m, d)
+
+    Returns
+    -------
+    distance : ndarray, shape (m,)
+    direction : ndarray, shape (m, d)
+        ``(x - v) / |x - v|`` (d distance / dx; d distance / dv is minus it); zero where
+        x = v.
+    """
+    offset = np.asarray(x, float) - np.asarray(v, float)
+    distance = np.linalg.norm(offset, axis=-1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        direction = np.where(distance[:, None] > 0, offset / distance[:, None], 0.0)
+    return distance, direction
+
+
+def point_edge(x: FloatArray, a: FloatArray, b: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Distance from points x to segments a-b, the closest point's parameter and the gradient.
+
+    Parameters
+    ----------
+    x, a, b : ndarray, shape (m, d)
+
+    Returns
+    -------
+    distance : ndarray, shape (m,)
+        Distance to the closest point ``a + t (b - a)`` of the segment.
+    t : ndarray, shape (m,)
+        Its parameter, clamped to [0, 1] (0 or 1: the closest point is a vertex).
+    direction : ndarray, shape (m, d)
+        ``(x - closest) / distance``: d distance / dx; with respect to a and b it is
+        ``-(1 - t)`` and ``-t`` times this.  Zero where x is on the segment.
+    """
+    x, a, b = (np.asarray(z, float) for z in (x, a, b))
+    edge = b - a
+    t = np.clip(np.einsum("ij,ij->i", x - a, edge) / np.einsum("ij,ij->i", edge, edge), 0.0, 1.0)
+    distance, direction = point_vertex(x, a + t[:, None] * edge)
+    return distance, t, direction
+
+
+def segment_normals(vertices: FloatArray, segments: IntArray) -> FloatArray:
+    """Outward unit normals of a counter-clockwise 2D boundary's segments, shape (m, 2)."""
+    edge = vertices[segments[:, 1]] - vertices[segments[:, 0]]
+    normal = np.column_stack([edge[:, 1], -edge[:, 0]])  # right-hand perpendicular: outward
+    return normal / np.linalg.norm(normal, axis=1, keepdims=True)
+
+
+def triangle_normals(vertices: FloatArray, triangles: IntArray) -> FloatArray:
+    """Outward unit normals of a closed surface's triangles (counter-clockwise from outside), (m, 3)."""
+    a, b, c = (vertices[triangles[:, k]] for k in range(3))
+    normal = np.cross(b - a, c - a)
+    return normal / np.linalg.norm(normal, axis=1, keepdims=True)
+
+
+def vertex_pseudonormals(vertices: FloatArray, elements: IntArray) -> FloatArray:
+    """Angle-weighted pseudo-normals of the vertices (not normalised), shape (nv, d).
+
+    In 2D every vertex joins two segments at angles that weigh the same, so its
+    pseudo-normal is the sum of their normals; in 3D each incident triangle's normal is
+    weighted by its angle at the vertex.
+    """
+    vertices = np.asarray(vertices, float)
+    d = vertices.shape[1]
+    pseudo = np.zeros_like(vertices)
+    if d == 2:
+        normal = segment_normals(vertices, elements)
+        for k in range(2):
+            np.add.at(pseudo, elements[:, k], normal)
+        return pseudo
+    normal = triangle_normals(vertices, elements)
+    for k in range(3):
+        here, after, before = (vertices[elements[:, (k + j) % 3]] for j in range(3))
+        u, w = after - here, before - here
+        cos = np.einsum("ij,ij->i", u, w) / (np.linalg.norm(u, axis=1) * np.linalg.norm(w, axis=1))
+        np.add.at(pseudo, elements[:, k], np.arccos(np.clip(cos, -1.0, 1.0))[:, None] * normal)
+    return pseudo
+
+
+def edge_pseudonormals(vertices: FloatArray, triangles: IntArray) -> tuple[IntArray, FloatArray]:
+    """Pseudo-normal of every edge of a closed 3D surface: the sum of its two triangles' normals.
+
+    Returns
+    -------
+    edges : ndarray of int, shape (ne, 2)
+        Each edge's vertices, sorted (i < j); the rows sorted too.
+    pseudo : ndarray, shape (ne, 3)
+    """
+    triangles = np.asarray(triangles, dtype=np.int64)
+    normal = triangle_normals(vertices, triangles)
+    ends = np.concatenate([triangles[:, [k, (k + 1) % 3]] for k in range(3)])
+    ends.sort(axis=1)
+    edges, which = np.unique(ends, axis=0, return_inverse=True)
+    pseudo = np.zeros((len(edges), 3))
+    np.add.at(pseudo, which.ravel(), np.tile(normal, (3, 1)))
+    return edges, pseudo
+
+
+def _closest_on_elements(x: FloatArray, vertices: FloatArray, elements: IntArray):
+    """Closest point of each element to its particle (row by row): kind, feature, weights, distance.
+
+    x has shape (m, d) and elements (m, d): row r pairs particle x[r] with element r.
+    """
+    from .assembly import _kernels_module
+
+    m, d = elements.shape
+    kernels = _kernels_module()
+    corners = [vertices[elements[:, k]] for k in range(d)]
+    kind = np.full(m, FACE)
+    feature = elements.copy()
+    if d == 2:
+        gap, s, _, _ = kernels.segment_2d(x.T, corners[0].T, corners[1].T)
+        weights = np.column_stack([1 - s[0], s[0]])
+    else:
+        gap, bary, _, _ = kernels.triangle_3d(x.T, *(c.T for c in corners))
+        weights = bary.T.copy()
+    distance = np.abs(gap[0])
+    outside = np.flatnonzero((weights < 0).any(axis=1) | (weights > 1).any(axis=1))
+    if len(outside):
+        # The projection leaves the element: its closest point is on its boundary, on the
+        # nearest of its edges (a segment's only edge is itself), inside it or at a vertex.
+        rows = outside
+        best = np.full(len(rows), np.inf)
+        best_t = np.zeros(len(rows))
+        best_k = np.zeros(len(rows), int)
+        for k in range(1 if d == 2 else 3):  # edge k runs from corner k to corner k + 1
+            dist, t, _ = point_edge(x[rows], corners[k][rows], corners[(k + 1) % d][rows])
+            closer = dist < best
+            best, best_t = np.where(closer, dist, best), np.where(closer, t, best_t)
+            best_k = np.where(closer, k, best_k)
+        i = elements[rows, best_k]
+        j = elements[rows, (best_k + 1) % d]
+        distance[rows] = best
+        at_end = np.where(best_t >= 1.0, j, i)
+        is_vertex = (best_t <= 0.0) | (best_t >= 1.0)
+        kind[rows] = np.where(is_vertex, VERTEX, EDGE)
+        lo, hi = np.minimum(i, j), np.maximum(i, j)
+        t_hi = np.where(i < j, best_t, 1 - best_t)  # the weight of hi
+        feature[rows] = -1
+        weights[rows] = 0.0
+        feature[rows, 0] = np.where(is_vertex, at_end, lo)
+        feature[rows, 1] = np.where(is_vertex, -1, hi)
+        weights[rows, 0] = np.where(is_vertex, 1.0, 1 - t_hi)
+        weights[rows, 1] = np.where(is_vertex, 0.0, t_hi)
+    return kind, feature, weights, distance
+
+
+def closest_features(x: FloatArray, vertices: FloatArray, elements: IntArray,
+                     pairs: IntArray | None = None, element_body: IntArray | None = None) -> SurfaceContact:
+    """Each particle's closest feature of a closed surface (or of each body's) and its signed gap.
+
+    Parameters
+    ----------
+    x : ndarray, shape (n, d)
+        Particle positions.
+    vertices : ndarray, shape (nv, d)
+        The surface's vertices.
+    elements : ndarray of int, shape (m, d)
+        Its segments (d = 2) or triangles (d = 3), oriented as in the module docstring.
+    pairs : ndarray of int, shape (k, 2), optional
+        Candidate ``(particle, element)`` pairs (from :mod:`flexbody.broadphase`); default:
+        every particle against every element.  Each particle is answered once (once per
+        body with ``element_body``), from its own candidates.  When the elements' vertices are particles (the broad phase's
+        numbering), pass ``x`` itself as ``vertices`` and leave a particle out of its own
+        elements' pairs.
+    element_body : ndarray of int, shape (m,), optional
+        The body of each element, when ``elements`` holds several bodies' surfaces: then a
+        particle gets one answer per body it has candidates on (it can touch two at once).
+
+    Returns
+    -------
+    SurfaceContact
+        One row per particle that has a candidate (per particle and body with
+        ``element_body``), ordered by particle (then body).
+    """
+    x, vertices = np.asarray(x, float), np.asarray(vertices, float)
+    elements = np.asarray(elements, dtype=np.int64)
+    d = x.shape[1]
+    if vertices.shape[1] != d or elements.shape[1] != d:
+        raise ValueError(f"`vertices` and `elements` must be of dimension {d} like `x`; got shapes "
+                         f"{vertices.shape} and {elements.shape}")
+    if pairs is None:
+        pairs = np.indices((len(x), len(elements))).reshape(2, -1).T
+    pairs = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
+    if len(pairs) == 0:
+        empty = np.zeros((0, d))
+        return SurfaceContact(np.zeros(0, int), np.zeros(0, int), np.zeros(0, int), np.zeros((0, d), int), empty,
+                              np.zeros(0), empty)
+    kind, feature, weights, distance = _closest_on_elements(x[pairs[:, 0]], vertices, elements[pairs[:, 1]])
+    # One answer per particle (and body): its nearest candidate, ties to the lowest-numbered element.
+    surface = np.zeros(len(pairs), int) if element_body is None else np.asarray(element_body)[pairs[:, 1]]
+    order = np.lexsort((pairs[:, 1], distance, surface, pairs[:, 0]))
+    group = np.column_stack([pairs[order, 0], surface[order]])
+    first = order[np.r_[True, np.any(group[1:] != group[:-1], axis=1)]]
+    particle, element = pairs[first, 0], pairs[first, 1]
+    kind, feature, weights, distance = kind[first], feature[first], weights[first], distance[first]
+    xp = x[particle]
+    closest = np.einsum("kj,kjd->kd", weights, vertices[np.maximum(feature, 0)])
+    offset = xp - closest
+    face_normal = (segment_normals if d == 2 else triangle_normals)(vertices, elements[element])
+    pseudo = face_normal.copy()
+    vertex_rows = kind == VERTEX
+    pseudo[vertex_rows] = vertex_pseudonormals(vertices, elements)[feature[vertex_rows, 0]]
+    edge_rows = np.flatnonzero(kind == EDGE)
+    if len(edge_rows):
+        edges, edge_pseudo = edge_pseudonormals(vertices, elements)
+        code = edges[:, 0] * len(vertices) + edges[:, 1]  # sorted, as the edges are
+        pseudo[edge_rows] = edge_pseudo[np.searchsorted(code, feature[edge_rows, 0] * len(vertices)
+                                                        + feature[edge_rows, 1])]
+    sign = np.where(np.einsum("kd,kd->k", offset, pseudo) < 0, -1.0, 1.0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        direction = np.where(distance[:, None] > 0, offset / distance[:, None],
+                             pseudo / np.linalg.norm(pseudo, axis=1, keepdims=True))
+    normal = np.where((kind == FACE)[:, None], face_normal, sign[:, None] * direction)
+    return SurfaceContact(particle=particle, kind=kind, element=element, feature=feature, weights=weights,
+                          gap=sign * distance, normal=normal)
+
+
+def jacobian_entries(contact: SurfaceContact, dim: int) -> tuple[IntArray, IntArray, FloatArray]:
+    """The gaps' Jacobian with respect to every coordinate, as sparse (row, column, value) entries.
+
+    Row r is contact r's gap; its entries are ``normal`` on the particle's coordinates and
+    ``-w_i normal`` on each feature vertex i's (column ``index * dim + axis``).  The
+    feature's vertex indices must be particle indices: call :func:`closest_features` with
+    the particles' positions as ``vertices``, as the broad phase numbers elements.
+
+    Parameters
+    ----------
+    contact : SurfaceContact
+        k contacts.
+    dim : int
+        2 or 3.
+
+    Returns
+    -------
+    rows, columns : ndarray of int, shape (k * (1 + d) * dim,)
+    values : ndarray, shape (k * (1 + d) * dim,)
+        Duplicates (a particle twice in a row) do not occur; padding entries are dropped.
+    """
+    k, width = contact.feature.shape
+    points = np.column_stack([contact.particle, contact.feature])  # (k, 1 + width)
+    scale = np.column_stack([np.ones(k), -contact.weights])
+    rows = np.repeat(np.arange(k), (1 + width) * dim)
+    columns = (points[:, :, None] * dim + np.arange(dim)).reshape(-1)
+    values = (scale[:, :, None] * contact.normal[:, None, :]).reshape(-1)
+    used = np.repeat(points.reshape(-1) >= 0, dim)
+    return rows[used], columns[used], values[used]
