@@ -250,8 +250,8 @@ def test_an_instant_of_coupled_contacts_satisfies_newtons_law_and_lifts_a_pushed
     # touching contacts.  Whatever the solver, the outcome must satisfy Newton's law per
     # contact, checked here from the velocity jump alone: impulses P = W^-1 J du >= 0,
     # v+ >= 0, P . v+ = 0 (plastic), and the contact that leaves is free.
-    from flexbody.contact import Phases, resolve
     from flexbody.constants import FREE, HELD
+    from flexbody.contact import Phases, resolve
     from flexbody.state import initial_coordinates
 
     scene = rigid_scene(TRIANGLE, TRIANGLE_MASSES, position=[0.0, 0.0])
