@@ -342,28 +342,38 @@ static int rhs_2d(const FbSystem *s, double t, const double *y, const int *held,
     double *acc = ydot + nq, power = 0.0, impact_power = 0.0;
     memcpy(ydot, v, sizeof(double) * nq);
     memset(acc, 0, sizeof(double) * nq);
-    for (int l = 0; l < A->n_links; ++l) {
-        const int i = 2 * A->links[2 * l], j = 2 * A->links[2 * l + 1];
-        double f[2], pw;
-        if (A->axial[l]) fb_k_link_axial_2d_force(x + i, x + j, v + i, v + j, A->link_par + 3 * l, f, &pw);
-        else fb_k_link_relative_2d_force(x + i, x + j, v + i, v + j, A->link_par + 3 * l, f, &pw);
-        for (int a = 0; a < 2; ++a) {
-            acc[i + a] += f[a];
-            acc[j + a] -= f[a];
-        }
-        power += pw;
+    for (int l = 0; l < A->n_links;) {
+        /* a run of links from the same first particle i (a particle's links are listed
+         * together): i's sum stays in registers, in the same order as through memory */
+        const int i = 2 * A->links[2 * l];
+        double sum[2];
+        for (int a = 0; a < 2; ++a) sum[a] = acc[i + a];
+        do {
+            const int j = 2 * A->links[2 * l + 1];
+            double f[2], pw;
+            if (A->axial[l]) fb_k_link_axial_2d_force(x + i, x + j, v + i, v + j, A->link_par + 3 * l, f, &pw);
+            else fb_k_link_relative_2d_force(x + i, x + j, v + i, v + j, A->link_par + 3 * l, f, &pw);
+            for (int a = 0; a < 2; ++a) {
+                sum[a] += f[a];
+                acc[j + a] -= f[a]; /* j != i: links join two particles */
+            }
+            power += pw;
+        } while (++l < A->n_links && 2 * A->links[2 * l] == i);
+        for (int a = 0; a < 2; ++a) acc[i + a] = sum[a];
     }
     for (int i = 0; i < n; ++i) {
         double f[2], potential, kinetic;
         fb_k_particle_2d(x + 2 * i, v + 2 * i, A->mass + i, A->gravity, f, &potential, &kinetic);
         for (int a = 0; a < 2; ++a) acc[2 * i + a] = (acc[2 * i + a] + f[a]) * A->inv_mass[i];
     }
+    memset(lam, 0, sizeof(double) * (size_t)n * G);
     for (int i = 0; i < n; ++i) {
         const int *h = held + i * G;
         const double *f = push + i * G;
-        int any_held = 0;
+        int any_held = 0, touched = 0;
+        for (int g = 0; g < G; ++g) touched |= h[g] | (f[g] != 0.0);
+        if (!touched) continue; /* most particles: free, their lam 0; a cheap test, no more */
         for (int g = 0; g < G; ++g) {
-            lam[i * G + g] = 0.0;
             any_held |= h[g];
             if (f[g] != 0.0) { /* the thesis impact mode's force along the ground's normal */
                 double gap, J[2], jv = 0.0;
@@ -739,28 +749,38 @@ static int rhs_3d(const FbSystem *s, double t, const double *y, const int *held,
     double *acc = ydot + nq, power = 0.0, impact_power = 0.0;
     memcpy(ydot, v, sizeof(double) * nq);
     memset(acc, 0, sizeof(double) * nq);
-    for (int l = 0; l < A->n_links; ++l) {
-        const int i = 3 * A->links[2 * l], j = 3 * A->links[2 * l + 1];
-        double f[3], pw;
-        if (A->axial[l]) fb_k_link_axial_3d_force(x + i, x + j, v + i, v + j, A->link_par + 3 * l, f, &pw);
-        else fb_k_link_relative_3d_force(x + i, x + j, v + i, v + j, A->link_par + 3 * l, f, &pw);
-        for (int a = 0; a < 3; ++a) {
-            acc[i + a] += f[a];
-            acc[j + a] -= f[a];
-        }
-        power += pw;
+    for (int l = 0; l < A->n_links;) {
+        /* a run of links from the same first particle i (a particle's links are listed
+         * together): i's sum stays in registers, in the same order as through memory */
+        const int i = 3 * A->links[2 * l];
+        double sum[3];
+        for (int a = 0; a < 3; ++a) sum[a] = acc[i + a];
+        do {
+            const int j = 3 * A->links[2 * l + 1];
+            double f[3], pw;
+            if (A->axial[l]) fb_k_link_axial_3d_force(x + i, x + j, v + i, v + j, A->link_par + 3 * l, f, &pw);
+            else fb_k_link_relative_3d_force(x + i, x + j, v + i, v + j, A->link_par + 3 * l, f, &pw);
+            for (int a = 0; a < 3; ++a) {
+                sum[a] += f[a];
+                acc[j + a] -= f[a]; /* j != i: links join two particles */
+            }
+            power += pw;
+        } while (++l < A->n_links && 3 * A->links[2 * l] == i);
+        for (int a = 0; a < 3; ++a) acc[i + a] = sum[a];
     }
     for (int i = 0; i < n; ++i) {
         double f[3], potential, kinetic;
         fb_k_particle_3d(x + 3 * i, v + 3 * i, A->mass + i, A->gravity, f, &potential, &kinetic);
         for (int a = 0; a < 3; ++a) acc[3 * i + a] = (acc[3 * i + a] + f[a]) * A->inv_mass[i];
     }
+    memset(lam, 0, sizeof(double) * (size_t)n * G);
     for (int i = 0; i < n; ++i) {
         const int *h = held + i * G;
         const double *f = push + i * G;
-        int any_held = 0;
+        int any_held = 0, touched = 0;
+        for (int g = 0; g < G; ++g) touched |= h[g] | (f[g] != 0.0);
+        if (!touched) continue; /* most particles: free, their lam 0; a cheap test, no more */
         for (int g = 0; g < G; ++g) {
-            lam[i * G + g] = 0.0;
             any_held |= h[g];
             if (f[g] != 0.0) { /* the thesis impact mode's force along the ground's normal */
                 double gap, J[3], jv = 0.0;
