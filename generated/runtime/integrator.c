@@ -55,7 +55,7 @@ static void layout(FbWork *w, char *base, size_t *size)
     for (size_t k = 0; k < sizeof contacts / sizeof *contacts; ++k) *contacts[k] = carve(&next, c);
     int **flags[] = {&w->held, &w->phase, &w->fired, &w->r_touching, &w->r_impacted, &w->r_settled,
                      &w->r_was_held, &w->r_held, &w->r_hit, &w->r_ending, &w->r_instant, &w->r_stop,
-                     &w->r_visit};
+                     &w->r_visit, &w->r_fresh, &w->r_moved};
     for (size_t k = 0; k < sizeof flags / sizeof *flags; ++k) *flags[k] = carve(&next, ci);
     *size = (size_t)(next - base);
 }
