@@ -17,6 +17,12 @@
 #include "fb_runtime.h"
 #include "kernels.h"
 
+/* Links per block of the right-hand side's link loop: a block's gathered states and forces
+ * (12 rows in 3D) stay in L1. */
+#define LINK_BLOCK 64
+
+enum { BLOCK_RELATIVE, BLOCK_AXIAL, BLOCK_MIXED }; /* the damper laws of a block's links */
+
 typedef struct {
     int dim, n, n_links, n_grounds;
     int *links;        /* (n_links, 2) particle indices */
@@ -31,6 +37,7 @@ typedef struct {
     /* Each particle's links (CSR, ascending: the order the right-hand side sums them in) and
      * its stencil, the state entries its force reads: its own q and u, then its neighbours'. */
     int *adj_start, *adj, *stencil_start, *stencil;
+    int *block_law;    /* (ceil(n_links / LINK_BLOCK),): BLOCK_RELATIVE, BLOCK_AXIAL or BLOCK_MIXED */
 } Assembly;
 
 static int n_parameters(const Assembly *A)
@@ -62,13 +69,20 @@ Assembly *fb_asm_new(int dim, int n, int n_links, int n_grounds, const int *link
     A->laws = calloc(2 * (size_t)n_grounds + 1, sizeof(double));
     A->slip = calloc(3 * (size_t)n * (size_t)n_grounds + 1, sizeof(double));
     A->tangential_push = calloc(3 * (size_t)n * (size_t)n_grounds + 1, sizeof(double));
+    A->block_law = malloc(sizeof(int) * ((size_t)n_links / LINK_BLOCK + 1));
     if (!A->links || !A->axial || !A->p || !A->link_par || !A->inv_mass || !A->adj_start || !A->adj
-        || !A->stencil_start || !A->stencil || !A->laws || !A->slip || !A->tangential_push) {
+        || !A->stencil_start || !A->stencil || !A->laws || !A->slip || !A->tangential_push || !A->block_law) {
         fb_asm_free(A);
         return 0;
     }
     memcpy(A->links, links, sizeof(int) * 2 * (size_t)n_links);
     memcpy(A->axial, axial, sizeof(int) * (size_t)n_links);
+    for (int first = 0; first < n_links; first += LINK_BLOCK) {
+        const int count = n_links - first < LINK_BLOCK ? n_links - first : LINK_BLOCK;
+        int n_axial = 0;
+        for (int l = first; l < first + count; ++l) n_axial += axial[l] != 0;
+        A->block_law[first / LINK_BLOCK] = n_axial == 0 ? BLOCK_RELATIVE : n_axial == count ? BLOCK_AXIAL : BLOCK_MIXED;
+    }
     for (int l = 0; l < 2 * n_links; ++l) A->adj_start[links[l] + 1]++;
     for (int i = 0; i < n; ++i) A->adj_start[i + 1] += A->adj_start[i];
     int *cursor = A->stencil_start; /* borrowed as the fill cursor until the stencils are built */
@@ -100,7 +114,7 @@ void fb_asm_free(Assembly *A)
     if (!A) return;
     free(A->links); free(A->axial); free(A->p); free(A->link_par); free(A->inv_mass);
     free(A->adj_start); free(A->adj); free(A->stencil_start); free(A->stencil); free(A->laws);
-    free(A->slip); free(A->tangential_push);
+    free(A->slip); free(A->tangential_push); free(A->block_law);
     free(A);
 }
 
@@ -333,6 +347,76 @@ static int contact_2d(const FbSystem *s, const double *y, const int *held, const
     return 0;
 }
 
+/* Links [first, first + count)'s force on their first particle (f: dim rows) and damping
+ * power, from their ends' states gathered into rows (in: x_i, x_j, v_i, v_j, dim rows each)
+ * and their constants (k, c, L rows in p).  Element by element through small arrays the
+ * compiler keeps in registers, so where the block has one damper law the loop vectorises
+ * over links (a link's square root and division are most of its time); the values are
+ * the kernel's, bit for bit. */
+static void link_block_2d(const Assembly *A, int first, int count, const double (*restrict in)[LINK_BLOCK],
+                           double (*restrict f)[LINK_BLOCK], double *restrict pw)
+{
+    const int nl = A->n_links, law = A->block_law[first / LINK_BLOCK], *axial = A->axial + first;
+    const double *restrict k = A->p + A->n + first, *restrict c = k + nl, *restrict L = c + nl;
+#define LINK_ELEMENT(KERNEL) do { \
+        double xi[2], xj[2], vi[2], vj[2], par[3] = {k[m], c[m], L[m]}, out[2]; \
+        for (int a = 0; a < 2; ++a) { \
+            xi[a] = in[a][m]; xj[a] = in[2 + a][m]; vi[a] = in[4 + a][m]; vj[a] = in[6 + a][m]; \
+        } \
+        KERNEL(xi, xj, vi, vj, par, out, pw + m); \
+        for (int a = 0; a < 2; ++a) f[a][m] = out[a]; \
+    } while (0)
+    if (law == BLOCK_RELATIVE)
+        for (int m = 0; m < count; ++m) LINK_ELEMENT(fb_k_link_relative_2d_force);
+    else if (law == BLOCK_AXIAL)
+        for (int m = 0; m < count; ++m) LINK_ELEMENT(fb_k_link_axial_2d_force);
+    else
+        for (int m = 0; m < count; ++m) {
+            if (axial[m]) LINK_ELEMENT(fb_k_link_axial_2d_force);
+            else LINK_ELEMENT(fb_k_link_relative_2d_force);
+        }
+#undef LINK_ELEMENT
+}
+
+/* The links' springs and dampers added to acc (nq) in link order; returns their damping
+ * power.  By blocks of LINK_BLOCK links: their ends' states gathered into rows, their forces
+ * (link_block), then added to both ends.  A run of links from the same first particle i (a
+ * particle's links are listed together) keeps i's sum in registers, in the same order as
+ * through memory: every particle's sum is free_acceleration's, bit for bit. */
+static double link_forces_2d(const Assembly *A, const double *x, const double *v, double *acc)
+{
+    double in[8][LINK_BLOCK], f[2][LINK_BLOCK], pw[LINK_BLOCK], power = 0.0;
+    for (int first = 0; first < A->n_links; first += LINK_BLOCK) {
+        const int count = A->n_links - first < LINK_BLOCK ? A->n_links - first : LINK_BLOCK;
+        const int *ends = A->links + 2 * first;
+        for (int m = 0; m < count; ++m) {
+            const int i = 2 * ends[2 * m], j = 2 * ends[2 * m + 1];
+            for (int a = 0; a < 2; ++a) {
+                in[a][m] = x[i + a];
+                in[2 + a][m] = x[j + a];
+                in[4 + a][m] = v[i + a];
+                in[6 + a][m] = v[j + a];
+            }
+        }
+        link_block_2d(A, first, count, (const double (*)[LINK_BLOCK])in, f, pw);
+        for (int m = 0; m < count;) {
+            const int i = 2 * ends[2 * m];
+            double sum[2];
+            for (int a = 0; a < 2; ++a) sum[a] = acc[i + a];
+            do {
+                const int j = 2 * ends[2 * m + 1];
+                for (int a = 0; a < 2; ++a) {
+                    sum[a] += f[a][m];
+                    acc[j + a] -= f[a][m]; /* j != i: a link joins two particles */
+                }
+                power += pw[m];
+            } while (++m < count && 2 * ends[2 * m] == i);
+            for (int a = 0; a < 2; ++a) acc[i + a] = sum[a];
+        }
+    }
+    return power;
+}
+
 /* The right-hand side: springs and dampers over the links, gravity over the particles,
  * prescribed forces and held contacts over the contacts. */
 static int rhs_2d(const FbSystem *s, double t, const double *y, const int *held, const double *push,
@@ -345,28 +429,20 @@ static int rhs_2d(const FbSystem *s, double t, const double *y, const int *held,
     double *acc = ydot + nq, power = 0.0, impact_power = 0.0;
     memcpy(ydot, v, sizeof(double) * nq);
     memset(acc, 0, sizeof(double) * nq);
-    for (int l = 0; l < A->n_links; ++l) {
-        const int i = 2 * A->links[2 * l], j = 2 * A->links[2 * l + 1];
-        double f[2], pw;
-        if (A->axial[l]) fb_k_link_axial_2d_force(x + i, x + j, v + i, v + j, A->link_par + 3 * l, f, &pw);
-        else fb_k_link_relative_2d_force(x + i, x + j, v + i, v + j, A->link_par + 3 * l, f, &pw);
-        for (int a = 0; a < 2; ++a) {
-            acc[i + a] += f[a];
-            acc[j + a] -= f[a];
-        }
-        power += pw;
-    }
+    power = link_forces_2d(A, x, v, acc);
     for (int i = 0; i < n; ++i) {
         double f[2], potential, kinetic;
         fb_k_particle_2d(x + 2 * i, v + 2 * i, A->mass + i, A->gravity, f, &potential, &kinetic);
         for (int a = 0; a < 2; ++a) acc[2 * i + a] = (acc[2 * i + a] + f[a]) * A->inv_mass[i];
     }
+    memset(lam, 0, sizeof(double) * (size_t)n * G);
     for (int i = 0; i < n; ++i) {
         const int *h = held + i * G;
         const double *f = push + i * G;
-        int any_held = 0;
+        int any_held = 0, touched = 0;
+        for (int g = 0; g < G; ++g) touched |= h[g] | (f[g] != 0.0);
+        if (!touched) continue; /* most particles: free, their lam 0; a cheap test, no more */
         for (int g = 0; g < G; ++g) {
-            lam[i * G + g] = 0.0;
             any_held |= h[g];
             if (f[g] != 0.0) { /* the thesis impact mode's force: along the ground's normal and tangential */
                 const double *ft = A->tangential_push + 3 * (i * G + g);
@@ -733,6 +809,76 @@ static int contact_3d(const FbSystem *s, const double *y, const int *held, const
     return 0;
 }
 
+/* Links [first, first + count)'s force on their first particle (f: dim rows) and damping
+ * power, from their ends' states gathered into rows (in: x_i, x_j, v_i, v_j, dim rows each)
+ * and their constants (k, c, L rows in p).  Element by element through small arrays the
+ * compiler keeps in registers, so where the block has one damper law the loop vectorises
+ * over links (a link's square root and division are most of its time); the values are
+ * the kernel's, bit for bit. */
+static void link_block_3d(const Assembly *A, int first, int count, const double (*restrict in)[LINK_BLOCK],
+                           double (*restrict f)[LINK_BLOCK], double *restrict pw)
+{
+    const int nl = A->n_links, law = A->block_law[first / LINK_BLOCK], *axial = A->axial + first;
+    const double *restrict k = A->p + A->n + first, *restrict c = k + nl, *restrict L = c + nl;
+#define LINK_ELEMENT(KERNEL) do { \
+        double xi[3], xj[3], vi[3], vj[3], par[3] = {k[m], c[m], L[m]}, out[3]; \
+        for (int a = 0; a < 3; ++a) { \
+            xi[a] = in[a][m]; xj[a] = in[3 + a][m]; vi[a] = in[6 + a][m]; vj[a] = in[9 + a][m]; \
+        } \
+        KERNEL(xi, xj, vi, vj, par, out, pw + m); \
+        for (int a = 0; a < 3; ++a) f[a][m] = out[a]; \
+    } while (0)
+    if (law == BLOCK_RELATIVE)
+        for (int m = 0; m < count; ++m) LINK_ELEMENT(fb_k_link_relative_3d_force);
+    else if (law == BLOCK_AXIAL)
+        for (int m = 0; m < count; ++m) LINK_ELEMENT(fb_k_link_axial_3d_force);
+    else
+        for (int m = 0; m < count; ++m) {
+            if (axial[m]) LINK_ELEMENT(fb_k_link_axial_3d_force);
+            else LINK_ELEMENT(fb_k_link_relative_3d_force);
+        }
+#undef LINK_ELEMENT
+}
+
+/* The links' springs and dampers added to acc (nq) in link order; returns their damping
+ * power.  By blocks of LINK_BLOCK links: their ends' states gathered into rows, their forces
+ * (link_block), then added to both ends.  A run of links from the same first particle i (a
+ * particle's links are listed together) keeps i's sum in registers, in the same order as
+ * through memory: every particle's sum is free_acceleration's, bit for bit. */
+static double link_forces_3d(const Assembly *A, const double *x, const double *v, double *acc)
+{
+    double in[12][LINK_BLOCK], f[3][LINK_BLOCK], pw[LINK_BLOCK], power = 0.0;
+    for (int first = 0; first < A->n_links; first += LINK_BLOCK) {
+        const int count = A->n_links - first < LINK_BLOCK ? A->n_links - first : LINK_BLOCK;
+        const int *ends = A->links + 2 * first;
+        for (int m = 0; m < count; ++m) {
+            const int i = 3 * ends[2 * m], j = 3 * ends[2 * m + 1];
+            for (int a = 0; a < 3; ++a) {
+                in[a][m] = x[i + a];
+                in[3 + a][m] = x[j + a];
+                in[6 + a][m] = v[i + a];
+                in[9 + a][m] = v[j + a];
+            }
+        }
+        link_block_3d(A, first, count, (const double (*)[LINK_BLOCK])in, f, pw);
+        for (int m = 0; m < count;) {
+            const int i = 3 * ends[2 * m];
+            double sum[3];
+            for (int a = 0; a < 3; ++a) sum[a] = acc[i + a];
+            do {
+                const int j = 3 * ends[2 * m + 1];
+                for (int a = 0; a < 3; ++a) {
+                    sum[a] += f[a][m];
+                    acc[j + a] -= f[a][m]; /* j != i: a link joins two particles */
+                }
+                power += pw[m];
+            } while (++m < count && 3 * ends[2 * m] == i);
+            for (int a = 0; a < 3; ++a) acc[i + a] = sum[a];
+        }
+    }
+    return power;
+}
+
 /* The right-hand side: springs and dampers over the links, gravity over the particles,
  * prescribed forces and held contacts over the contacts. */
 static int rhs_3d(const FbSystem *s, double t, const double *y, const int *held, const double *push,
@@ -745,28 +891,20 @@ static int rhs_3d(const FbSystem *s, double t, const double *y, const int *held,
     double *acc = ydot + nq, power = 0.0, impact_power = 0.0;
     memcpy(ydot, v, sizeof(double) * nq);
     memset(acc, 0, sizeof(double) * nq);
-    for (int l = 0; l < A->n_links; ++l) {
-        const int i = 3 * A->links[2 * l], j = 3 * A->links[2 * l + 1];
-        double f[3], pw;
-        if (A->axial[l]) fb_k_link_axial_3d_force(x + i, x + j, v + i, v + j, A->link_par + 3 * l, f, &pw);
-        else fb_k_link_relative_3d_force(x + i, x + j, v + i, v + j, A->link_par + 3 * l, f, &pw);
-        for (int a = 0; a < 3; ++a) {
-            acc[i + a] += f[a];
-            acc[j + a] -= f[a];
-        }
-        power += pw;
-    }
+    power = link_forces_3d(A, x, v, acc);
     for (int i = 0; i < n; ++i) {
         double f[3], potential, kinetic;
         fb_k_particle_3d(x + 3 * i, v + 3 * i, A->mass + i, A->gravity, f, &potential, &kinetic);
         for (int a = 0; a < 3; ++a) acc[3 * i + a] = (acc[3 * i + a] + f[a]) * A->inv_mass[i];
     }
+    memset(lam, 0, sizeof(double) * (size_t)n * G);
     for (int i = 0; i < n; ++i) {
         const int *h = held + i * G;
         const double *f = push + i * G;
-        int any_held = 0;
+        int any_held = 0, touched = 0;
+        for (int g = 0; g < G; ++g) touched |= h[g] | (f[g] != 0.0);
+        if (!touched) continue; /* most particles: free, their lam 0; a cheap test, no more */
         for (int g = 0; g < G; ++g) {
-            lam[i * G + g] = 0.0;
             any_held |= h[g];
             if (f[g] != 0.0) { /* the thesis impact mode's force: along the ground's normal and tangential */
                 const double *ft = A->tangential_push + 3 * (i * G + g);

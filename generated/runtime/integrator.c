@@ -55,7 +55,7 @@ static void layout(FbWork *w, char *base, size_t *size)
     for (size_t k = 0; k < sizeof contacts / sizeof *contacts; ++k) *contacts[k] = carve(&next, c);
     int **flags[] = {&w->held, &w->phase, &w->fired, &w->r_touching, &w->r_impacted, &w->r_settled,
                      &w->r_was_held, &w->r_held, &w->r_hit, &w->r_ending, &w->r_instant, &w->r_stop,
-                     &w->r_visit};
+                     &w->r_visit, &w->r_fresh, &w->r_moved};
     for (size_t k = 0; k < sizeof flags / sizeof *flags; ++k) *flags[k] = carve(&next, ci);
     *size = (size_t)(next - base);
 }
@@ -526,8 +526,14 @@ int fb_integrate(FbWork *w, const FbSystem *s, int method, double t0, const doub
         }
         int rejected = 0;
         if (h_abs < min_step) h_abs = min_step;
-        memcpy(S.y_old, S.y, sizeof(double) * ny);
-        memcpy(S.K[0], S.K[S.stages], sizeof(double) * ny); /* first same as last */
+        /* the last step's end is this one's start, its last stage this one's first (FSAL):
+         * swapped, not copied (the step rewrites S.y and K[stages] whole) */
+        double *swap = S.y_old;
+        S.y_old = S.y;
+        S.y = swap;
+        swap = S.K[0];
+        S.K[0] = S.K[S.stages];
+        S.K[S.stages] = swap;
         for (;;) {
             if (h_abs < min_step) { status = FB_STEP_COLLAPSE; memcpy(S.y, S.y_old, sizeof(double) * ny); goto done; }
             t_new = t + h_abs > t_bound ? t_bound : t + h_abs;

@@ -97,6 +97,31 @@ static int window_friction(const FbSystem *s, const double *y, const int *held, 
     return 0;
 }
 
+/* Mark the contacts of contact c's particle stale (its phases or pushes change). */
+static void stale(int *fresh, int c, int per_particle)
+{
+    const int first = c - c % per_particle;
+    for (int k = first; k < first + per_particle; ++k) fresh[k] = 0;
+}
+
+/* After impacts on the visited contacts with stop[c] set: mark stale every visited contact
+ * whose stencil reads a particle they changed (its velocity, and its position if settled). */
+static void impacted_stencils(const FbSystem *s, const int *visit, int n_visit, const int *stop, int per_particle,
+                              int *moved, int *fresh)
+{
+    for (int m = 0; m < n_visit; ++m)
+        if (stop[visit[m]] != FB_KEEP) moved[visit[m] / per_particle] = 1;
+    for (int m = 0; m < n_visit; ++m) {
+        const int *entries;
+        const int k = s->stencil(s, visit[m], &entries);
+        for (int e = 0; e < k && fresh[visit[m]]; ++e) {
+            const int entry = entries[e] < s->nq ? entries[e] : entries[e] - s->nq;
+            if (moved[entry / s->dim]) fresh[visit[m]] = 0;
+        }
+    }
+    for (int m = 0; m < n_visit; ++m) moved[visit[m] / per_particle] = 0;
+}
+
 /* Apply the fixed point at instant t to y[ny] and the phases (all updated in place).
  *   phase[c]: FB_FREE, FB_HELD, FB_SLIDING or FB_PUSHED; floor[c]: a free contact's gap event level;
  *   push[c], push_until[c]: a pushed contact's force and window end (0 and INFINITY elsewhere);
@@ -122,6 +147,7 @@ int fb_resolve(FbWork *w, const FbSystem *s, double t, double *y, int *phase, do
     int *touching = w->r_touching, *impacted = w->r_impacted, *settled = w->r_settled;
     int *was_held = w->r_was_held, *held = w->r_held, *hit = w->r_hit, *ending = w->r_ending;
     int *instant = w->r_instant, *stop = w->r_stop, *visit = w->r_visit, n_visit = 0;
+    int *fresh = w->r_fresh, *moved = w->r_moved;
     double *gaps = w->r_gaps, *vn = w->r_vn, *lam = w->r_lam, *y_new = w->r_y_new;
     int done = 0;
     *n_events = 0;
@@ -146,17 +172,22 @@ int fb_resolve(FbWork *w, const FbSystem *s, double t, double *y, int *phase, do
         for (int c = first; c < first + per_particle; ++c)
             involved |= touching[c] || leaving[c] || phase[c] != FB_FREE || gaps[c] <= floor[c] + gap_tol;
         if (involved)
-            for (int c = first; c < first + per_particle; ++c) visit[n_visit++] = c;
+            for (int c = first; c < first + per_particle; ++c) {
+                fresh[c] = 0;
+                visit[n_visit++] = c;
+            }
+        moved[first / per_particle] = 0;
     }
     for (*iterations = 1; *iterations < 2 * nc + 3; ++*iterations) {
         for (int m = 0; m < n_visit; ++m) {
             const int c = visit[m];
             held[c] = phase[c] == FB_HELD || phase[c] == FB_SLIDING ? phase[c] : 0;
         }
-        if (s->contact) {
+        if (s->contact) { /* a contact's values change only with its stencil, its particle's phases or pushes */
             for (int m = 0; m < n_visit; ++m) {
                 const int c = visit[m];
-                if (s->contact(s, y, held, push, c, gaps + c, vn + c, lam + c)) return -1;
+                if (!fresh[c] && s->contact(s, y, held, push, c, gaps + c, vn + c, lam + c)) return -1;
+                fresh[c] = 1;
             }
         } else if (s->contact_state(s, y, held, push, gaps, vn, lam)) {
             return -1;
@@ -170,6 +201,7 @@ int fb_resolve(FbWork *w, const FbSystem *s, double t, double *y, int *phase, do
             ending[c] = phase[c] == FB_PUSHED && touching[c]; /* thesis windows that end now */
             if (ending[c] || near) touching[c] = 0;             /* each touch is handled once */
             if (ending[c]) { /* its force ends with it: a held contact's force is the contact force of eq. 4.8 */
+                stale(fresh, c, per_particle);
                 push[c] = 0.0;
                 if (s->tangential_push) memset(s->tangential_push + 3 * c, 0, 3 * sizeof(double));
             }
@@ -178,6 +210,7 @@ int fb_resolve(FbWork *w, const FbSystem *s, double t, double *y, int *phase, do
             settled[c] |= ending[c] || (hit[c] && !thesis);
             const int rebounds = hit[c] && restitution[c] > 0.0 && -restitution[c] * vn[c] >= min_rebound[c];
             if (hit[c] && thesis) { /* eq. 4.6: the impulse spread as a force over impact_dt */
+                stale(fresh, c, per_particle);
                 phase[c] = FB_PUSHED;
                 push[c] = -masses[c] * vn[c] * (1.0 + (rebounds ? restitution[c] : 0.0)) / impact_dt;
                 push_until[c] = t + impact_dt;
@@ -204,6 +237,7 @@ int fb_resolve(FbWork *w, const FbSystem *s, double t, double *y, int *phase, do
              * the thesis mode's windows, whose penetration is the model's) */
             if (!thesis && s->settle && s->settle(s, y, stop)) return -1;
             if (!s->contact) s->gaps(s, y, gaps);
+            else impacted_stencils(s, visit, n_visit, stop, per_particle, moved, fresh);
             for (int m = 0; m < n_visit; ++m) {
                 const int c = visit[m];
                 if (stop[c] == FB_REBOUND) { /* it leaves the ground at once */
@@ -220,6 +254,7 @@ int fb_resolve(FbWork *w, const FbSystem *s, double t, double *y, int *phase, do
         for (int m = 0; m < n_visit; ++m) {
             const int c = visit[m];
             if (ending[c] && vn[c] >= 0.0) {
+                stale(fresh, c, per_particle);
                 phase[c] = FB_FREE;
                 floor[c] = fmin(0.0, gaps[c]) - gap_tol;
                 changed = 1;
@@ -237,6 +272,7 @@ int fb_resolve(FbWork *w, const FbSystem *s, double t, double *y, int *phase, do
             done = 1;
             break;
         }
+        stale(fresh, release, per_particle); /* nothing else changed: the others' values stand */
         phase[release] = FB_FREE;
         floor[release] = fmin(0.0, gaps[release]) - gap_tol;
         if (settled[release]) not_held[release] = 1; /* its impact did not hold it */

@@ -18,6 +18,7 @@ struct FbWork {
     /* phases.c */
     int *r_touching, *r_impacted, *r_settled, *r_was_held, *r_held, *r_hit, *r_ending, *r_instant, *r_stop;
     int *r_visit; /* the contacts an instant can change, where contacts decouple */
+    int *r_fresh, *r_moved; /* a visited contact's last values are current; a particle an impact changed */
     void *block; /* all of the above, one allocation */
 };
 
