@@ -77,7 +77,7 @@ TAIL = ("status", "message", "worker", "model_load_s", "task_s", "task_cpu_s")
 #: Parquet is rewritten at most this often (s) while rows arrive; the CSV gets every row at once.
 PARQUET_EVERY = 5.0
 #: An adaptive task holds about this many CPU seconds of runs (see _Batcher).
-TASK_SECONDS = 0.25
+TASK_SECONDS = 0.5
 
 
 class SweepError(InputError):
