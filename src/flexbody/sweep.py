@@ -556,8 +556,8 @@ def _require_extra() -> None:
 #: cut the cluster's idle cost from ~0.12 to ~0.02 cores on the 2-core test machine (README).
 #: The nannies also start each worker with MALLOC_TRIM_THRESHOLD_=65536, which fixes glibc's mmap
 #: threshold at 128 KiB: every result array of a run (a few hundred KiB) is then a fresh mmap, zeroed
-#: page by page by the kernel (1800 page faults and ~6 ms of system time per thesis-ball run, against
-#: 20 without it; README).  Our workers hold no data between tasks, so there is nothing to trim; a
+#: page by page by the kernel (1600-1800 page faults and 5-7 ms of system time per thesis-ball run, against
+#: 0-20 faults without it; README).  Our workers hold no data between tasks, so there is nothing to trim; a
 #: value the user sets in the environment still wins.
 QUIET_CLUSTER = {
     "distributed.worker.profile.enabled": False,
@@ -980,7 +980,12 @@ def benchmark(out: Path, quick: bool) -> dict:
     Per-run overhead, CPU: the CPU seconds of this process (client and scheduler) and of
     the workers, minus those of the runs themselves (measured inside each task) and of
     validating the scenes (the serial loop loads each scene too), per run: what Dask and
-    the row writing add, which other programs do not change.
+    the row writing add, which other programs change less.  It is split by thread (psutil):
+    the client's main thread (the sweep call, rows), its other threads (client, scheduler
+    and nannies share one event loop), the workers' event loops (their main threads) and
+    their other threads beyond the runs; with the runs' system CPU and page faults, which
+    showed where the workers' runs lost 27 % (Dask's MALLOC_TRIM_THRESHOLD_, see
+    QUIET_CLUSTER).
     """
     import shutil
     import tempfile
@@ -1060,7 +1065,7 @@ def benchmark(out: Path, quick: bool) -> dict:
                   f"CPU {cpu_overhead * 1e3:5.2f} ms ({100 * case['cpu_overhead_relative']:.0f} %); "
                   f"load {load:.1f}; identical to serial: {same}")
             system = split["worker_system_s"] * len(points)
-            print(f"  {'':42s} runs' thread CPU {runs_cpu:.2f} s (system {system:.2f} s, "
+            print(f"  {'':42s} runs' thread CPU {runs_cpu:.2f} s (workers' system CPU {system:.2f} s, "
                   f"{faults / len(points):.0f} page faults per run); per run beyond the runs: client main thread "
                   f"{split['client_main_s'] * 1e3:.2f} ms, client/scheduler/nanny threads "
                   f"{split['client_other_threads_s'] * 1e3:.2f} ms, worker event loops "
