@@ -217,6 +217,49 @@ def test_a_run_that_raises_is_a_row(monkeypatch):
     assert all(math.isnan(row[key]) for key in OBSERVABLES)
 
 
+def test_a_runs_cpu_is_its_own_threads_not_the_process(tmp_path):
+    """task_cpu_s counts the thread that ran the run: a second thread burning CPU meanwhile (as a
+    worker's event loop or a second worker thread would) is not in it, but is in the process's CPU."""
+    import threading
+
+    from flexbody.sweep import _model_for
+    from flexbody.scene import load_scene
+
+    scene = load_scene(tiny(tmp_path, t_end=30.0, rtol=1e-10))
+    _model_for(scene)
+    stop, burnt = threading.Event(), []
+
+    def burn():
+        start = time.thread_time()
+        while not stop.is_set():
+            sum(range(1000))
+        burnt.append(time.thread_time() - start)
+
+    process = time.process_time()
+    burner = threading.Thread(target=burn)
+    burner.start()
+    row = run_one(0, scene)
+    stop.set()
+    burner.join()
+    process = time.process_time() - process
+    assert row["status"] == "success"
+    # The two threads share the GIL, so the burner got a good part of the CPU: the row must not hold it.
+    assert burnt[0] > 0.2 * process
+    assert row["task_cpu_s"] <= 1.1 * (process - burnt[0]) + 0.005
+
+
+def test_the_local_workers_start_without_dasks_malloc_trim_setting(monkeypatch):
+    """Dask's nannies set MALLOC_TRIM_THRESHOLD_=65536 in the workers (and in this process's
+    environment), which makes glibc mmap every array >= 128 KiB afresh: ~1800 page faults per
+    thesis-ball run.  Our LocalCluster starts its workers without it."""
+    from flexbody.sweep import _Engine
+
+    monkeypatch.delenv("MALLOC_TRIM_THRESHOLD_", raising=False)
+    with _Engine(None, 1) as client:
+        assert list(client.run(os.environ.get, "MALLOC_TRIM_THRESHOLD_").values()) == [None]
+    assert "MALLOC_TRIM_THRESHOLD_" not in os.environ
+
+
 # ------------------------------------------------------------------------- on a cluster
 
 

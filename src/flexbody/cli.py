@@ -167,7 +167,7 @@ def _add_sweep(sub) -> None:
                                                               "(default: a local cluster)")
     sweep.add_argument("--workers", type=int, metavar="N", help="local cluster size (default: one per core)")
     sweep.add_argument("--batch", type=int, metavar="N",
-                       help="runs per Dask task (default: adaptive, tasks of about 0.25 s)")
+                       help="runs per Dask task (default: adaptive, tasks of about 0.5 s of CPU)")
     sweep.add_argument("--keep-results", action="store_true", help="save every run's result in DIR/runs/")
     sweep.add_argument("--resume", action="store_true", help="finish an interrupted sweep in DIR")
     sweep.add_argument("--max-wall-time", type=float, default=600.0, metavar="S",

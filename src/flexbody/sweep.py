@@ -76,8 +76,8 @@ COUNTS = ("impacts", "liftoffs", "rhs_evaluations")
 TAIL = ("status", "message", "worker", "model_load_s", "task_s", "task_cpu_s")
 #: Parquet is rewritten at most this often (s) while rows arrive; the CSV gets every row at once.
 PARQUET_EVERY = 5.0
-#: An adaptive task holds about this many seconds of runs (see _Batcher).
-TASK_SECONDS = 0.25
+#: An adaptive task holds about this many CPU seconds of runs (see _Batcher).
+TASK_SECONDS = 0.5
 
 
 class SweepError(InputError):
@@ -367,7 +367,9 @@ def run_one(run: int, scene: Scene | Mapping, max_wall_time: float = math.inf, k
     ``scene`` is a validated Scene or a scene table; ``keep`` a folder for the run's result
     (with ``table`` saved beside it as ``scene.json``).
     """
-    start, cpu = time.perf_counter(), time.process_time()
+    # The thread's CPU, not the process's: a worker's event loop (and, with nthreads > 1, the other
+    # runs) work in other threads of the same process meanwhile.
+    start, cpu = time.perf_counter(), time.thread_time()
     row: dict[str, Any] = {"run": run, **{key: math.nan for key in OBSERVABLES}, "status": "error",
                            "worker": f"{socket.gethostname()}:{os.getpid()}", "model_load_s": 0.0}
     try:
@@ -384,7 +386,7 @@ def run_one(run: int, scene: Scene | Mapping, max_wall_time: float = math.inf, k
             row["result_path"] = str(folder)
     except Exception as exc:  # noqa: BLE001 - any failure of one run is that run's row
         row["message"] = f"{type(exc).__name__}: {exc}"
-    row["task_s"], row["task_cpu_s"] = time.perf_counter() - start, time.process_time() - cpu
+    row["task_s"], row["task_cpu_s"] = time.perf_counter() - start, time.thread_time() - cpu
     return row
 
 
@@ -552,11 +554,17 @@ def _require_extra() -> None:
 
 #: Our LocalCluster has no dashboard, so nothing shows its profiles and monitors: sampling them less
 #: cut the cluster's idle cost from ~0.12 to ~0.02 cores on the 2-core test machine (README).
+#: The nannies also start each worker with MALLOC_TRIM_THRESHOLD_=65536, which fixes glibc's mmap
+#: threshold at 128 KiB: every result array of a run (a few hundred KiB) is then a fresh mmap, zeroed
+#: page by page by the kernel (1600-1800 page faults and 5-7 ms of system time per thesis-ball run, against
+#: 0-20 faults without it; README).  Our workers hold no data between tasks, so there is nothing to trim; a
+#: value the user sets in the environment still wins.
 QUIET_CLUSTER = {
     "distributed.worker.profile.enabled": False,
     "distributed.admin.system-monitor.interval": "2s",
     "distributed.worker.memory.monitor-interval": "1s",
     "distributed.admin.tick.interval": "1s",
+    "distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None,
 }
 
 
@@ -693,7 +701,8 @@ def sweep(
     pandas.DataFrame
         One row per run, sorted by ``run``: the varied fields, :data:`OBSERVABLES`,
         ``status``, ``message``, ``worker`` (host:pid), ``model_load_s``, ``task_s`` and
-        ``task_cpu_s`` (wall and CPU seconds of the whole run on its worker), and
+        ``task_cpu_s`` (wall seconds of the whole run on its worker, and CPU seconds of
+        the thread that ran it), and
         ``result_path`` with ``keep_results``.
 
     Raises
@@ -801,10 +810,12 @@ class _Batcher:
     """How many runs the next task gets.
 
     A fixed ``batch``, or adaptive: single runs until some have finished, then as many as
-    take about TASK_SECONDS by the median run so far, so Dask's cost per task (a few ms
-    on a loaded 2-core machine, see the README) stays a small part of each task's time;
-    near the end never more than an even share of what is left, so no worker idles while
-    another finishes a long last task.
+    take about TASK_SECONDS of CPU by the median run so far, so Dask's CPU per task (a few
+    ms on a 2-core machine, see the README) stays a small part of each task's CPU; near the
+    end never more than an even share of what is left, so no worker idles while another
+    finishes a long last task.  CPU, not wall time: on a busy machine a run's wall time
+    grows with the other programs, and so does Dask's per task, but the ratio of their CPU
+    does not (sized by wall time, tasks shrank to one or two runs at load 8 on 2 cores).
     """
 
     def __init__(self, batch: int | None, workers: int) -> None:
@@ -812,7 +823,7 @@ class _Batcher:
         self.times: list[float] = []
 
     def observe(self, rows: list[dict]) -> None:
-        self.times += [row["task_s"] for row in rows if row.get("task_s") == row.get("task_s")]  # not NaN
+        self.times += [row["task_cpu_s"] for row in rows if row.get("task_cpu_s") == row.get("task_cpu_s")]  # not NaN
         del self.times[:-200]
 
     def size(self, remaining: int) -> int:
@@ -900,16 +911,52 @@ def _cpu_seconds(processes) -> float:
     return own + sum(sum(p.cpu_times()[:2]) for p in processes)
 
 
+def _thread_cpu(processes) -> dict[int, dict[int, tuple[float, float]]]:
+    """User and system CPU seconds of every thread of ``processes`` (psutil), by pid and thread id."""
+    return {p.pid: {t.id: (t.user_time, t.system_time) for t in p.threads()} for p in processes}
+
+
+def _minor_faults(pid: int) -> float:
+    """Minor page faults of process ``pid`` so far (Linux ``/proc``; NaN elsewhere)."""
+    try:
+        return float(Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[7])
+    except (OSError, IndexError, ValueError):
+        return math.nan
+
+
+def _where_cpu_goes(before: dict, after: dict, own: int, workers: set[int], main_cpu: float, validation_cpu: float,
+                    runs_cpu: float, runs: int) -> dict:
+    """CPU seconds per run by thread, beyond the runs and the validation, between two
+    :func:`_thread_cpu` snapshots.
+
+    ``own`` is this process (client, scheduler, nannies), ``main_cpu`` the CPU of its calling
+    thread (which ran :func:`sweep`, ``validation_cpu`` of it validating), ``workers`` the
+    worker pids, whose main thread runs the event loop, ``runs_cpu`` the runs' own thread CPU
+    (``task_cpu_s``).
+    """
+    def spent(pid: int, keep) -> tuple[float, float]:
+        pairs = [(u - before[pid].get(tid, (0.0, 0.0))[0], s - before[pid].get(tid, (0.0, 0.0))[1])
+                 for tid, (u, s) in after[pid].items() if keep(tid)]
+        return sum(u for u, _ in pairs), sum(s for _, s in pairs)
+
+    client = sum(spent(own, lambda tid: True))
+    loops = sum(sum(spent(pid, lambda tid, pid=pid: tid == pid)) for pid in workers)
+    others = [spent(pid, lambda tid, pid=pid: tid != pid) for pid in workers]  # the runs' threads and helpers
+    return {"client_main_s": (main_cpu - validation_cpu) / runs, "client_other_threads_s": (client - main_cpu) / runs,
+            "worker_event_loops_s": loops / runs, "worker_other_threads_s": (sum(map(sum, others)) - runs_cpu) / runs,
+            "worker_system_s": sum(s for _, s in others) / runs}
+
+
 def _warm_process(table: dict) -> None:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", OverdampedLinkWarning)
         _model_for(load_scene(table))
 
 
-def _parallel_ceiling(tables: list[dict], workers: int) -> float:
+def _parallel_ceiling(tables: list[dict], workers: int) -> tuple[float, list[dict]]:
     """Wall time of the same runs split over ``workers`` plain processes (no Dask), their
     models loaded before the clock starts: the best these cores allow, the ceiling for the
-    sweep's speed-up (cores that share a host's core run slower side by side)."""
+    sweep's speed-up (cores that share a host's core run slower side by side).  And the rows."""
     import multiprocessing
 
     numbered = list(enumerate(tables))
@@ -917,8 +964,8 @@ def _parallel_ceiling(tables: list[dict], workers: int) -> float:
     with multiprocessing.get_context("spawn").Pool(workers, _warm_process, (tables[0],)) as pool:
         pool.map(abs, range(workers), chunksize=1)  # every process started and warm
         start = time.perf_counter()
-        pool.map(run_batch, chunks, chunksize=1)
-        return time.perf_counter() - start
+        rows = pool.map(run_batch, chunks, chunksize=1)
+        return time.perf_counter() - start, [row for chunk in rows for row in chunk]
 
 
 def benchmark(out: Path, quick: bool) -> dict:
@@ -933,7 +980,12 @@ def benchmark(out: Path, quick: bool) -> dict:
     Per-run overhead, CPU: the CPU seconds of this process (client and scheduler) and of
     the workers, minus those of the runs themselves (measured inside each task) and of
     validating the scenes (the serial loop loads each scene too), per run: what Dask and
-    the row writing add, which other programs do not change.
+    the row writing add, which other programs change less.  It is split by thread (psutil):
+    the client's main thread (the sweep call, rows), its other threads (client, scheduler
+    and nannies share one event loop), the workers' event loops (their main threads) and
+    their other threads beyond the runs; with the runs' system CPU and page faults, which
+    showed where the workers' runs lost 27 % (Dask's MALLOC_TRIM_THRESHOLD_, see
+    QUIET_CLUSTER).
     """
     import shutil
     import tempfile
@@ -951,20 +1003,28 @@ def benchmark(out: Path, quick: bool) -> dict:
     print(f"sweep benchmark: thesis ball, {len(points)} runs (stiffness {n_k} x damping {n_c}), "
           f"{workers}-worker LocalCluster against a serial loop; {os.cpu_count()} cores, "
           f"load average {os.getloadavg()[0]:.1f}")
+    me = psutil.Process()
+    faults, system = _minor_faults(me.pid), me.cpu_times().system
     start, cpu = time.perf_counter(), time.process_time()
     serial_rows = run_batch(list(enumerate(tables)), 600.0)
     serial, serial_cpu = time.perf_counter() - start, time.process_time() - cpu
     per_run = serial / len(points)
+    serial_runs = {"runs_cpu_s": sum(r["task_cpu_s"] for r in serial_rows),
+                   "system_s": me.cpu_times().system - system, "minor_faults": _minor_faults(me.pid) - faults}
     print(f"  serial loop: {serial:.2f} s wall, {serial_cpu:.2f} s CPU; {per_run * 1e3:.1f} ms per run "
-          f"(integration {np.mean([r['wall_time_s'] for r in serial_rows]) * 1e3:.1f} ms of it)")
-    ceiling = _parallel_ceiling(tables, workers)
+          f"(integration {np.mean([r['wall_time_s'] for r in serial_rows]) * 1e3:.1f} ms of it); the runs' "
+          f"thread CPU {serial_runs['runs_cpu_s']:.2f} s, of it system {serial_runs['system_s']:.2f} s; "
+          f"{serial_runs['minor_faults'] / len(points):.0f} page faults per run")
+    ceiling, plain_rows = _parallel_ceiling(tables, workers)
+    plain_cpu = sum(r["task_cpu_s"] for r in plain_rows)
     print(f"  {workers} plain processes (no Dask), half the runs each: {ceiling:.2f} s, speed-up "
-          f"{serial / ceiling:.2f}: the ceiling on these cores")
+          f"{serial / ceiling:.2f}: the ceiling on these cores; the runs' thread CPU {plain_cpu:.2f} s")
     start = time.perf_counter()
     engine = _Engine(None, workers)
     client = engine.__enter__()
     startup = time.perf_counter() - start
-    procs = psutil.Process().children(recursive=True)
+    procs = me.children(recursive=True)
+    worker_pids = set(client.run(os.getpid).values())
     print(f"  LocalCluster start: {startup:.2f} s")
     cpu = time.process_time()
     validate(base, list(vary), points)
@@ -977,33 +1037,47 @@ def benchmark(out: Path, quick: bool) -> dict:
         for label, batch in (("cold workers, 1 run per task", 1), ("warm workers, 1 run per task", 1),
                              ("warm workers, 5 runs per task", 5), ("warm workers, adaptive tasks (default)", None)):
             load = os.getloadavg()[0]
-            start, cpu = time.perf_counter(), _cpu_seconds(procs)
+            threads, faults = _thread_cpu([me, *procs]), sum(map(_minor_faults, worker_pids))
+            start, cpu, main = time.perf_counter(), _cpu_seconds(procs), time.thread_time()
             frame = sweep("thesis_ball", vary, scratch / f"{len(cases)}", scheduler=client, batch=batch,
                           figures=False, progress=False)
-            elapsed, used = time.perf_counter() - start, _cpu_seconds(procs) - cpu
+            elapsed, used, main = time.perf_counter() - start, _cpu_seconds(procs) - cpu, time.thread_time() - main
+            faults = sum(map(_minor_faults, worker_pids)) - faults
             same = all(_same(frame[key].tolist(), [r[key] for r in serial_rows])
                        for key in OBSERVABLES if key != "wall_time_s")
             overhead = (workers * elapsed - serial) / len(points)
             runs_cpu = float(frame["task_cpu_s"].sum())
             cpu_overhead = (used - runs_cpu - validation_cpu) / len(points)
+            split = _where_cpu_goes(threads, _thread_cpu([me, *procs]), me.pid, worker_pids,
+                                    main, validation_cpu, runs_cpu, len(points))
             case = {"label": label, "batch": batch, "time_s": elapsed, "cpu_s": used, "runs_cpu_s": runs_cpu,
                     "speedup": serial / elapsed, "of_ceiling": ceiling / elapsed, "overhead_per_run_s": overhead,
                     "overhead_relative": overhead / per_run,
                     "cpu_overhead_per_run_s": cpu_overhead, "cpu_overhead_relative": cpu_overhead * len(points)
                     / runs_cpu, "load_average": load,
-                    "failed": int((frame["status"] != "success").sum()), "identical_to_serial": bool(same)}
+                    "failed": int((frame["status"] != "success").sum()), "identical_to_serial": bool(same),
+                    "per_run_by_thread_s": split,
+                    "worker_minor_faults_per_run": faults / len(points)}
             cases.append(case)
             print(f"  {label:42s} {elapsed:6.2f} s  speed-up {case['speedup']:.2f} "
                   f"({100 * case['of_ceiling']:.0f} % of the ceiling)  overhead per run: wall "
                   f"{overhead * 1e3:6.2f} ms ({100 * case['overhead_relative']:.0f} %), "
                   f"CPU {cpu_overhead * 1e3:5.2f} ms ({100 * case['cpu_overhead_relative']:.0f} %); "
                   f"load {load:.1f}; identical to serial: {same}")
+            system = split["worker_system_s"] * len(points)
+            print(f"  {'':42s} runs' thread CPU {runs_cpu:.2f} s (workers' system CPU {system:.2f} s, "
+                  f"{faults / len(points):.0f} page faults per run); per run beyond the runs: client main thread "
+                  f"{split['client_main_s'] * 1e3:.2f} ms, client/scheduler/nanny threads "
+                  f"{split['client_other_threads_s'] * 1e3:.2f} ms, worker event loops "
+                  f"{split['worker_event_loops_s'] * 1e3:.2f} ms, other worker threads "
+                  f"{split['worker_other_threads_s'] * 1e3:.2f} ms")
     finally:
         engine.__exit__()
         shutil.rmtree(scratch, ignore_errors=True)
     data = {"runs": len(points), "workers": workers, "serial_s": serial, "serial_cpu_s": serial_cpu,
             "validation_cpu_s": validation_cpu,
-            "serial_per_run_s": per_run, "plain_processes_s": ceiling, "ceiling_speedup": serial / ceiling,
+            "serial_per_run_s": per_run, "serial_runs": serial_runs, "plain_processes_s": ceiling,
+            "plain_processes_runs_cpu_s": plain_cpu, "ceiling_speedup": serial / ceiling,
             "cluster_start_s": startup, "cases": cases, "vary": vary,
             "environment": {"cpus": os.cpu_count(), **_versions()}}
     out.mkdir(parents=True, exist_ok=True)
