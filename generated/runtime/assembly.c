@@ -380,9 +380,9 @@ static void link_block_2d(const Assembly *A, int first, int count, const double 
 
 /* The links' springs and dampers added to acc (nq) in link order; returns their damping
  * power.  By blocks of LINK_BLOCK links: their ends' states gathered into rows, their forces
- * (link_block), then added to both ends.  A run of links from the same first particle i (a
- * particle's links are listed together) keeps i's sum in registers, in the same order as
- * through memory: every particle's sum is free_acceleration's, bit for bit. */
+ * (link_block), then added to both ends.  A run of links from the same first particle i (the
+ * presets list a particle's links together) keeps i's sum in registers, in the same order
+ * as through memory: every particle's sum is free_acceleration's, bit for bit. */
 static double link_forces_2d(const Assembly *A, const double *x, const double *v, double *acc)
 {
     double in[8][LINK_BLOCK], f[2][LINK_BLOCK], pw[LINK_BLOCK], power = 0.0;
@@ -842,9 +842,9 @@ static void link_block_3d(const Assembly *A, int first, int count, const double 
 
 /* The links' springs and dampers added to acc (nq) in link order; returns their damping
  * power.  By blocks of LINK_BLOCK links: their ends' states gathered into rows, their forces
- * (link_block), then added to both ends.  A run of links from the same first particle i (a
- * particle's links are listed together) keeps i's sum in registers, in the same order as
- * through memory: every particle's sum is free_acceleration's, bit for bit. */
+ * (link_block), then added to both ends.  A run of links from the same first particle i (the
+ * presets list a particle's links together) keeps i's sum in registers, in the same order
+ * as through memory: every particle's sum is free_acceleration's, bit for bit. */
 static double link_forces_3d(const Assembly *A, const double *x, const double *v, double *acc)
 {
     double in[12][LINK_BLOCK], f[3][LINK_BLOCK], pw[LINK_BLOCK], power = 0.0;
