@@ -49,7 +49,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     root = args.out or generated_root()
     stale = 0
-    rigid = [b.name for b in scene.bodies if b.rigid]
+    rigid = scene.rigid_bodies
     if rigid and "particles" in (args.formulation or ()):
         print(f"error: `--formulation` = 'particles': bodies {rigid} are rigid, frames T without particle "
               "coordinates, which only the floating formulation has", file=sys.stderr)

@@ -243,7 +243,7 @@ def _show(args: argparse.Namespace) -> int:
     from .scene import load_scene
 
     scene = load_scene(args.scene)
-    formulation = args.formulation or ("floating" if any(b.rigid for b in scene.bodies) else scene.simulation.formulation)
+    formulation = args.formulation or ("floating" if scene.rigid_bodies else scene.simulation.formulation)
     if scene.n_particles > SHOW_MAX_PARTICLES and not args.force and find_model_dir(scene, formulation) is None:
         print(f"error: {scene.source} has {scene.n_particles} particles: deriving its equations whole ({formulation}) "
               f"would take about {derivation_seconds(scene.n_particles, formulation):.0f} s. Running it needs no "

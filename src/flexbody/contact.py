@@ -257,7 +257,7 @@ def resolve(
             hit = np.zeros_like(hit)
         # After a window, what velocity is left towards the ground is stopped instantly.
         instant = hit | (ending & (vn < 0.0))
-        if instant.any() and getattr(model, "coupled", False):
+        if instant.any() and model.coupled:
             # Coupled contacts (a rigid body's): one LCP over every touching contact.
             touching_now = instant | phases.on_ground
             out = coupled_impact(model, y, p, touching_now, np.where(hit & rebounds, e, 0.0), slowest)
@@ -290,7 +290,7 @@ def resolve(
         phases.floor[away] = np.minimum(0.0, gaps[away]) - gap_tolerance
         if (started | instant | away).any():
             continue  # the dampers saw the velocity jump: recompute the forces before holding anyone
-        if getattr(model, "coupled", False):  # Signorini's law over all held contacts at once
+        if model.coupled:  # Signorini's law over all held contacts at once
             pulling, implied = coupled_release(model, y, p, phases.on_ground, phases.push, leaving,
                                                force_tolerance)
             phases.phase[implied] = FREE  # redundant and unloaded: the others hold it at gap 0

@@ -110,7 +110,7 @@ def _settings(scene: Scene, overrides: dict) -> SimulationSettings:
         if value is not None:
             values[key] = value
     problems = []
-    rigid = [b.name for b in scene.bodies if getattr(b, "rigid", False)]
+    rigid = scene.rigid_bodies
     if rigid and overrides.get("formulation") == "particles":
         problems.append(f"`formulation` = 'particles': bodies {rigid} are rigid, frames T without particle "
                         "coordinates, which only the floating formulation has; drop the option")
@@ -175,7 +175,7 @@ def _contact_law_problems(scene: Scene, values: dict) -> list[str]:
     friction = [j for j, g in enumerate(scene.grounds) if g.friction > 0.0]
     restitution = [j for j, g in enumerate(scene.grounds) if g.restitution > 0.0]
     out = []
-    rigid = [b.name for b in scene.bodies if getattr(b, "rigid", False)]
+    rigid = scene.rigid_bodies
     if friction and rigid:
         out.append(f"bodies {rigid} are rigid: grounds {friction} have friction, but a rigid body's contacts couple "
                    "(J M^-1 J^T is not diagonal), and coupled sticking and sliding are not in the runtime yet "
@@ -413,8 +413,8 @@ class _Run:
     def resolve_at(self, t: float, touching: np.ndarray, leaving: np.ndarray) -> list[Event]:
         """Apply the fixed point at instant ``t`` to ``y`` and the phases; return the new events."""
         s = self.settings
-        was_pushed = self.phases.phase == PUSHED
-        if self.compiled and not getattr(self.model, "coupled", False):  # the compiled twin of contact.resolve
+        was_pushed = self.phases.phase == PUSHED if self.windows is not None else None  # O(nc): only if needed
+        if self.compiled and not self.model.coupled:  # the compiled twin of contact.resolve
             found, not_held, loss = self.compiled.resolve(t, touching, leaving, s.impact == "thesis", s.impact_dt)
             new = [Event(t, c, EVENT_KINDS[kind], speed) for c, kind, speed in found]
         else:

@@ -47,6 +47,7 @@ class Model:
     backend = ""
     formulation = ""
     digest = ""
+    coupled = False  # True where a rigid body's contacts couple: instants are LCPs (flexbody.coupled)
     dim = 2
     nq = nu = ny = n_particles = n_contacts = 0
     contacts: np.ndarray
@@ -385,7 +386,7 @@ def _scene_and_formulation(scene, backend: str, formulation: str | None) -> tupl
         scene = load_scene(scene)
     if backend not in BACKENDS:
         raise InputError(f"`backend` = {backend!r}: must be one of {sorted(BACKENDS)}")
-    rigid = [b.name for b in scene.bodies if getattr(b, "rigid", False)]
+    rigid = scene.rigid_bodies
     if rigid and formulation == "particles":
         raise InputError(f"`formulation` = 'particles': bodies {rigid} are rigid, frames T without particle "
                          "coordinates, which only the floating formulation has; drop the option")
@@ -434,7 +435,7 @@ def load_model(scene: Scene | str | Path, backend: str = "c", formulation: str |
                     "line, so in 3D no third particle fixes T's rotation about it; use the particles formulation "
                     "(the default)"
                 )
-    flexible = sum(b.n_particles for b in scene.bodies if not getattr(b, "rigid", False))
+    flexible = sum(b.n_particles for b in scene.bodies if not b.rigid)
     if flexible > FLOATING_MAX_PARTICLES:  # a rigid body costs its frame alone, whatever its particles
         raise InputError(
             f"`formulation` = 'floating' with {flexible} particles in flexible bodies: the floating formulation is "

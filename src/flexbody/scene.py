@@ -293,6 +293,11 @@ class Scene:
     def dim(self) -> int:
         return len(self.gravity)
 
+    @property
+    def rigid_bodies(self) -> list[str]:
+        """Names of the bodies with ``rigid = true`` (they run on the floating formulation)."""
+        return [b.name for b in self.bodies if b.rigid]
+
     def surfaces(self) -> tuple[np.ndarray, np.ndarray]:
         """Every body's surface with global particle indices.
 
@@ -343,7 +348,7 @@ class Scene:
                     links=b.links,
                     damper=b.damper,
                     gauge=gauge_particles(b.points),
-                    rigid=bool(getattr(b, "rigid", False)),
+                    rigid=b.rigid,
                 )
                 for b in self.bodies
             ),
