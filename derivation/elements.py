@@ -38,8 +38,9 @@ Elements
     respect to every coordinate is ``[n, -w_1 n, -w_2 n, ...]``, so with the weights in
     [0, 1] a contact force ``lam n`` on x comes with ``-w_i lam n`` on the vertices: zero
     net force and moment.  Their ``_velocity`` twins give the gap rate (the Jacobian times
-    the velocities) and the tangential part of the velocity of x relative to the
-    material point of the element under it (for friction).
+    the velocities), the tangential part of the velocity of x relative to the material
+    point of the element under it (for friction), and the gap acceleration's velocity
+    term ``d(J v)/dq . v`` that a held contact between bodies needs (:mod:`flexbody.body_contact`).
 
 Every kernel is a :class:`Kernel`: named inputs (flat arrays of given sizes) and named
 outputs (SymPy matrices of those inputs only).
@@ -233,8 +234,12 @@ def _surface_kernels(d: int) -> list[Kernel]:
                    (a - p).cross(b - p).dot(outward) / area2]
     normal = outward / sp.sqrt(outward.dot(outward))
     gap = sp.Matrix([(p - a).dot(normal)])
-    jacobian = gap.jacobian(x + [q for c in corners for q in X[c]])
+    coordinates = x + [q for c in corners for q in X[c]]
+    jacobian = gap.jacobian(coordinates)
     velocities = sp.Matrix(v + [u for c in corners for u in V[c]])
+    rate = jacobian * velocities
+    # d(gap)/dt = J v, so d2(gap)/dt2 = J a + gap_bias with gap_bias = (d(J v)/d coordinates) v:
+    # a held contact keeps its gap's acceleration at 0 with this term (Baumgarte-free).
     material = sum((w * _frame_vector(N, V[c]) for w, c in zip(weights, corners)), 0 * N.x)
     relative = _frame_vector(N, v) - material
     tangential = relative - relative.dot(normal) * normal
@@ -253,11 +258,13 @@ def _surface_kernels(d: int) -> list[Kernel]:
                {"gap": gap, **projection, "normal": sp.Matrix([normal.dot(e) for e in axes]),
                 "gap_jacobian": jacobian}),
         Kernel(f"{name}_velocity", f"Gap rate (m/s) of particle x against the {element}: d gap / dt, the gap "
-               "Jacobian times the velocities; and the tangential part (m/s) of x's velocity relative to the "
-               "element's material point under x.",
+               "Jacobian times the velocities; the tangential part (m/s) of x's velocity relative to the "
+               "element's material point under x; and the gap acceleration's velocity term (m/s^2), "
+               "d2 gap / dt2 - J a.",
                positions + [("v", v)] + [(f"v{c}", V[c]) for c in corners],
-               {"gap_rate": jacobian * velocities,
-                "tangential_velocity": sp.Matrix([tangential.dot(e) for e in axes])}),
+               {"gap_rate": rate,
+                "tangential_velocity": sp.Matrix([tangential.dot(e) for e in axes]),
+                "gap_bias": rate.jacobian(coordinates) * velocities}),
     ]
 
 

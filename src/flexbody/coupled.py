@@ -10,7 +10,8 @@ is held; one that leaves (a rebound, or an end lifted by the others' impulses) i
 The held contacts' forces are decided the same way (:func:`coupled_release`): Signorini's
 law ``a = a_free + W lam >= 0`` complementary to ``lam >= 0`` as one LCP, so which contacts
 lift off does not depend on the order they are tried in.  Used for whole-scene models with
-rigid bodies (:attr:`flexbody.model.GeneratedModel.coupled`).
+rigid bodies (:attr:`flexbody.model.GeneratedModel.coupled`) and for contacts between
+bodies (:mod:`flexbody.body_contact`).
 """
 
 from __future__ import annotations
@@ -52,8 +53,19 @@ class CoupledImpact:
 def _rounded(rates: np.ndarray, J: np.ndarray, x: np.ndarray) -> np.ndarray:
     """Contact rates ``J x`` with what is round-off of their terms set to 0: a contact at rest
     reads +-1e-17 m/s, and a solver asked to keep that sign exactly would fail its check."""
-    level = 1e-13 * float(np.abs(J).max(initial=0.0)) * float(np.abs(x).max(initial=0.0))
+    largest = float(abs(J).max()) if J.shape[0] * J.shape[1] else 0.0  # J dense or scipy.sparse
+    level = 1e-13 * largest * float(np.abs(x).max(initial=0.0))
     return np.where(np.abs(rates) <= level, 0.0, rates)
+
+
+def _coupling(model, q: np.ndarray, u: np.ndarray, p: np.ndarray, rows: np.ndarray):
+    """Contact rows ``J`` (k, nu), ``W = J M^-1 J^T`` (k, k), ``P -> M^-1 J^T P`` and the gap
+    accelerations' velocity terms (k,) of the contacts ``rows``: the model's own where it
+    has them (contacts between bodies: sparse, M diagonal), else from its dense matrices."""
+    if hasattr(model, "contact_coupling"):
+        return model.contact_coupling(q, u, p, rows)
+    M, J = model.mass_matrix(q, p), model.gap_jacobian(q, p)[rows]
+    return J, delassus(J, M), lambda P: velocity_change(J, M, P), model.gap_bias(q, u, p)[rows]
 
 
 def coupled_impact(model, y: np.ndarray, p: np.ndarray, touching: np.ndarray, restitution: np.ndarray,
@@ -89,20 +101,20 @@ def coupled_impact(model, y: np.ndarray, p: np.ndarray, touching: np.ndarray, re
     leaving = np.zeros(model.n_contacts, bool)
     if not len(rows):
         return CoupledImpact(np.array(y, float), 0.0, impulses, leaving)
-    M, J = model.mass_matrix(q, p), model.gap_jacobian(q, p)[rows]
-    W = delassus(J, M)
+    J, W, response, _ = _coupling(model, q, u, p, rows)
     solution = solve_impact(W, _rounded(J @ u, J, u), restitution[rows])
     if not solution.solved:
         raise CoupledImpactError(f"the impact of contacts {rows.tolist()} has no solution found: {solution.message}")
     out = np.array(y, float)
-    u_new = u + velocity_change(J, M, solution.normal)
+    u_new = u + response(solution.normal)
     impulses[rows] = solution.normal
     leaves = solution.normal_rate > np.maximum(slowest[rows], 1e-12)
     if (~leaves).any():  # what stays is stopped exactly (v+ = 0 up to round-off, or too slow to leave)
         stay = ~leaves
-        extra = contact_solve(W[np.ix_(stay, stay)], -(J[stay] @ u_new))
-        u_new = u_new + velocity_change(J[stay], M, extra)
-        impulses[rows[stay]] += extra
+        extra = np.zeros(len(rows))
+        extra[stay] = contact_solve(W[np.ix_(stay, stay)], -(J[stay] @ u_new))
+        u_new = u_new + response(extra)
+        impulses[rows] += extra
     out[nq : nq + nu] = u_new
     before = float(model.energies(q, u, p)[0])
     after = float(model.energies(q, u_new, p)[0])
@@ -148,9 +160,9 @@ def coupled_release(model, y: np.ndarray, p: np.ndarray, held: np.ndarray, push:
         return release, implied
     q, u = y[:nq], y[nq : nq + nu]
     free, _ = model.rhs(y, p, np.zeros(model.n_contacts, np.intc), push)
-    J = model.gap_jacobian(q, p)[rows]
-    a_free = J @ free[nq : nq + nu] + model.gap_bias(q, u, p)[rows]
-    solution = solve_forces(delassus(J, model.mass_matrix(q, p)), _rounded(a_free, J, free[nq : nq + nu]))
+    J, W, _, bias = _coupling(model, q, u, p, rows)
+    a_free = J @ free[nq : nq + nu] + bias
+    solution = solve_forces(W, _rounded(a_free, J, free[nq : nq + nu]))
     if not solution.solved:
         raise CoupledImpactError(f"the forces of held contacts {rows.tolist()} have no solution found: "
                                  f"{solution.message}")
@@ -158,6 +170,7 @@ def coupled_release(model, y: np.ndarray, p: np.ndarray, held: np.ndarray, push:
     floor = 1e-10 * max(1.0, float(np.abs(a_free).max()))
     lifted = (solution.normal == 0.0) & (solution.normal_rate > floor)
     release[rows] = lifted | (leaving[rows] & (solution.normal <= force_tolerance[rows]))
+    J = J.toarray() if hasattr(J, "toarray") else J
     if len(rows) > 1 and np.linalg.matrix_rank(J, tol=1e-9 * max(1.0, float(np.abs(J).max()))) < len(rows):
         implied[rows] = (solution.normal == 0.0) & ~release[rows]  # redundant: the others carry it
     return release, implied

@@ -23,7 +23,7 @@ from .compiled import CompiledPath
 from .constants import (EVENT, IMPACT, LIFTOFF, NON_FINITE, SINGULAR, SLIP, STEP_COLLAPSE, STICK, TOO_SLOW,
                         ZENO_RISE)
 from .assembly import AssembledModel
-from .contact import HELD, PUSHED, Event, Phases, UnsettledInstant, resolve
+from .contact import FREE, HELD, PUSHED, Event, Phases, UnsettledInstant, resolve
 from .coupled import CoupledImpactError
 from .events import EventFunctions, locate
 from .model import Model, load_model
@@ -103,7 +103,6 @@ def _settings(scene: Scene, overrides: dict) -> SimulationSettings:
     from .errors import InputError, shown  # here, not at the top: this function is the validation's only user
     from .scene import timing_problems
 
-    _refuse_not_simulated_yet(scene)
     s = scene.simulation
     values = {k: getattr(s, k) for k in s.__dataclass_fields__}
     for key, value in overrides.items():
@@ -117,7 +116,7 @@ def _settings(scene: Scene, overrides: dict) -> SimulationSettings:
     elif rigid:
         values["formulation"] = "floating"  # a rigid body is its frame T (DESIGN §6)
     if values["method"] is None:
-        values["method"] = "dopri5" if values["backend"] == "c" else "RK45"
+        values["method"] = "dopri5" if values["backend"] == "c" and not scene.contacts else "RK45"
     if values["method"] in COMPILED_METHODS and values["backend"] != "c":
         problems.append(f"`method` = {values['method']!r}: is compiled C and needs backend 'c'; with backend "
                         f"{values['backend']!r} use a SciPy method ({', '.join(METHODS[len(COMPILED_METHODS):])})")
@@ -134,37 +133,47 @@ def _settings(scene: Scene, overrides: dict) -> SimulationSettings:
         values["impact_dt"] = overrides.get("impact_dt")
     problems += [f"`{key}` = {value!r}: {rule}" for key, value, rule in
                  timing_problems(values["t_end"], values["output_dt"], values["impact"], values["impact_dt"])]
-    problems += _contact_law_problems(scene, values)
+    problems += _contact_law_problems(scene, values) + _body_contact_problems(scene, values)
     if problems:
         raise InputError("invalid simulation options:\n" + "\n".join(f"  - {p}" for p in problems))
     return SimulationSettings(**values)
 
 
 # ----------------------------------------------------------------------------------------------
-# Issue 13, until the runtime simulates them: bodies touching each other are valid in a scene
-# (flexbody.scene parses and checks them) but refused here, never ignored.  Rigid bodies run
-# (on the grounds, see _contact_law_problems for what they cannot run with yet).
+# Contact between bodies (flexbody.body_contact) runs between flexible bodies, frictionless, with
+# instant impacts; what it cannot run with yet is refused here, naming the bodies, never ignored.
 
 
-def _refuse_not_simulated_yet(scene: Scene) -> None:
-    """Raise for a scene that asks for body-body contact.
-
-    Raises
-    ------
-    flexbody.errors.InputError
-        Naming each pair of bodies that may touch.
-    """
-    from .errors import InputError
-
+def _body_contact_problems(scene: Scene, values: dict) -> list[str]:
+    """What the scene's contacts between bodies cannot run with yet (one sentence each)."""
+    if not scene.contacts:
+        return []
     names = [b.name for b in scene.bodies]
-    refused = []
+    out = []
     for c in scene.contacts:
         first, second = (names[k] for k in c.bodies)
-        who = f"body {first!r} may touch itself (self_contact = true)" if first == second else \
-            f"bodies {first!r} and {second!r} may touch each other (collide = true or [[contacts]])"
-        refused.append(f"{who}: contact between bodies is not simulated yet (only with the grounds)")
-    if refused:
-        raise InputError(f"scene {scene.source} asks for what flexbody does not simulate yet: " + "; ".join(refused))
+        who = f"bodies {first!r} and {second!r} may touch each other"
+        if first == second:
+            out.append(f"body {first!r} may touch itself (self_contact = true): self-contact is not simulated yet")
+        elif scene.bodies[c.bodies[0]].rigid or scene.bodies[c.bodies[1]].rigid:
+            out.append(f"{who}, and a rigid body touches the grounds only: contact between a rigid body and "
+                       "another body is not simulated yet")
+        if c.friction > 0.0:
+            out.append(f"{who} with friction = {c.friction!r}: friction between bodies is not simulated yet (their "
+                       "contacts are frictionless); set friction = 0")
+    rough = [j for j, g in enumerate(scene.grounds) if g.friction > 0.0]
+    if rough:
+        out.append(f"grounds {rough} have friction and bodies may touch each other: their contacts couple, and "
+                   "coupled sticking and sliding are not simulated yet; make the grounds frictionless")
+    if values["impact"] == "thesis":
+        out.append("`impact` = 'thesis' with bodies that may touch each other: the window force -m v_n / dT "
+                   "(eq. 4.6) takes one particle's mass, not a contact between bodies' effective mass; use "
+                   "impact = 'instant' (the default)")
+    if values["method"] in COMPILED_METHODS:
+        out.append(f"`method` = {values['method']!r}: bodies that may touch each other run with SciPy's steppers "
+                   "(the compiled loop knows the grounds only); use RK45 (the same Dormand-Prince pair, the default "
+                   f"here) or {', '.join(m for m in METHODS[len(COMPILED_METHODS):] if m != 'RK45')}")
+    return out
 
 
 # ----------------------------------------------------------------------------------------------
@@ -190,18 +199,22 @@ def _contact_law_problems(scene: Scene, values: dict) -> list[str]:
     return out
 
 
-def _rebound_laws(scene: Scene, contacts: np.ndarray, size: float) -> tuple[np.ndarray, np.ndarray]:
+def _rebound_laws(scene: Scene, model: Model, size: float) -> tuple[np.ndarray, np.ndarray]:
     """Each contact's Newton e and slowest rebound speed, shape (nc,) each.
 
     A rebound at ``v`` against gravity's pull ``a = -g . n`` rises ``v^2 / (2 a)``; below
     ``ZENO_RISE * size`` it is plastic (DESIGN §6), so a bouncing particle comes to rest at
     its Zeno time t1 (1 + e) / (1 - e) instead of bouncing ever faster.  Grounds gravity does
-    not pull towards never stop a rebound this way (0).
+    not pull towards never stop a rebound this way (0).  Between bodies (contacts past the
+    grounds': ``model.slot_pair``) e is the pair's, and the pull at most ``|g|``.
     """
     grounds = scene.grounds
-    ground = contacts[:, 1] if len(contacts) else np.zeros(0, int)
+    ground = model.contacts[: getattr(model, "n_ground_contacts", model.n_contacts), 1]
     e = np.array([g.restitution for g in grounds])[ground]
     pull = np.array([max(0.0, -float(np.dot(scene.gravity, g.normal))) for g in grounds])[ground]
+    pairs = getattr(model, "slot_pair", np.zeros(0, int))
+    e = np.concatenate([e, np.array([c.restitution for c in scene.contacts])[pairs]])
+    pull = np.concatenate([pull, np.full(len(pairs), float(np.linalg.norm(scene.gravity)))])
     return e, np.sqrt(2.0 * pull * ZENO_RISE * size)
 
 
@@ -248,11 +261,13 @@ class _Run:
         # For point masses on flat grounds a contact's effective mass 1 / (J M^-1 J^T) is its particle's.
         self.contact_masses = scene.masses[model.contacts[:, 0]]
         self.force_tolerance = 1e-10 * self.contact_masses * max(float(np.linalg.norm(scene.gravity)), 1.0)
-        self.restitution, self.min_rebound = _rebound_laws(scene, model.contacts, size)
+        self.restitution, self.min_rebound = _rebound_laws(scene, model, size)
         # A sliding contact slower than this has come to rest (a stop's root is ~1e-15 s wide).
         self.speed_tolerance = SPEED_TOLERANCE * np.sqrt(max(float(np.linalg.norm(scene.gravity)), 1.0) * max(size, 1.0))
-        self.mu = np.array([g.friction for g in scene.grounds], float)[model.contacts[:, 1]] if len(model.contacts) \
-            else np.zeros(0)
+        ng = getattr(model, "n_ground_contacts", model.n_contacts)  # between bodies: frictionless (refused else)
+        self.mu = np.zeros(model.n_contacts)
+        if ng:
+            self.mu[:ng] = np.array([g.friction for g in scene.grounds], float)[model.contacts[:ng, 1]]
         self.friction = bool(np.any(self.mu > 0.0))
         # The thesis mode's windows with friction: their constant forces (normal and tangential)
         # and the samples' tangential ones, to split the integrated contact work (see result).
@@ -275,7 +290,7 @@ class _Run:
         self.min_gap = np.inf
         self.stalled = 0
         self.compiled = None
-        if model.backend == "c":
+        if model.backend == "c" and model.compiled_segments:
             self.compiled = CompiledPath(model, self.p, self.y, self.phases, self.grid, self.Y,
                                          self.force_tolerance, self.contact_masses, self.gap_tolerance,
                                          self.restitution, self.min_rebound, self.speed_tolerance, self.mu)
@@ -352,6 +367,8 @@ class _Run:
             options["first_step"] = min(self.h_next, t_bound - t0)
         import scipy.integrate
 
+        if hasattr(model, "forget_free"):  # a free contact between bodies picks its element at its next instant
+            model.forget_free(phases.phase == FREE)
         solver = getattr(scipy.integrate, s.method)(model.rhs_function(self.p, phases.held, phases.push), t0, self.y.copy(),
                                    t_bound, **options)
         events = EventFunctions(model, self.p, phases, self.force_tolerance, self.gap_tolerance)
@@ -418,6 +435,8 @@ class _Run:
             found, not_held, loss = self.compiled.resolve(t, touching, leaving, s.impact == "thesis", s.impact_dt)
             new = [Event(t, c, EVENT_KINDS[kind], speed) for c, kind, speed in found]
         else:
+            if hasattr(self.model, "switch_elements"):
+                touching, leaving = self.switch_elements(t, touching, leaving)
             res = resolve(self.model, t, self.y, self.p, self.phases, touching, leaving,
                           gap_tolerance=self.gap_tolerance, force_tolerance=self.force_tolerance,
                           masses=self.contact_masses, impact=s.impact, impact_dt=s.impact_dt,
@@ -443,6 +462,24 @@ class _Run:
         if loss:
             self.losses.append((t, loss))
         return new
+
+    def switch_elements(self, t: float, touching: np.ndarray, leaving: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Contacts held on another body's element whose particle passed onto the neighbour
+        (:meth:`flexbody.body_contact.BodyContactModel.switch_elements`): held on it if they
+        meet it tangentially, else freed at the instant (an approach is then an impact, a
+        separation a lift-off)."""
+        phases = self.phases
+        stay, approach, leave = self.model.switch_elements(self.y, self.p, phases.held, self.gap_tolerance,
+                                                           self.speed_tolerance)
+        touching, leaving = np.array(touching, bool), np.array(leaving, bool)
+        moved = np.concatenate([stay, approach, leave])
+        leaving[moved] = False
+        for c in np.concatenate([approach, leave]).tolist():
+            phases.phase[c] = FREE
+            phases.floor[c] = -self.gap_tolerance
+        touching[approach] = True
+        self.events += [Event(t, int(c), "liftoff") for c in leave]
+        return touching, leaving
 
     def track_windows(self, t: float, was_pushed: np.ndarray) -> None:
         """Record the thesis-mode windows that start or end at ``t`` (positions, constant force)."""
@@ -595,8 +632,10 @@ class _Run:
         T, Y, held, push = self.grid[:k], self.Y[:k], self.sample_held[:k].astype(np.intc), self.sample_push[:k]
         n = model.n_particles
         X, V, E, lam = model.trajectory(Y, p, held, push)
-        # Contacts are every (particle, ground) pair, particle-major (the Model checks it).
-        force = (lam + push).reshape(len(T), n, model.n_contacts // n).sum(axis=2)
+        if hasattr(model, "particle_forces"):  # contacts between bodies too
+            force = model.particle_forces(lam + push)
+        else:  # contacts are every (particle, ground) pair, particle-major (the Model checks it)
+            force = (lam + push).reshape(len(T), n, model.n_contacts // n).sum(axis=2)
         self.min_gap = min(self.min_gap, float(np.min(model.gaps(Y[-1, :nq], p))) if len(Y) else np.inf)
         # Energy taken by instant impacts strictly before each sample time (losses come in time order).
         loss_t = np.array([x[0] for x in self.losses], dtype=float)

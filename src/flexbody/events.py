@@ -6,6 +6,8 @@ One event function per contact, positive while nothing happens:
   at gap -1e-16 is still armed and a restart never starts on a root);
 * ``HELD``: ``lam + force_tolerance`` (the constraint force, lift-off when it would pull);
   with friction the smaller of that and ``mu lam - |ft| + force_tolerance`` (it slips at 0);
+  on another body's element, also how far inside the element the particle projects (m; it
+  passes onto the neighbour at 0, :mod:`flexbody.body_contact`);
 * ``SLIDING``: the smaller of ``lam + force_tolerance`` and the tangential velocity along the
   slip direction at the start of the step (it stops at 0; the direction is renewed after
   every step because in 3D it turns, see ``friction_event`` in integrator.c);
@@ -41,6 +43,7 @@ class EventFunctions:
         self.free = phases.phase == FREE
         self.held_mask = phases.on_ground
         self.held = phases.held
+        self.margins = getattr(model, "element_margins", None)
         laws = getattr(model, "laws", np.zeros((0, 2)))
         self.friction = bool(self.held_mask.any() and laws[:, 0].any())
         # Each sliding contact's direction at the step's start: the model's own (FbSystem.slip), whose
@@ -82,6 +85,8 @@ class EventFunctions:
         if self.held_mask.any():
             _, lam = m.rhs(y, self.p, self.held, self.phases.push)
             g[self.held_mask] = lam[self.held_mask] + self.force_tolerance[self.held_mask]
+            if self.margins is not None:  # a contact held on another body's element passes onto the next
+                g[self.held_mask] = np.minimum(g[self.held_mask], self.margins(y, self.p, self.held)[self.held_mask])
             if self.friction:
                 vt, _, slack = m.friction(y, self.p, self.held, self.phases.push)
                 sticking, sliding = self.phases.phase == HELD, self.phases.phase == SLIDING

@@ -47,7 +47,8 @@ class Model:
     backend = ""
     formulation = ""
     digest = ""
-    coupled = False  # True where a rigid body's contacts couple: instants are LCPs (flexbody.coupled)
+    coupled = False  # True where contacts couple (a rigid body's, or between bodies): instants are LCPs (flexbody.coupled)
+    compiled_segments = True  # with backend "c", segments run in the compiled loop (not for body-body contacts)
     dim = 2
     nq = nu = ny = n_particles = n_contacts = 0
     contacts: np.ndarray
@@ -426,6 +427,10 @@ def load_model(scene: Scene | str | Path, backend: str = "c", formulation: str |
     if formulation == "particles":
         from .assembly import assembled_model
 
+        if scene.contacts:  # bodies that may touch each other: their contacts are added
+            from .body_contact import body_contact_model
+
+            return body_contact_model(scene, assembled_model(scene, backend))
         return assembled_model(scene, backend)
     if scene.dim == 3:
         for body, gauge in zip(scene.bodies, (b.gauge for b in scene.topology().bodies)):
