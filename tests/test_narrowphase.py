@@ -143,8 +143,8 @@ def test_c_kernels_equal_numpy_kernels(rng):
     lib, m = runtime.library(), 9
     manifest = {"segment_2d": [("x", 2), ("a", 2), ("b", 2)],
                 "triangle_3d": [("x", 3), ("a", 3), ("b", 3), ("c", 3)]}
-    outputs = {"segment_2d": [1, 1, 2, 6], "segment_2d_velocity": [1, 2],
-               "triangle_3d": [1, 3, 3, 12], "triangle_3d_velocity": [1, 3]}
+    outputs = {"segment_2d": [1, 1, 2, 6], "segment_2d_velocity": [1, 2, 1],
+               "triangle_3d": [1, 3, 3, 12], "triangle_3d_velocity": [1, 3, 1]}
     for base, positions in manifest.items():
         d = positions[0][1]
         for name, inputs in ((base, positions),
@@ -161,7 +161,7 @@ def test_c_kernels_equal_numpy_kernels(rng):
 
 def test_gap_rate_is_the_time_derivative_of_the_gap(rng):
     """Along a random motion of the particle and the element's vertices, the gap rate equals
-    the central difference of the gap; the tangential velocity is the relative velocity of x
+    the central difference of the gap, and ``J a + gap_bias`` its second difference; the tangential velocity is the relative velocity of x
     and the material point under it, less its normal part (which is the gap rate)."""
     for _ in range(20):
         for d, corners in ((2, 2), (3, 3)):
@@ -177,9 +177,14 @@ def test_gap_rate_is_the_time_derivative_of_the_gap(rng):
                 return (segment(*q) if d == 2 else triangle(*q))[0]
 
             kernel = K.segment_2d_velocity if d == 2 else K.triangle_3d_velocity
-            rate, tangential = kernel(*q0, *v)
+            rate, tangential, bias = kernel(*q0, *v)
             h = 1e-5
             assert rate[0] == pytest.approx((gap(h) - gap(-h)) / (2 * h), rel=1e-7, abs=1e-9)
+            # The gap's acceleration is J a + bias (what a held contact between bodies keeps at 0).
+            jacobian = (segment(*q0) if d == 2 else triangle(*q0))[3]
+            h = 1e-4
+            second = (gap(h) - 2 * gap(0.0) + gap(-h)) / h**2
+            assert jacobian @ acc.ravel() + bias[0] == pytest.approx(second, rel=1e-6, abs=1e-6)
             _, w, n, _ = segment(*q0) if d == 2 else triangle(*q0)
             weights = [1 - w, w] if d == 2 else w
             relative = v[0] - sum(wk * vk for wk, vk in zip(weights, v[1:]))

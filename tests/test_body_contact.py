@@ -1,0 +1,181 @@
+"""Contact between bodies in the runtime (flexbody.body_contact), against closed forms,
+conservation laws, statics and the ground-only path.
+
+References: the impulse of a particle hitting a segment in closed form (three point masses,
+Newton's law along the segment's normal); linear and angular momentum of bodies touching
+only each other; the mirror image of a symmetric collision; the weight a resting body puts
+on what carries it; and the assembled model's own per-particle ground contacts.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import flexbody
+from flexbody.body_contact import BodyContactModel
+from flexbody.coupled import coupled_impact
+from flexbody.model import load_model
+
+# Two triangles 0.1 m long moving head-on along x in free space (no gravity): A's apex
+# meets the middle of B's left face at s = 1/2.  Both are mirror-symmetric about y = 0.
+TRIANGLES = {
+    "name": "triangles",
+    "gravity": [0.0, 0.0],
+    "bodies": [
+        {"name": "a", "shape": "polygon", "vertices": [[-0.05, -0.04], [0.05, 0.0], [-0.05, 0.04]],
+         "mass": 0.05, "stiffness": 2000.0, "damping": 0.0, "position": [-0.1, 1.0], "velocity": [1.0, 0.0],
+         "collide": True},
+        {"name": "b", "shape": "polygon", "vertices": [[-0.05, 0.04], [-0.05, -0.04], [0.05, 0.0]],
+         "mass": 0.05, "stiffness": 2000.0, "damping": 0.0, "position": [0.1, 1.0], "velocity": [-1.0, 0.0],
+         "collide": True},
+    ],
+    "simulation": {"t_end": 0.15, "output_dt": 0.001},
+}
+
+
+def _scene(table, **contact):
+    table = {**table, "bodies": [dict(b) for b in table["bodies"]]}
+    if contact:
+        for b in table["bodies"]:
+            b.pop("collide", None)
+        table["contacts"] = [{"bodies": [b["name"] for b in table["bodies"][:2]], **contact}]
+    return flexbody.load_scene(table)
+
+
+def _momenta(result):
+    m = result.masses[None, :, None]
+    p = (m * result.velocities).sum(axis=1)
+    x, v = result.positions, result.velocities
+    L = (result.masses[None, :] * (x[..., 0] * v[..., 1] - x[..., 1] * v[..., 0])).sum(axis=1)
+    return p, L
+
+
+@pytest.mark.parametrize("e", [0.0, 1.0])
+def test_a_particle_hitting_a_segment_takes_the_closed_form_impulse(e):
+    """At the instant A's apex touches B's face, the coupled impact gives the three particles
+    the impulse of Newton's law with the effective mass 1 / (1/m + ((1-s)^2 + s^2)/m)."""
+    scene = _scene(TRIANGLES, restitution=e)
+    model = load_model(scene, backend="numpy")
+    assert isinstance(model, BodyContactModel)
+    p = model.parameters(scene)
+    x = scene.initial_positions().copy()
+    x[:3, 0] += 0.1  # A's apex (particle 1) onto B's left face, x = 0.05 (B's particles 3 and 4)
+    apex, (a, b) = 1, (3, 4)
+    assert x[apex, 0] == pytest.approx(x[a, 0]) and x[apex, 1] == pytest.approx(0.5 * (x[a, 1] + x[b, 1]))
+    v = np.zeros_like(x)
+    v[:3] = [0.7, 0.1]
+    v[3:] = [-1.3, 0.2]
+    v[a] += [0.4, 0.0]  # the face's ends move differently: the material point under the apex is their mean
+    y = np.concatenate([x.ravel(), v.ravel(), [0.0, 0.0]])
+    touching = np.zeros(model.n_contacts, bool)
+    slot = np.flatnonzero((model.slot_particle == apex) & (model.slot_body == 1))
+    touching[model.n_ground_contacts + slot] = True
+    out = coupled_impact(model, y, p, touching, np.full(model.n_contacts, e), np.zeros(model.n_contacts))
+
+    m, s, n = 0.05, 0.5, np.array([-1.0, 0.0])  # B's face's outward normal points to -x
+    vn = n @ (v[apex] - (1 - s) * v[a] - s * v[b])
+    P = -(1 + e) * vn / (1 / m + ((1 - s) ** 2 + s**2) / m)
+    expected = v.copy()
+    expected[apex] += P * n / m
+    expected[a] -= (1 - s) * P * n / m
+    expected[b] -= s * P * n / m
+    got = out.y[model.nq : 2 * model.nq].reshape(-1, 2)
+    np.testing.assert_allclose(got, expected, rtol=0, atol=1e-13)
+    assert out.loss == pytest.approx((1 - e**2) * 0.5 * vn**2 / (1 / m + ((1 - s) ** 2 + s**2) / m), abs=1e-14)
+
+
+@pytest.mark.parametrize("e", [0.0, 1.0])
+def test_head_on_bodies_conserve_momentum_and_mirror_symmetry(e):
+    """Two bodies that touch only each other: linear and angular momentum constant through
+    their impact (to the integration's accuracy), the motion its own mirror image about the
+    line of approach, no particle inside the other body, the energy ledger closed."""
+    result = flexbody.simulate(_scene(TRIANGLES, restitution=e), backend="numpy", rtol=1e-9, atol=1e-12)
+    assert result.status == "success", result.message
+    impacts = result.events_time[result.events_kind == "impact"]
+    assert len(impacts) >= 1 and impacts[0] == pytest.approx(0.05, abs=1e-9)  # 0.1 m closed at 2 m/s
+    p, L = _momenta(result)
+    np.testing.assert_allclose(p, 0.0, atol=1e-10)
+    np.testing.assert_allclose(L - L[0], 0.0, atol=1e-10)
+    # Mirror image about y = 1: particle k of each triangle maps onto its mirror particle.
+    mirror = np.array([2, 1, 0, 4, 3, 5])
+    X = result.positions
+    np.testing.assert_allclose(X[:, mirror, 0], X[:, :, 0], atol=1e-9)
+    np.testing.assert_allclose(2.0 - X[:, mirror, 1], X[:, :, 1], atol=1e-9)
+    assert result.stats["max_penetration_m"] <= 1e-9
+    assert result.stats["energy_drift_relative"] < 1e-7
+    # They separate: after the last event each body's own momentum is constant (nothing
+    # touches it), and B moves away from A.
+    after = result.t > result.events_time[-1] + 1e-3
+    m = result.masses[:3, None]
+    own_a = (m * result.velocities[after, :3]).sum(axis=1)
+    np.testing.assert_allclose(own_a - own_a[0], 0.0, atol=1e-10)
+    assert own_a[0, 0] < 0.0  # A (first moving at +1 m/s) bounced back
+    if e == 1.0:  # no impulse took energy: the ledger's impact loss stays 0
+        assert result.impact_loss[-1] == pytest.approx(0.0, abs=1e-12)
+    else:
+        assert result.impact_loss[-1] > 0.0
+
+
+# A ring with spokes dropped onto a block that lies on the ground.
+RING_ON_BLOCK = {
+    "name": "ring_on_block",
+    "bodies": [
+        {"name": "ring", "shape": "ring", "count": 9, "radius": 0.1, "center": True, "mass": 0.05,
+         "stiffness": 2000.0, "damping": 5.0, "position": [0.0, 0.25], "collide": True},
+        {"name": "block", "shape": "polygon", "vertices": [[-0.2, 0.0], [0.2, 0.0], [0.2, 0.1], [-0.2, 0.1]],
+         "mass": 0.1, "stiffness": 5000.0, "damping": 5.0, "position": [0.0, 0.0], "collide": True},
+    ],
+    "simulation": {"t_end": 1.5, "output_dt": 0.01},
+}
+
+
+def test_a_ring_comes_to_rest_on_a_block_carrying_its_weight():
+    """Statics at rest: the block carries the ring's weight, the ground both bodies' weight;
+    nothing inside anything, the ledger closed."""
+    scene = _scene(RING_ON_BLOCK)
+    result = flexbody.simulate(scene)
+    assert result.status == "success", result.message
+    assert result.stats["max_penetration_m"] <= 1e-9
+    assert result.stats["energy_drift_relative"] < 1e-6
+    g = 9.81
+    ring, block = slice(0, 10), slice(10, 14)
+    # Nothing pushes sideways (frictionless contacts): the rocking landing leaves the ring
+    # sliding one way on the block and the block the other way on the ground, with no net
+    # horizontal momentum; vertically everything is at rest.
+    assert abs(float(result.masses @ result.velocities[-1, :, 0])) < 1e-9
+    assert np.abs(result.velocities[-1, :, 1]).max() < 1e-3  # the last vibrations decay (measured 2.6e-4 m/s)
+    ring_weight = result.masses[ring].sum() * g
+    total_weight = result.masses.sum() * g
+    model = load_model(scene)
+    ng = model.n_ground_contacts
+    # The block's top pushes the ring's particles; the ground pushes the block's.
+    on_ring = result.contact_force[-1, ring].sum()
+    on_ground = result.contact_force[-1, block].sum()
+    assert on_ring == pytest.approx(ring_weight, rel=1e-4)  # measured 4.7e-6: what is left of the vibration
+    assert on_ground == pytest.approx(total_weight, rel=1e-4)
+    assert ng == scene.n_particles  # one ground
+
+
+def test_contacts_that_never_touch_another_body_give_the_ground_only_answer():
+    """Two rings far apart that may touch: every contact is with the ground, decoupled, and
+    the body-contact model (its impacts and lift-offs through the LCPs) gives the same events
+    and motion as the assembled model's per-particle closed form."""
+    table = {
+        "name": "apart",
+        "bodies": [
+            {"name": "left", "shape": "ring", "count": 8, "radius": 0.1, "center": True, "mass": 0.05,
+             "stiffness": 2000.0, "damping": 0.5, "position": [-0.5, 0.3], "angle": 0.05},
+            {"name": "right", "shape": "ring", "count": 8, "radius": 0.1, "center": True, "mass": 0.05,
+             "stiffness": 2000.0, "damping": 0.5, "position": [0.5, 0.4], "angle": -0.1},
+        ],
+        "simulation": {"t_end": 0.5, "output_dt": 0.01},
+    }
+    alone = flexbody.simulate(flexbody.load_scene(table), method="RK45")
+    together = flexbody.simulate(_scene(table, restitution=0.0))
+    assert alone.status == together.status == "success"
+    assert len(alone.events_time) == len(together.events_time) > 5
+    np.testing.assert_array_equal(alone.events_kind, together.events_kind)
+    np.testing.assert_array_equal(alone.events_particle, together.events_particle)
+    np.testing.assert_allclose(together.events_time, alone.events_time, atol=1e-9)
+    np.testing.assert_allclose(together.positions, alone.positions, atol=1e-9)
