@@ -206,7 +206,7 @@ def _rebound_laws(scene: Scene, model: Model, size: float) -> tuple[np.ndarray, 
     ``ZENO_RISE * size`` it is plastic (DESIGN §6), so a bouncing particle comes to rest at
     its Zeno time t1 (1 + e) / (1 - e) instead of bouncing ever faster.  Grounds gravity does
     not pull towards never stop a rebound this way (0).  Between bodies (contacts past the
-    grounds': ``model.slot_pair``) e is the pair's, and the pull at most ``|g|``.
+    grounds': ``model.slot_pair``) e is the pair's, and the pull ``max(|g|, 1 m/s^2)``.
     """
     grounds = scene.grounds
     ground = model.contacts[: getattr(model, "n_ground_contacts", model.n_contacts), 1]
@@ -214,7 +214,9 @@ def _rebound_laws(scene: Scene, model: Model, size: float) -> tuple[np.ndarray, 
     pull = np.array([max(0.0, -float(np.dot(scene.gravity, g.normal))) for g in grounds])[ground]
     pairs = getattr(model, "slot_pair", np.zeros(0, int))
     e = np.concatenate([e, np.array([c.restitution for c in scene.contacts])[pairs]])
-    pull = np.concatenate([pull, np.full(len(pairs), float(np.linalg.norm(scene.gravity)))])
+    # between bodies: no gravity direction to rise against; |g|, at least 1 m/s^2 (as the speed
+    # tolerance), so two bodies in free space end a rocking accumulation of impacts too
+    pull = np.concatenate([pull, np.full(len(pairs), max(float(np.linalg.norm(scene.gravity)), 1.0))])
     return e, np.sqrt(2.0 * pull * ZENO_RISE * size)
 
 
