@@ -212,6 +212,14 @@ def test_two_icosahedra_colliding_in_space_conserve_momentum_in_3d():
     assert result.stats["energy_drift_relative"] < 1e-6
 
 
+def _crossing(t: np.ndarray, s: np.ndarray) -> float:
+    """When ``s`` (samples, shape (nt,)) first reaches 0 from above, extrapolated from the two
+    samples before (the motion is smooth until the event, not after it); with 1e-4 s samples
+    and accelerations of ~1 m/s^2 its error is ~1e-8 s."""
+    k = np.flatnonzero((s[:-1] > 0.0) & (s[1:] <= 0.0))[0]
+    return float(t[k] + s[k] / (s[k - 1] - s[k]) * (t[k] - t[k - 1]))
+
+
 def test_a_body_sliding_off_a_blocks_edge_leaves_its_top_where_the_edge_is():
     """A frictionless triangle sliding flat along a block's top: its front particle is handed
     from the top segment to the side at the corner, which it leaves at once (a convex
@@ -237,7 +245,38 @@ def test_a_body_sliding_off_a_blocks_edge_leaves_its_top_where_the_edge_is():
     X = result.positions
     top = X[:, other] - X[:, corner]
     s = np.einsum("td,td->t", X[:, front] - X[:, corner], top) / np.einsum("td,td->t", top, top)
-    k = np.flatnonzero((s[:-1] > 0.0) & (s[1:] <= 0.0))[0]  # s = 0 at the corner
-    crossing = result.t[k] + s[k] / (s[k] - s[k + 1]) * (result.t[k + 1] - result.t[k])
+    crossing = _crossing(result.t, s)
     assert result.events_time[off][0] == pytest.approx(crossing, abs=1e-7)
     assert crossing == pytest.approx(0.3, abs=1e-3)  # 0.15 m at 0.5 m/s, up to the bodies' vibration
+
+
+def test_a_body_sliding_into_a_concave_corner_hits_the_wall_where_the_floor_ends():
+    """The concave twin of the edge: sliding along an L-shaped block's floor into its inner
+    corner, the front particle is handed from the floor to the wall, which it approaches: an
+    impact there, at the instant its projection on the floor reaches the corner."""
+    table = {
+        "name": "slide_in",
+        "bodies": [
+            {"name": "slider", "shape": "polygon", "vertices": [[-0.05, 0.0], [0.05, 0.0], [0.0, 0.05]],
+             "mass": 0.02, "stiffness": 2000.0, "damping": 0.5, "position": [-0.05, 0.1], "velocity": [0.5, 0.0],
+             "collide": True},
+            {"name": "block", "shape": "polygon",
+             "vertices": [[-0.2, 0.0], [0.2, 0.0], [0.2, 0.2], [0.1, 0.2], [0.1, 0.1], [-0.2, 0.1]],
+             "mass": 0.1, "stiffness": 5000.0, "damping": 1.0, "position": [0.0, 0.0], "collide": True},
+        ],
+        "simulation": {"t_end": 0.25, "output_dt": 1e-4},
+    }
+    result = flexbody.simulate(flexbody.load_scene(table))
+    assert result.status == "success", result.message
+    assert result.stats["max_penetration_m"] <= 1e-9
+    front, corner, other = 1, 7, 8  # the floor runs from the inner corner (block vertex 4) to vertex 5
+    hits = np.flatnonzero((result.events_particle == front) & (result.events_kind == "impact"))
+    X = result.positions
+    floor = X[:, other] - X[:, corner]
+    s = np.einsum("td,td->t", X[:, front] - X[:, corner], floor) / np.einsum("td,td->t", floor, floor)
+    crossing = _crossing(result.t, s)
+    assert crossing == pytest.approx(0.2, abs=1e-3)  # 0.1 m at 0.5 m/s, up to the bodies' vibration
+    at_corner = hits[np.abs(result.events_time[hits] - crossing) < 1e-6]
+    assert len(at_corner) == 1
+    # The wall stopped it: the front particle never goes past the corner's x.
+    assert (X[:, front, 0] - X[:, corner, 0]).max() <= 1e-9
