@@ -34,10 +34,10 @@ slows its Newton iterations, not its answer.
 
 from __future__ import annotations
 
+import ctypes
 import hashlib
 
 import numpy as np
-import scipy.sparse
 
 from .assembly import AssembledModel, _kernels_module
 from .broadphase import CandidateList
@@ -115,8 +115,7 @@ class BodyContactModel(Model):
         self._candidates = CandidateList(self.elements, self.particle_body, self.margin, self.margin,
                                          element_body=self.element_body)
         self.element_of = np.full(self.n_slots, -1, np.intp)  # each slot's element while constrained
-        self._kernels = _kernels_module()
-        self._tag = "segment_2d" if self.dim == 2 else "triangle_3d"
+        self._element = ElementKernels(self.dim, self.backend)
         text = f"{inner.digest}|{self.slot_particle.tolist()}|{self.slot_body.tolist()}"
         self.digest = hashlib.sha256(f"bodies|{text}".encode()).hexdigest()[:16]
 
@@ -159,11 +158,11 @@ class BodyContactModel(Model):
         fast[ground_rows] = 0
         ydot, lam[:ng] = self.inner.rhs(y, p, fast, push[:ng])
         acc = ydot[self.nq : 2 * self.nq]
-        J, bias = self._rows(ground_rows, held_slots, x, v, p)
-        scaled = J.multiply(np.repeat(1.0 / self.masses, self.dim)[None, :]).tocsr()
-        W = (scaled @ J.T).toarray()
-        force = contact_solve(W, -(J @ acc + bias))
-        acc += scaled.T @ force
+        particles, J, bias = self._rows(ground_rows, held_slots, x, v, p)
+        columns = (particles[:, None] * self.dim + np.arange(self.dim)).ravel()
+        scaled = J / np.repeat(self.masses[particles], self.dim)
+        force = contact_solve(scaled @ J.T, -(J @ acc[columns] + bias))
+        acc[columns] += scaled.T @ force
         rows = np.concatenate([ground_rows, ng + held_slots])
         lam[rows] = force
         return ydot, lam
@@ -187,7 +186,7 @@ class BodyContactModel(Model):
 
         Returns
         -------
-        J : scipy.sparse.csr_matrix, shape (k, nu)
+        J : ndarray, shape (k, nu)
         W : ndarray, shape (k, k)
             ``J M^-1 J^T`` (M diagonal: the particle masses).
         response : callable
@@ -201,9 +200,18 @@ class BodyContactModel(Model):
         ng = self.n_ground_contacts
         slots = rows[rows >= ng] - ng
         self._constrain_elements(slots, x)
-        J, bias = self._rows(rows[rows < ng], slots, x, v, p)
-        scaled = J.multiply(np.repeat(1.0 / self.masses, self.dim)[None, :]).tocsr()
-        return J, (scaled @ J.T).toarray(), lambda P: scaled.T @ np.asarray(P, float), bias
+        particles, local, bias = self._rows(rows[rows < ng], slots, x, v, p)
+        columns = (particles[:, None] * self.dim + np.arange(self.dim)).ravel()
+        J = np.zeros((len(rows), self.nu))
+        J[:, columns] = local
+        scaled = local / np.repeat(self.masses[particles], self.dim)
+
+        def response(P):
+            out = np.zeros(self.nu)
+            out[columns] = scaled.T @ np.asarray(P, float)
+            return out
+
+        return J, scaled @ local.T, response, bias
 
     def impact(self, y, p, stop):  # pragma: no cover - coupled models resolve with flexbody.coupled
         raise NotImplementedError("contacts between bodies couple: flexbody.coupled.coupled_impact resolves them")
@@ -343,38 +351,82 @@ class BodyContactModel(Model):
         """Gap (k,), weights (k, dim), normal (k, dim), gap rate (k,) and velocity term (k,) of
         each slot's particle against its element."""
         e = self.elements[self.element_of[slots]]
-        points = [x[self.slot_particle[slots]].T] + [x[e[:, k]].T for k in range(self.dim)]
-        rates = [v[self.slot_particle[slots]].T] + [v[e[:, k]].T for k in range(self.dim)]
-        gap, projection, normal, _ = getattr(self._kernels, self._tag)(*points)
-        rate, _, bias = getattr(self._kernels, f"{self._tag}_velocity")(*points, *rates)
-        if self.dim == 2:
-            weights = np.column_stack([1.0 - projection[0], projection[0]])
-        else:
-            weights = projection.T
-        return gap[0], weights, normal.T, rate[0], bias[0]
+        points = [x[self.slot_particle[slots]]] + [x[e[:, k]] for k in range(self.dim)]
+        rates = [v[self.slot_particle[slots]]] + [v[e[:, k]] for k in range(self.dim)]
+        return self._element(points, rates)
 
-    def _rows(self, ground_rows, slots, x, v, p) -> tuple[scipy.sparse.csr_matrix, FloatArray]:
-        """Constraint rows (ground rows, then slots) as a sparse (k, nu) Jacobian, and their
-        velocity terms (k,): 0 for a flat ground."""
+    def _rows(self, ground_rows, slots, x, v, p) -> tuple[IntArray, FloatArray, FloatArray]:
+        """Constraint rows (ground rows, then slots) on the particles they move.
+
+        Returns
+        -------
+        particles : ndarray of int, shape (u,)
+            The particles the rows touch, ascending.
+        J : ndarray, shape (k, u * dim)
+            The rows' Jacobian with respect to those particles' coordinates.
+        bias : ndarray, shape (k,)
+            Their gap accelerations' velocity terms (0 for a flat ground).
+        """
         d = self.dim
         grounds = np.asarray(p, float)[-self.n_grounds * 2 * d :].reshape(self.n_grounds, 2, d) \
             if self.n_grounds else np.zeros((0, 2, d))
-        particle, ground = self.inner.contacts[ground_rows, 0], self.inner.contacts[ground_rows, 1]
-        cols = [(particle[:, None] * d + np.arange(d))]
-        vals = [grounds[ground, 1, :]]
-        bias = np.zeros(0)
-        if len(slots):
-            _, weights, normal, _, bias = self._element_terms(slots, x, v)
-            points = np.column_stack([self.slot_particle[slots], self.elements[self.element_of[slots]]])
-            scale = np.column_stack([np.ones(len(slots)), -weights])
-            cols.append((points[:, :, None] * d + np.arange(d)).reshape(len(slots), -1))
-            vals.append((scale[:, :, None] * normal[:, None, :]).reshape(len(slots), -1))
         k_g = len(ground_rows)
-        rows = np.concatenate([np.repeat(np.arange(k_g), d), np.repeat(k_g + np.arange(len(slots)), (1 + d) * d)])
-        J = scipy.sparse.csr_matrix((np.concatenate([a.ravel() for a in vals]),
-                                     (rows, np.concatenate([c.ravel() for c in cols]))),
-                                    shape=(k_g + len(slots), self.nu))
-        return J, np.concatenate([np.zeros(k_g), bias])
+        points = [self.inner.contacts[ground_rows, :1]]
+        coefficients = [grounds[self.inner.contacts[ground_rows, 1], 1, :][:, None, :]]
+        bias = np.zeros(k_g + len(slots))
+        if len(slots):
+            _, weights, normal, _, bias[k_g:] = self._element_terms(slots, x, v)
+            points.append(np.column_stack([self.slot_particle[slots], self.elements[self.element_of[slots]]]))
+            coefficients.append(np.column_stack([np.ones(len(slots)), -weights])[:, :, None] * normal[:, None, :])
+        particles = np.unique(np.concatenate([q.ravel() for q in points]))
+        J = np.zeros((k_g + len(slots), len(particles), d))
+        start = 0
+        for q, c in zip(points, coefficients):
+            rows = np.repeat(np.arange(start, start + len(q)), q.shape[1])
+            np.add.at(J, (rows, np.searchsorted(particles, q.ravel())), c.reshape(-1, d))
+            start += len(q)
+        return particles, J.reshape(len(J), -1), bias
+
+
+class ElementKernels:
+    """The generated segment (2D) or triangle (3D) kernels on k contacts at once: the compiled
+    ones with the C backend (the triangle's velocity kernel is 2565 operations: NumPy spends
+    ~1 ms a call on that many small arrays), else their NumPy twins.
+
+    Call with ``points`` (the particle, then the element's vertices; each (k, dim)) and their
+    velocities ``rates``; returns gap (k,), weights (k, dim), normal (k, dim), gap rate (k,)
+    and the gap acceleration's velocity term (k,).
+    """
+
+    def __init__(self, dim: int, backend: str) -> None:
+        self.dim = dim
+        self.name = "segment_2d" if dim == 2 else "triangle_3d"
+        self.numpy = _kernels_module()
+        self.c = None
+        if backend == "c":
+            from .runtime import library
+
+            lib = library()
+            self.c = [getattr(lib, f"fb_kb_{self.name}"), getattr(lib, f"fb_kb_{self.name}_velocity")]
+            self.c[0].argtypes = [ctypes.c_long] + [ctypes.c_void_p] * (dim + 1 + 4)
+            self.c[1].argtypes = [ctypes.c_long] + [ctypes.c_void_p] * (2 * (dim + 1) + 3)
+
+    def __call__(self, points: list[FloatArray], rates: list[FloatArray]):
+        d, k = self.dim, len(points[0])
+        if self.c is not None:
+            inputs = [np.ascontiguousarray(z, float) for z in points + rates]
+            # outputs as in the kernel manifest: s (2D) or the 3 barycentrics (3D)
+            gap, weight, normal, jacobian = (np.empty((k, n)) for n in (1, 1 if d == 2 else 3, d, (d + 1) * d))
+            rate, tangential, bias = np.empty((k, 1)), np.empty((k, d)), np.empty((k, 1))
+            self.c[0](k, *(z.ctypes.data for z in inputs[: d + 1]), gap.ctypes.data, weight.ctypes.data,
+                      normal.ctypes.data, jacobian.ctypes.data)
+            self.c[1](k, *(z.ctypes.data for z in inputs), rate.ctypes.data, tangential.ctypes.data, bias.ctypes.data)
+            weights = np.column_stack([1.0 - weight[:, 0], weight[:, 0]]) if d == 2 else weight
+            return gap[:, 0], weights, normal, rate[:, 0], bias[:, 0]
+        gap, weight, normal, _ = getattr(self.numpy, self.name)(*(z.T for z in points))
+        rate, _, bias = getattr(self.numpy, f"{self.name}_velocity")(*(z.T for z in points + rates))
+        weights = np.column_stack([1.0 - weight[0], weight[0]]) if d == 2 else weight.T
+        return gap[0], weights, normal.T, rate[0], bias[0]
 
 
 def _incidence(elements: IntArray, n: int) -> list[IntArray]:
