@@ -617,7 +617,8 @@ class _Run:
             out.append(f"the energy ledger drifted by {relative_drift:.2g} of the energy (more than {DRIFT_WARNING:g}): "
                        "tighten --rtol/--atol")
         if penetration > 10 * self.gap_tolerance:
-            out.append(f"a particle went {penetration:.2g} m below a ground between event checks (an impact was "
+            into = " or into another body" if self.scene.contacts else ""
+            out.append(f"a particle went {penetration:.2g} m below a ground{into} between event checks (an impact was "
                        "missed at this tolerance): tighten --rtol/--atol")
         if min_force < -float(self.force_tolerance.max(initial=0.0)):
             out.append(f"a held contact's force turned negative ({min_force:.2g} N) between event checks (a lift-off "
