@@ -234,7 +234,7 @@ def figure_impact(result: SimulationResult, grounds: Sequence | None = None) -> 
         ax.quiverkey(arrows, 0.8, 0.93, key, f"{key:g} m/s", labelpos="W", coordinates="axes",
                      fontproperties={"size": 8})
         ax.set_title(f"{title}, t = {result.t[i]:.4f} s", fontsize=10)
-    fig.suptitle("Impact phase (thesis fig. 5.2): red particles are held by the ground; arrows are velocities "
+    fig.suptitle("Impact phase (thesis fig. 5.2): red particles are held (pushed by a contact); arrows are velocities "
                  "(same scale in both panels)", fontsize=10)
     return fig
 
