@@ -654,3 +654,18 @@ def test_sticking_contact_with_enough_friction_holds():
 def test_bad_contact_arguments_are_named(call, match):
     with pytest.raises(ValueError, match=match):
         call()
+
+
+def test_entries_of_q_eight_orders_apart_are_all_solved():
+    """An impact seen in a body-contact drop: two contacts graze (approach at 3e-11 m/s)
+    beside one at 1.6e-3 m/s.  The LCP is homogeneous in q, so its answer cannot depend
+    on the scale; it once left the grazing contact at w = -3e-11."""
+    M = np.array([[31.18277, 4.70648, 0.0], [4.70648, 31.88978, 9.62532], [0.0, 9.62532, 33.6331]])
+    q = np.array([-3.07741e-11, -3.44418e-11, -1.59486e-03])
+    solution = solve_lcp(M, q)
+    assert solution.status == "solved"
+    z, w = solution.z, M @ solution.z + q
+    assert np.all(z >= 0.0) and np.all(w >= -1e-9 * (np.abs(M) @ z + np.abs(q)))
+    assert np.all(np.abs(z * w) <= 1e-12 * np.abs(z) * (np.abs(M) @ z + np.abs(q)).max())
+    scaled = solve_lcp(M, q * 1e8)
+    np.testing.assert_allclose(scaled.z * 1e-8, z, rtol=1e-9, atol=1e-20)

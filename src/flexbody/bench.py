@@ -22,6 +22,8 @@ The studies, each printed as a table and saved as JSON and PNG in ``--out``:
 * ``sweep`` — a 200-run stiffness x damping sweep of the ball on a 2-worker Dask cluster
   against a serial loop and plain processes (optional extra ``flexbody[sweep]``):
   speed-up, per-run overhead.
+* ``bodies`` — 20 discs of about 200 particles that touch each other against the same
+  bodies passing through each other and 20 separate drops (:mod:`flexbody.bench_bodies`).
 * ``friction_wp``, ``friction_map`` — work-precision on ``ball_on_incline`` and the
   methods over Coulomb's mu x Newton's e (:mod:`flexbody.bench_friction`).
 
@@ -591,6 +593,12 @@ def plot_mujoco(data: dict):
 
 
 #: The chart of each study, drawn from its saved JSON alone.
+def _plot_bodies(data: dict):
+    from .bench_bodies import plot_bodies
+
+    return plot_bodies(data)
+
+
 def _plot_friction_map(data: dict):
     from .bench_friction import plot_friction_map
 
@@ -599,7 +607,7 @@ def _plot_friction_map(data: dict):
 
 PLOTS = {"work_precision": plot_work_precision, "stability_map": plot_stability, "resolution": plot_resolution,
          "mujoco": plot_mujoco, "mujoco3d": plot_mujoco, "work_precision_incline": plot_work_precision,
-         "friction_map": _plot_friction_map}
+         "friction_map": _plot_friction_map, "bodies": _plot_bodies}
 
 
 def replot(folder: Path) -> list[Path]:
@@ -709,6 +717,12 @@ def _scale(out: Path, quick: bool) -> dict:
     return scale_study(out, quick)
 
 
+def _bodies(out: Path, quick: bool) -> dict:
+    from .bench_bodies import bodies_study
+
+    return bodies_study(out, quick)
+
+
 def _friction_wp(out: Path, repeats: int, quick: bool) -> dict:
     from .bench_friction import friction_work_precision
 
@@ -723,7 +737,7 @@ def _friction_map(out: Path, quick: bool) -> dict:
 
 STUDIES = {"wp": work_precision, "stability": stability_map, "resolution": resolution_study,
            "mujoco": mujoco_comparison, "mujoco3d": mujoco3d_comparison, "run": run_study, "scale": _scale,
-           "sweep": sweep_benchmark, "friction_wp": _friction_wp, "friction_map": _friction_map}
+           "sweep": sweep_benchmark, "friction_wp": _friction_wp, "friction_map": _friction_map, "bodies": _bodies}
 
 
 def bench_command(args) -> int:

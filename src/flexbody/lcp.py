@@ -144,10 +144,14 @@ def solve_lcp(
     if np.all(q >= 0.0):  # z = 0 already solves it
         return LcpSolution(np.zeros(n), q.copy(), "solved", 0, "q >= 0: z = 0 with no pivots.")
     limit = 100 * (n + 1) if max_pivots is None else int(max_pivots)
+    # z(a q) = a z(q): pivot on q / max|q| so the ratio and tie tests, whose tolerances are
+    # absolute below 1, see every entry of q at its relative size (a contact approaching at
+    # 3e-11 m/s beside one at 1.6e-3 m/s was otherwise left out, its w below 0).
+    unit = float(np.abs(q).max())
 
     # Tableau of  w - M z - d z0 = q:  columns w (0..n-1), z (n..2n-1), z0 (2n), right side (2n+1).
     # Its first n columns are always the basis inverse (the start basis is w, the identity).
-    T = np.hstack([np.eye(n), -M, -d[:, None], q[:, None]])
+    T = np.hstack([np.eye(n), -M, -d[:, None], q[:, None] / unit])
     basis = np.arange(n)  # variable held in each row
     z0, rhs = 2 * n, 2 * n + 1
 
@@ -162,17 +166,17 @@ def solve_lcp(
         top = np.abs(column).max()
         rows = np.flatnonzero(column > pivot_tol * top) if top > 0.0 else np.empty(0, int)
         if rows.size == 0:
-            return _finish(M, q, T, basis, "ray", pivots, check_tol,
+            return _finish(M, q, T, basis, "ray", pivots, check_tol, unit,
                            f"secondary ray after {pivots} pivots: no solution found.")
         if pivots >= limit:
-            return _finish(M, q, T, basis, "iterations", pivots, check_tol,
+            return _finish(M, q, T, basis, "iterations", pivots, check_tol, unit,
                            f"pivot limit {limit} reached before a solution.")
         row = _lex_min_row(T, rows, column[rows], n, rhs, prefer=np.flatnonzero(basis == z0))
         _pivot(T, row, entering)
         leaving, basis[row] = basis[row], entering
         pivots += 1
         if leaving == z0:
-            return _finish(M, q, T, basis, "solved", pivots, check_tol, f"solved in {pivots} pivots.")
+            return _finish(M, q, T, basis, "solved", pivots, check_tol, unit, f"solved in {pivots} pivots.")
 
 
 def _checked(M, q, covering) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -226,11 +230,12 @@ def _pivot(T: np.ndarray, row: int, col: int) -> None:
 
 
 def _finish(M: np.ndarray, q: np.ndarray, T: np.ndarray, basis: np.ndarray, status: str, pivots: int,
-            check_tol: float, message: str) -> LcpSolution:
-    """Read ``z`` off the final basis, polish it, check it and wrap it up."""
+            check_tol: float, unit: float, message: str) -> LcpSolution:
+    """Read ``z`` off the final basis (its right side is in units of ``unit``), polish it,
+    check it and wrap it up."""
     n = q.size
     values = np.zeros(2 * n + 1)
-    values[basis] = T[:, -1]
+    values[basis] = T[:, -1] * unit
     z = values[n:2 * n]
     if status != "solved":
         return LcpSolution(z, M @ z + q, status, pivots, message)

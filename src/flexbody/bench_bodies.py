@@ -1,0 +1,173 @@
+"""``flexbody bench --study bodies``: many bodies that touch each other (issue 13, item 5).
+
+Twenty flexible discs (``shape = "disc"``, about 200 particles each, the thesis ball's
+lattice spacing and per-particle constants, as in :func:`flexbody.bench_scale.disc_scene_table`)
+in two staggered rows, the upper row over the gaps of the lower, dropped onto the ground and
+onto each other.  Three runs, all with SciPy's RK45 (body contact runs with SciPy's steppers
+only, so the ratios isolate the cost of contact, not of the stepper):
+
+* ``collide`` — the drop with ``collide = true``: contacts between bodies (broad phase,
+  closest features, coupled impacts and held forces, :mod:`flexbody.body_contact`);
+* ``pass_through`` — the same 20 bodies with ``collide = false`` (they pass through each
+  other and touch the ground only);
+* ``separate`` — one body alone, run once per body position and summed: the "20 separate
+  drops" of the issue.
+
+Each run records its wall time (median over ``repeats`` where affordable), RHS
+evaluations, events, maximum penetration, relative energy drift, the broad phase's
+rebuilds and, when it stops early, the time it reached and why.  ``--quick`` runs four
+discs of about 23 particles (the thesis ball's lattice) for 0.3 s.
+"""
+
+from __future__ import annotations
+
+import statistics
+import time
+from pathlib import Path
+
+import numpy as np
+
+from .scene import Scene, load_scene
+
+#: The full study: 20 discs of about 200 particles (radius 0.1 m x sqrt(200 / 23)), 0.5 s.
+FULL = {"bodies": 20, "count": 200, "t_end": 0.5}
+#: ``--quick``: four thesis-ball discs (about 23 particles, radius 0.1 m), 0.3 s.
+QUICK = {"bodies": 4, "count": 23, "t_end": 0.3}
+#: Gap between neighbouring discs and the height of the lowest point above the ground (m).
+GAP = 0.02
+LIFT = 0.05
+
+
+def disc_radius(count: int) -> float:
+    """Radius (m) of a disc of about ``count`` particles on the thesis ball's lattice spacing."""
+    return 0.1 * (count / 23) ** 0.5
+
+
+def disc_positions(n_bodies: int, radius: float, gap: float = GAP, lift: float = LIFT) -> np.ndarray:
+    """Centres of ``n_bodies`` (>= 2) discs in two staggered rows, shape (n_bodies, 2).
+
+    The lower row holds ``n_bodies // 2 + 1`` discs; its discs are ``gap`` apart, their lowest points ``lift`` above the ground;
+    each upper disc sits over the gap between two lower ones, ``gap`` from both, so it lands
+    on them once they have stopped on the ground.
+    """
+    pitch = 2 * radius + gap
+    per_row = n_bodies // 2 + 1  # one more below than above: every upper disc is over a gap
+    rise = np.sqrt((2 * radius + gap) ** 2 - (pitch / 2) ** 2)  # centre distance 2 R + gap
+    out = np.empty((n_bodies, 2))
+    for k in range(n_bodies):
+        row, col = divmod(k, per_row)
+        out[k] = col * pitch + row * pitch / 2, radius + lift + row * rise
+    return out
+
+
+def bodies_scene_table(n_bodies: int, count: int, t_end: float, collide: bool,
+                       only: int | None = None) -> dict:
+    """The study's scene as a table: ``n_bodies`` discs of about ``count`` particles, 0.05 kg
+    each, k = 2000 N/m and c = 0.5 N s/m per link (relative dampers), each turned by a
+    different small angle so no two land alike; ``only``: that body alone, where it is in
+    the full scene."""
+    radius = disc_radius(count)
+    centres = disc_positions(n_bodies, radius)
+    keep = range(n_bodies) if only is None else (only,)
+    bodies = [{"name": f"disc{k}", "shape": "disc", "count": count, "radius": radius, "mass": 0.05,
+               "stiffness": 2000.0, "damping": 0.5, "damper": "relative", "position": centres[k].tolist(),
+               "angle": 0.05 + 0.07 * k, "collide": collide} for k in keep]
+    # output every 10 ms: the study times the integration, not the sampling
+    return {"name": f"bodies_{n_bodies}x{count}" + ("" if only is None else f"_{only}"), "bodies": bodies,
+            "simulation": {"t_end": t_end, "output_dt": 1e-2, "method": "RK45", "rtol": 1e-6, "atol": 1e-9}}
+
+
+def bodies_scene(n_bodies: int, count: int, t_end: float, collide: bool, only: int | None = None) -> Scene:
+    """:func:`bodies_scene_table`, loaded (validated)."""
+    return load_scene(bodies_scene_table(n_bodies, count, t_end, collide, only))
+
+
+#: Wall-time cap of one run (s): a run stopped by it reports the time it reached.
+CAP = 600.0
+
+
+def _measure(scene: Scene, repeats: int) -> dict:
+    """Run ``scene`` ``repeats`` times (once if it stops early, or after :data:`CAP`); its
+    numbers, the median wall time."""
+    from .driver import simulate
+    from .model import load_model
+
+    times = []
+    for _ in range(repeats):
+        model = load_model(scene)  # a fresh broad phase per run: its rebuilds are this run's
+        start = time.perf_counter()
+        result = simulate(scene, model=model, max_wall_time=CAP)
+        times.append(time.perf_counter() - start)
+        if not result.success:
+            break
+    s = result.stats
+    candidates = getattr(model, "_candidates", None)
+    return {"particles": scene.n_particles, "status": result.status, "message": result.message,
+            "t_reached_s": float(result.t[-1]), "wall_s": statistics.median(times), "repeats": len(times),
+            "rhs_evaluations": s["rhs_evaluations"], "steps": s["steps"], "events": s["events"],
+            "max_penetration_m": s["max_penetration_m"], "energy_drift_relative": s["energy_drift_relative"],
+            "broadphase_rebuilds": None if candidates is None else int(candidates.rebuilds)}
+
+
+def bodies_study(out: Path, quick: bool, repeats: int = 3) -> dict:
+    """Run the study; print a table; save ``bodies.json`` and ``bodies.png`` in ``out``."""
+    from . import runtime
+    from .bench import _environment, _save
+
+    runtime.library()  # compiled once per install, before anything is timed
+    case = QUICK if quick else FULL
+    n, count, t_end = case["bodies"], case["count"], case["t_end"]
+    contact_repeats = 1 if not quick else repeats  # the full drop takes minutes: once
+    print(f"bodies: {n} discs of about {count} particles dropped for {t_end:g} s, SciPy RK45 rtol 1e-6")
+    runs = {"collide": _measure(bodies_scene(n, count, t_end, True), contact_repeats),
+            "pass_through": _measure(bodies_scene(n, count, t_end, False), repeats)}
+    alone = [_measure(bodies_scene(n, count, t_end, False, only=k), repeats) for k in range(n)]
+    runs["separate"] = {"particles": sum(r["particles"] for r in alone),
+                        "status": "success" if all(r["status"] == "success" for r in alone) else "failed",
+                        "t_reached_s": min(r["t_reached_s"] for r in alone),
+                        "wall_s": sum(r["wall_s"] for r in alone), "repeats": repeats,
+                        **{k: sum(r[k] for r in alone) for k in ("rhs_evaluations", "steps", "events")},
+                        "max_penetration_m": max(r["max_penetration_m"] for r in alone),
+                        "energy_drift_relative": max(r["energy_drift_relative"] for r in alone),
+                        "broadphase_rebuilds": None, "each_wall_s": [r["wall_s"] for r in alone]}
+    separate = runs["separate"]["wall_s"]
+    ratios = {label: r["wall_s"] / separate for label, r in runs.items()}
+    print(f"  {'run':14s} {'status':>11s} {'t reached':>9s} {'wall s':>8s} {'x separate':>10s} {'RHS evals':>9s} "
+          f"{'events':>7s} {'penetration m':>13s} {'drift':>8s} {'rebuilds':>8s}")
+    for label, r in runs.items():
+        rebuilds = "-" if r["broadphase_rebuilds"] is None else str(r["broadphase_rebuilds"])
+        print(f"  {label:14s} {r['status']:>11s} {r['t_reached_s']:9.3f} {r['wall_s']:8.2f} {ratios[label]:10.2f} "
+              f"{r['rhs_evaluations']:9d} {r['events']:7d} {r['max_penetration_m']:13.2e} "
+              f"{r['energy_drift_relative']:8.1e} {rebuilds:>8s}")
+        if r["status"] != "success" and r.get("message"):
+            print(f"    stopped: {r['message']}")
+    data = {"bodies": n, "count": count, "t_end_s": t_end, "method": "RK45", "rtol": 1e-6, "runs": runs,
+            "ratio_to_separate": ratios, "environment": _environment()}
+    _save(out, "bodies", data, plot_bodies(data))
+    return data
+
+
+def plot_bodies(data: dict):
+    """Wall time and RHS evaluations of the three runs, side by side (log axes), from the JSON."""
+    from matplotlib.figure import Figure
+
+    runs = data["runs"]
+    labels = {"separate": f"{data['bodies']} separate drops\n(one body each, summed)",
+              "pass_through": "all bodies,\ncollide = false", "collide": "all bodies,\ncollide = true"}
+    order = [k for k in ("separate", "pass_through", "collide") if k in runs]
+    fig = Figure(figsize=(10, 4.5), layout="constrained")
+    for ax, key, title in zip(fig.subplots(1, 2), ("wall_s", "rhs_evaluations"),
+                              ("wall time of the integration (s)", "RHS evaluations")):
+        bars = ax.bar(range(len(order)), [runs[k][key] for k in order], color=["C0", "C2", "C3"][: len(order)])
+        ax.set_yscale("log")
+        ax.set_xticks(range(len(order)), [labels[k] for k in order], fontsize=8)
+        ax.set_title(title, fontsize=10)
+        for bar, k in zip(bars, order):
+            r = runs[k]
+            note = f"{r[key]:.3g}" + ("" if r["status"] == "success" else f"\nstopped at {r['t_reached_s']:.3f} s")
+            ax.annotate(note, (bar.get_x() + bar.get_width() / 2, bar.get_height()), ha="center", va="bottom",
+                        fontsize=7)
+        ax.grid(True, axis="y", which="both", alpha=0.3)
+    fig.suptitle(f"{data['bodies']} discs x about {data['count']} particles dropped for {data['t_end_s']:g} s "
+                 f"(SciPy RK45, rtol {data['rtol']:g})", fontsize=10)
+    return fig

@@ -1,0 +1,54 @@
+"""The bodies benchmark's scene builder (flexbody.bench_bodies): geometry and flags only, no timing."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from flexbody.bench_bodies import GAP, LIFT, bodies_scene, disc_positions, disc_radius
+
+
+def _centre_distances(centres: np.ndarray) -> np.ndarray:
+    d = np.linalg.norm(centres[:, None] - centres[None], axis=2)
+    return d[np.triu_indices(len(centres), 1)]
+
+
+@pytest.mark.parametrize("n", [4, 5, 20])
+def test_discs_are_gap_apart_or_farther_and_each_upper_one_rests_on_two_lower_ones(n):
+    radius = 0.3
+    centres = disc_positions(n, radius)
+    lower, upper = centres[: n // 2 + 1], centres[n // 2 + 1 :]
+    assert _centre_distances(centres).min() == pytest.approx(2 * radius + GAP)
+    np.testing.assert_allclose(lower[:, 1], radius + LIFT)
+    for c in upper:  # over a gap of the lower row: 2 R + gap from its two neighbours below
+        d = np.sort(np.linalg.norm(lower - c, axis=1))[:2]
+        np.testing.assert_allclose(d, 2 * radius + GAP)
+
+
+def test_the_scene_holds_its_discs_apart_above_the_ground_with_the_asked_flags():
+    scene = bodies_scene(4, 23, 0.3, collide=True)
+    x = scene.initial_positions()
+    owner = np.repeat(np.arange(len(scene.bodies)), [b.n_particles for b in scene.bodies])
+    assert len(scene.bodies) == 4 and all(b.collide for b in scene.bodies)
+    assert len(scene.contacts) == 4 * 3 // 2  # every pair may touch
+    assert x[:, 1].min() >= LIFT - 1e-12  # every particle within the disc's radius of its centre
+    other = owner[:, None] != owner[None]
+    gaps = np.linalg.norm(x[:, None] - x[None], axis=2)[other]
+    assert gaps.min() >= GAP - 1e-12
+    apart = bodies_scene(4, 23, 0.3, collide=False)
+    assert not any(b.collide for b in apart.bodies) and not apart.contacts
+    assert apart.n_particles == scene.n_particles
+
+
+def test_one_body_alone_is_where_it_is_in_the_full_scene():
+    full = bodies_scene(4, 23, 0.3, collide=False)
+    offsets = np.cumsum([0] + [b.n_particles for b in full.bodies])
+    for k in range(4):
+        alone = bodies_scene(4, 23, 0.3, collide=False, only=k)
+        np.testing.assert_array_equal(alone.initial_positions(),
+                                      full.initial_positions()[offsets[k] : offsets[k + 1]])
+
+
+def test_the_radius_keeps_the_thesis_ball_lattice_spacing():
+    assert disc_radius(23) == pytest.approx(0.1)
+    assert disc_radius(200) ** 2 / 200 == pytest.approx(0.1**2 / 23)  # same area per particle
