@@ -125,3 +125,122 @@ def test_the_rings_separate_slower_than_they_met(collision):
         translation = 2 * 0.5 * mass * (rel[-1] / 2) ** 2
         total = r.kinetic + r.spring
         assert translation < total[-1] + 1e-12  # the rest is vibration
+
+
+# ---------------------------------------------------------------------------------------------- ring stack
+
+G = 9.81
+#: ring_stack's bodies: the block (4 particles), the lower ring and the upper ring (9 each).
+STACK = {"block": slice(0, 4), "lower": slice(4, 13), "upper": slice(13, 22)}
+
+
+def stack_run(t_end: float):
+    table = bundled("ring_stack")
+    table["simulation"]["t_end"] = t_end
+    return flexbody.simulate(flexbody.load_scene(table))
+
+
+def centres(result) -> dict[str, np.ndarray]:
+    """Each body's centre of mass (m), shape (nt, 2)."""
+    m, x = result.masses, result.positions
+    return {k: np.einsum("i,tid->td", m[s], x[:, s]) / m[s].sum() for k, s in STACK.items()}
+
+
+def test_the_stack_lands_without_penetration_or_sideways_motion():
+    r = stack_run(0.5)
+    assert r.status == "success", r.message
+    assert r.stats["max_penetration_m"] < 1e-9
+    assert r.stats["energy_drift_relative"] < 1e-8
+    # Symmetric about the y-axis, frictionless: no sideways force, so the centres stay on it
+    # up to rounding.
+    for c in centres(r).values():
+        assert np.abs(c[:, 0]).max() < 1e-9
+    # Every body landed: each carries the weight above it at some time.
+    assert (r.contact_force[:, STACK["upper"]].sum(axis=1) > 0).any()
+
+
+@pytest.fixture(scope="module")
+def stack():
+    """The bundled stack over its 4 s (20 s wall): at rest from about 2.5 s."""
+    return stack_run(4.0)
+
+
+def test_the_stack_comes_to_rest_without_drift(stack):
+    r = stack
+    assert r.status == "success", r.message
+    assert r.stats["max_penetration_m"] < 1e-9
+    assert r.stats["energy_drift_relative"] < 1e-8
+    late = r.t >= 3.0
+    for name, c in centres(r).items():
+        assert np.abs(c[late] - c[late][-1]).max() < 1e-9, name  # still
+        assert np.abs(c[:, 0]).max() < 1e-9, name  # on the axis of symmetry
+    assert r.kinetic[late].max() < 1e-12
+
+
+def weights(r) -> dict[str, float]:
+    return {k: G * r.masses[s].sum() for k, s in STACK.items()}
+
+
+def test_at_rest_each_level_carries_the_weight_above_it(stack):
+    # Statics, level by level: the ground holds everything, on the block's bottom corners
+    # (particles 0 and 1, which touch nothing else); the block's top face holds both rings, on
+    # the lower ring's bottom vertices; the lower ring's top face holds the upper ring, on its
+    # bottom vertices (a particle's contact force counts its grounds and the slots it is the
+    # particle of, not the reactions on the face's vertices).
+    r, w = stack, weights(stack)
+    late = r.t >= 3.0
+    F = r.contact_force[late]
+    assert np.allclose(F[:, :2].sum(axis=1), sum(w.values()), rtol=1e-6)
+    assert np.allclose(F[:, STACK["lower"]].sum(axis=1), w["lower"] + w["upper"], rtol=1e-6)
+    assert np.allclose(F[:, STACK["upper"]].sum(axis=1), w["upper"], rtol=1e-6)
+
+
+# ---------------------------------------------------------------------------------------------- Newton's cradle
+
+V0 = 1.0
+BALL = 0.05 * RING  # each ring's mass (kg)
+
+
+@pytest.fixture(scope="module")
+def plastic_cradle():
+    return flexbody.simulate(flexbody.load_scene("newtons_cradle_plastic"))  # 15 s
+
+
+@pytest.fixture(scope="module")
+def elastic_cradle():
+    return flexbody.simulate(flexbody.load_scene("newtons_cradle"))  # 190 s: 2489 impacts
+
+
+def check_cradle(r) -> None:
+    """Momentum conserved; the row comes apart into rings flying freely, each faster than the one behind."""
+    assert r.status == "success", r.message
+    assert r.stats["max_penetration_m"] < 1e-9
+    assert r.stats["energy_drift_relative"] < 1e-7
+    assert np.abs(momentum(r) - [BALL * V0, 0.0]).max() < 1e-9 * BALL * V0
+    v = body_sums(r, RING, r.velocities)[:, :, 0]  # (4, nt): the rings' centre-of-mass velocities
+    late = r.t > r.t[-1] - 0.03
+    assert np.ptp(v[:, late], axis=1).max() < 1e-9  # free flight
+    assert np.all(np.diff(v[:, -1]) > 0)  # no ring catches up with the next: no more contact
+    translation = 0.5 * BALL * np.sum(v[:, -1] ** 2)
+    assert translation < r.kinetic[-1] + r.spring[-1]  # the rest vibrates
+
+
+def test_the_plastic_cradle_conserves_momentum_and_loses_the_first_impacts_energy(plastic_cradle):
+    r = plastic_cradle
+    check_cradle(r)
+    # The first impact (vertex on a face's midpoint at V0) takes 1/2 (m / 1.5) V0^2.
+    first = r.events_time[0]
+    second = r.events_time[r.events_time > first][0]
+    between = (r.t > first) & (r.t < second)
+    assert between.any()
+    assert np.allclose(r.impact_loss[between], 0.5 * 0.05 / 1.5 * V0**2, rtol=1e-12)
+
+
+@pytest.mark.slow
+def test_the_elastic_cradle_conserves_momentum_and_energy(elastic_cradle):
+    r = elastic_cradle
+    check_cradle(r)
+    # e = 1, no damping: kinetic + spring energy is all there is.
+    energy0 = 0.5 * BALL * V0**2
+    assert np.abs(r.kinetic + r.spring - energy0).max() < 1e-7 * energy0
+    assert np.abs(r.impact_loss).max() < 1e-12
