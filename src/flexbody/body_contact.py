@@ -186,7 +186,9 @@ class BodyContactModel(Model):
 
         Returns
         -------
-        J : ndarray, shape (k, nu)
+        J : ndarray, shape (k, c)
+            On the coordinates ``columns`` of the particles the rows move.
+        columns : ndarray of int, shape (c,)
         W : ndarray, shape (k, k)
             ``J M^-1 J^T`` (M diagonal: the particle masses).
         response : callable
@@ -200,18 +202,16 @@ class BodyContactModel(Model):
         ng = self.n_ground_contacts
         slots = rows[rows >= ng] - ng
         self._constrain_elements(slots, x)
-        particles, local, bias = self._rows(rows[rows < ng], slots, x, v, p)
+        particles, J, bias = self._rows(rows[rows < ng], slots, x, v, p)
         columns = (particles[:, None] * self.dim + np.arange(self.dim)).ravel()
-        J = np.zeros((len(rows), self.nu))
-        J[:, columns] = local
-        scaled = local / np.repeat(self.masses[particles], self.dim)
+        scaled = J / np.repeat(self.masses[particles], self.dim)
 
         def response(P):
             out = np.zeros(self.nu)
             out[columns] = scaled.T @ np.asarray(P, float)
             return out
 
-        return J, scaled @ local.T, response, bias
+        return J, columns, scaled @ J.T, response, bias
 
     def impact(self, y, p, stop):  # pragma: no cover - coupled models resolve with flexbody.coupled
         raise NotImplementedError("contacts between bodies couple: flexbody.coupled.coupled_impact resolves them")

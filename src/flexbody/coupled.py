@@ -74,13 +74,14 @@ def _within_rounding(solution, rates: np.ndarray) -> bool:
 
 
 def _coupling(model, q: np.ndarray, u: np.ndarray, p: np.ndarray, rows: np.ndarray):
-    """Contact rows ``J`` (k, nu), ``W = J M^-1 J^T`` (k, k), ``P -> M^-1 J^T P`` and the gap
-    accelerations' velocity terms (k,) of the contacts ``rows``: the model's own where it
-    has them (contacts between bodies: sparse, M diagonal), else from its dense matrices."""
+    """The contacts ``rows``: their Jacobian ``J`` (k, c) on the coordinates ``columns`` (an
+    index array, or every one), ``W = J M^-1 J^T`` (k, k), ``P -> M^-1 J^T P`` (nu,) and the
+    gap accelerations' velocity terms (k,).  The model's own where it has them (contacts
+    between bodies: the few particles they move, M diagonal), else from its dense matrices."""
     if hasattr(model, "contact_coupling"):
         return model.contact_coupling(q, u, p, rows)
     M, J = model.mass_matrix(q, p), model.gap_jacobian(q, p)[rows]
-    return J, delassus(J, M), lambda P: velocity_change(J, M, P), model.gap_bias(q, u, p)[rows]
+    return J, slice(None), delassus(J, M), lambda P: velocity_change(J, M, P), model.gap_bias(q, u, p)[rows]
 
 
 def coupled_impact(model, y: np.ndarray, p: np.ndarray, touching: np.ndarray, restitution: np.ndarray,
@@ -116,8 +117,8 @@ def coupled_impact(model, y: np.ndarray, p: np.ndarray, touching: np.ndarray, re
     leaving = np.zeros(model.n_contacts, bool)
     if not len(rows):
         return CoupledImpact(np.array(y, float), 0.0, impulses, leaving)
-    J, W, response, _ = _coupling(model, q, u, p, rows)
-    v_minus = _rounded(J @ u, J, u)
+    J, cols, W, response, _ = _coupling(model, q, u, p, rows)
+    v_minus = _rounded(J @ u[cols], J, u[cols])
     solution = solve_impact(W, v_minus, restitution[rows])
     if not (solution.solved or _within_rounding(solution, v_minus)):
         raise CoupledImpactError(f"the impact of contacts {rows.tolist()} has no solution found: {solution.message}")
@@ -128,7 +129,7 @@ def coupled_impact(model, y: np.ndarray, p: np.ndarray, touching: np.ndarray, re
     if (~leaves).any():  # what stays is stopped exactly (v+ = 0 up to round-off, or too slow to leave)
         stay = ~leaves
         extra = np.zeros(len(rows))
-        extra[stay] = contact_solve(W[np.ix_(stay, stay)], -(J[stay] @ u_new))
+        extra[stay] = contact_solve(W[np.ix_(stay, stay)], -(J[stay] @ u_new[cols]))
         u_new = u_new + response(extra)
         impulses[rows] += extra
     out[nq : nq + nu] = u_new
@@ -176,9 +177,9 @@ def coupled_release(model, y: np.ndarray, p: np.ndarray, held: np.ndarray, push:
         return release, implied
     q, u = y[:nq], y[nq : nq + nu]
     free, _ = model.rhs(y, p, np.zeros(model.n_contacts, np.intc), push)
-    J, W, _, bias = _coupling(model, q, u, p, rows)
-    a_free = J @ free[nq : nq + nu] + bias
-    a_free = _rounded(a_free, J, free[nq : nq + nu])
+    J, cols, W, _, bias = _coupling(model, q, u, p, rows)
+    acc = free[nq : nq + nu][cols]
+    a_free = _rounded(J @ acc + bias, J, acc)
     solution = solve_forces(W, a_free)
     if not (solution.solved or _within_rounding(solution, a_free)):
         raise CoupledImpactError(f"the forces of held contacts {rows.tolist()} have no solution found: "
@@ -187,7 +188,6 @@ def coupled_release(model, y: np.ndarray, p: np.ndarray, held: np.ndarray, push:
     floor = 1e-10 * max(1.0, float(np.abs(a_free).max()))
     lifted = (solution.normal == 0.0) & (solution.normal_rate > floor)
     release[rows] = lifted | (leaving[rows] & (solution.normal <= force_tolerance[rows]))
-    J = J.toarray() if hasattr(J, "toarray") else J
     if len(rows) > 1 and np.linalg.matrix_rank(J, tol=1e-9 * max(1.0, float(np.abs(J).max()))) < len(rows):
         implied[rows] = (solution.normal == 0.0) & ~release[rows]  # redundant: the others carry it
     return release, implied
