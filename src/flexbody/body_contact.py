@@ -216,13 +216,22 @@ class BodyContactModel(Model):
     def impact(self, y, p, stop):  # pragma: no cover - coupled models resolve with flexbody.coupled
         raise NotImplementedError("contacts between bodies couple: flexbody.coupled.coupled_impact resolves them")
 
-    def trajectory(self, Y, p, held, push):
+    def trajectory(self, Y, p, held, push, elements: IntArray | None = None):
+        """As :meth:`flexbody.model.Model.trajectory`; ``elements (nt, ns)``: the element each
+        slot was held on at each sample (the driver records them), without which held slots'
+        forces are taken on their elements now."""
         ng = self.n_ground_contacts
         X, V, E, lam_g = self.inner.trajectory(Y, p, np.asarray(held)[:, :ng], np.asarray(push)[:, :ng])
         lam = np.zeros((len(Y), self.n_contacts))
         lam[:, :ng] = lam_g
-        for k in np.flatnonzero(np.any(np.asarray(held)[:, ng:], axis=1)):
-            lam[k] = self.rhs(Y[k], p, held[k], push[k])[1]
+        now = self.element_of.copy()
+        try:
+            for k in np.flatnonzero(np.any(np.asarray(held)[:, ng:], axis=1)):
+                if elements is not None:
+                    self.element_of[:] = elements[k]
+                lam[k] = self.rhs(Y[k], p, held[k], push[k])[1]
+        finally:
+            self.element_of[:] = now
         return X, V, E, lam
 
     def jacobian_function(self, p, held):

@@ -281,6 +281,8 @@ class _Run:
         self.sample_held = np.zeros((n, model.n_contacts), np.intc)  # contact-law codes (Phases.held)
         self.sample_push = np.zeros((n, model.n_contacts))
         self.sample_tangential = np.zeros((n, model.n_contacts, model.dim)) if thesis_friction else None
+        # contacts between bodies: the element each slot was held on at each sample (its force's row)
+        self.sample_elements = np.full((n, model.n_slots), -1, np.intp) if hasattr(model, "element_of") else None
         self.n_samples = 0
         self.events: list[Event] = []
         self.impact_times: dict[int, deque[tuple[float, float]]] = defaultdict(deque)  # for the chatter guard
@@ -315,6 +317,8 @@ class _Run:
         self.sample_push[start:stop] = self.phases.push
         if self.sample_tangential is not None:
             self.sample_tangential[start:stop] = self.model.tangential_pushes(self.p)
+        if self.sample_elements is not None:
+            self.sample_elements[start:stop] = self.model.element_of
         self.n_samples = stop
 
     # ------------------------------------------------------------------ one smooth segment
@@ -634,7 +638,10 @@ class _Run:
         k = self.n_samples
         T, Y, held, push = self.grid[:k], self.Y[:k], self.sample_held[:k].astype(np.intc), self.sample_push[:k]
         n = model.n_particles
-        X, V, E, lam = model.trajectory(Y, p, held, push)
+        if self.sample_elements is not None:
+            X, V, E, lam = model.trajectory(Y, p, held, push, elements=self.sample_elements[:k])
+        else:
+            X, V, E, lam = model.trajectory(Y, p, held, push)
         if hasattr(model, "particle_forces"):  # contacts between bodies too
             force = model.particle_forces(lam + push)
         else:  # contacts are every (particle, ground) pair, particle-major (the Model checks it)
