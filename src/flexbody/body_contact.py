@@ -80,7 +80,6 @@ class BodyContactModel(Model):
         self.backend, self.dim = inner.backend, inner.dim
         self.nq, self.nu, self.ny, self.n_particles = inner.nq, inner.nu, inner.ny, inner.n_particles
         self.masses, self.laws, self.n_grounds = inner.masses, inner.laws, inner.n_grounds
-        self.n_ground_contacts = inner.n_contacts
         self.elements, self.element_body = scene.surfaces()
         counts = [b.n_particles for b in scene.bodies]
         self.particle_body = np.repeat(np.arange(len(counts)), counts)
@@ -120,6 +119,10 @@ class BodyContactModel(Model):
         self.digest = hashlib.sha256(f"bodies|{text}".encode()).hexdigest()[:16]
 
     # ------------------------------------------------------------------ the model interface
+    @property
+    def n_ground_contacts(self) -> int:
+        return self.inner.n_contacts
+
     def parameters(self, scene: Scene) -> FloatArray:
         return self.inner.parameters(scene)
 
@@ -158,9 +161,7 @@ class BodyContactModel(Model):
         fast[ground_rows] = 0
         ydot, lam[:ng] = self.inner.rhs(y, p, fast, push[:ng])
         acc = ydot[self.nq : 2 * self.nq]
-        particles, J, bias = self._rows(ground_rows, held_slots, x, v, p)
-        columns = (particles[:, None] * self.dim + np.arange(self.dim)).ravel()
-        scaled = J / np.repeat(self.masses[particles], self.dim)
+        columns, J, scaled, bias = self._rows(ground_rows, held_slots, x, v, p)
         force = contact_solve(scaled @ J.T, -(J @ acc[columns] + bias))
         acc[columns] += scaled.T @ force
         rows = np.concatenate([ground_rows, ng + held_slots])
@@ -202,9 +203,7 @@ class BodyContactModel(Model):
         ng = self.n_ground_contacts
         slots = rows[rows >= ng] - ng
         self._constrain_elements(slots, x)
-        particles, J, bias = self._rows(rows[rows < ng], slots, x, v, p)
-        columns = (particles[:, None] * self.dim + np.arange(self.dim)).ravel()
-        scaled = J / np.repeat(self.masses[particles], self.dim)
+        columns, J, scaled, bias = self._rows(rows[rows < ng], slots, x, v, p)
 
         def response(P):
             out = np.zeros(self.nu)
@@ -284,10 +283,11 @@ class BodyContactModel(Model):
             return empty, empty, empty
         x, v = self._split(np.asarray(y, float))
         weights = self._element_terms(slots, x, v)[1]
-        out = slots[weights.min(axis=1) * self._sizes(slots, x) <= gap_tolerance]
+        passed = weights.min(axis=1) * self._sizes(slots, x) <= gap_tolerance
+        out = slots[passed]
         if not len(out):
             return empty, empty, empty
-        corner = np.argmin(self._element_terms(out, x, v)[1], axis=1)
+        corner = np.argmin(weights[passed], axis=1)
         self.element_of[out] = self._neighbour[self.element_of[out], corner]
         rate = self._element_terms(out, x, v)[3]
         return ng + out[np.abs(rate) <= speed_tolerance], ng + out[rate < -speed_tolerance], \
@@ -364,15 +364,17 @@ class BodyContactModel(Model):
         rates = [v[self.slot_particle[slots]]] + [v[e[:, k]] for k in range(self.dim)]
         return self._element(points, rates)
 
-    def _rows(self, ground_rows, slots, x, v, p) -> tuple[IntArray, FloatArray, FloatArray]:
+    def _rows(self, ground_rows, slots, x, v, p) -> tuple[IntArray, FloatArray, FloatArray, FloatArray]:
         """Constraint rows (ground rows, then slots) on the particles they move.
 
         Returns
         -------
-        particles : ndarray of int, shape (u,)
-            The particles the rows touch, ascending.
-        J : ndarray, shape (k, u * dim)
-            The rows' Jacobian with respect to those particles' coordinates.
+        columns : ndarray of int, shape (c,)
+            The coordinates of the particles the rows touch (particles ascending).
+        J : ndarray, shape (k, c)
+            The rows' Jacobian with respect to those coordinates.
+        scaled : ndarray, shape (k, c)
+            ``J M^-1`` (M diagonal: the particle masses).
         bias : ndarray, shape (k,)
             Their gap accelerations' velocity terms (0 for a flat ground).
         """
@@ -394,7 +396,9 @@ class BodyContactModel(Model):
             rows = np.repeat(np.arange(start, start + len(q)), q.shape[1])
             np.add.at(J, (rows, np.searchsorted(particles, q.ravel())), c.reshape(-1, d))
             start += len(q)
-        return particles, J.reshape(len(J), -1), bias
+        J = J.reshape(len(J), -1)
+        columns = (particles[:, None] * d + np.arange(d)).ravel()
+        return columns, J, J / np.repeat(self.masses[particles], d), bias
 
 
 class ElementKernels:
@@ -461,8 +465,3 @@ def _neighbours(elements: IntArray) -> IntArray:
             sharing = [f for f in facets[tuple(sorted(vertices[:k] + vertices[k + 1 :]))] if f != e]
             out[e, k] = sharing[0] if sharing else e
     return out
-
-
-def body_contact_model(scene: Scene, inner: AssembledModel) -> BodyContactModel:
-    """The model of a scene whose bodies may touch each other (see :class:`BodyContactModel`)."""
-    return BodyContactModel(scene, inner)

@@ -209,7 +209,7 @@ def _rebound_laws(scene: Scene, model: Model, size: float) -> tuple[np.ndarray, 
     grounds': ``model.slot_pair``) e is the pair's, and the pull ``max(|g|, 1 m/s^2)``.
     """
     grounds = scene.grounds
-    ground = model.contacts[: getattr(model, "n_ground_contacts", model.n_contacts), 1]
+    ground = model.contacts[: model.n_ground_contacts, 1]
     e = np.array([g.restitution for g in grounds])[ground]
     pull = np.array([max(0.0, -float(np.dot(scene.gravity, g.normal))) for g in grounds])[ground]
     pairs = getattr(model, "slot_pair", np.zeros(0, int))
@@ -266,7 +266,7 @@ class _Run:
         self.restitution, self.min_rebound = _rebound_laws(scene, model, size)
         # A sliding contact slower than this has come to rest (a stop's root is ~1e-15 s wide).
         self.speed_tolerance = SPEED_TOLERANCE * np.sqrt(max(float(np.linalg.norm(scene.gravity)), 1.0) * max(size, 1.0))
-        ng = getattr(model, "n_ground_contacts", model.n_contacts)  # between bodies: frictionless (refused else)
+        ng = model.n_ground_contacts  # between bodies: frictionless (refused else)
         self.mu = np.zeros(model.n_contacts)
         if ng:
             self.mu[:ng] = np.array([g.friction for g in scene.grounds], float)[model.contacts[:ng, 1]]

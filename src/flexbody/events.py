@@ -45,7 +45,7 @@ class EventFunctions:
         self.held = phases.held
         self.margins = getattr(model, "element_margins", None)
         # Contacts between bodies (past the grounds'): a just released one is checked more densely.
-        self.between_bodies = np.arange(model.n_contacts) >= getattr(model, "n_ground_contacts", model.n_contacts)
+        self.between_bodies = np.arange(model.n_contacts) >= model.n_ground_contacts
         laws = getattr(model, "laws", np.zeros((0, 2)))
         self.friction = bool(self.held_mask.any() and laws[:, 0].any())
         # Each sliding contact's direction at the step's start: the model's own (FbSystem.slip), whose
@@ -163,11 +163,7 @@ def _first_dip(events: EventFunctions, dense: Callable[[float], np.ndarray], t_o
         g = events(dense(t))
         fired = np.flatnonzero(fresh & (g_prev > 0.0) & (g <= 0.0))
         if fired.size:
-            roots = {c: _root(events, dense, int(c), t_prev, t) for c in fired}
-            t_star = min(roots.values())
-            group = np.zeros(len(g_old), bool)
-            group[[c for c, r in roots.items() if r <= t_star + GROUP_TIME]] = True
-            return Crossing(t_star, group)
+            return _earliest(events, dense, fired, t_prev, t, len(g_old))
         t_prev, g_prev = t, g
     return None
 
@@ -185,12 +181,19 @@ def _sign_change(events: EventFunctions, dense: Callable[[float], np.ndarray], t
         fired = np.flatnonzero((ga > 0.0) & (gb <= 0.0))
         if fired.size == 0:
             continue
-        roots = {c: _root(events, dense, int(c), ta, tb) for c in fired}
-        t_star = min(roots.values())
-        group = np.zeros(len(g_old), bool)
-        group[[c for c, r in roots.items() if r <= t_star + GROUP_TIME]] = True
-        return Crossing(t_star, group)
+        return _earliest(events, dense, fired, ta, tb, len(g_old))
     return None
+
+
+def _earliest(events: EventFunctions, dense: Callable[[float], np.ndarray], fired: np.ndarray, ta: float,
+              tb: float, nc: int) -> Crossing:
+    """The earliest root in ``[ta, tb]`` of the ``fired`` contacts, with every root within
+    ``GROUP_TIME`` of it (the same instant)."""
+    roots = {c: _root(events, dense, int(c), ta, tb) for c in fired}
+    t_star = min(roots.values())
+    group = np.zeros(nc, bool)
+    group[[c for c, r in roots.items() if r <= t_star + GROUP_TIME]] = True
+    return Crossing(t_star, group)
 
 
 def _root(events: EventFunctions, dense: Callable[[float], np.ndarray], c: int, ta: float, tb: float) -> float:

@@ -53,6 +53,11 @@ class Model:
     nq = nu = ny = n_particles = n_contacts = 0
     contacts: np.ndarray
 
+    @property
+    def n_ground_contacts(self) -> int:
+        """The first contacts, with the grounds: all of them unless bodies touch each other."""
+        return self.n_contacts
+
     def parameters(self, scene: Scene) -> FloatArray:  # pragma: no cover - abstract
         raise NotImplementedError
 
@@ -428,9 +433,9 @@ def load_model(scene: Scene | str | Path, backend: str = "c", formulation: str |
         from .assembly import assembled_model
 
         if scene.contacts:  # bodies that may touch each other: their contacts are added
-            from .body_contact import body_contact_model
+            from .body_contact import BodyContactModel
 
-            return body_contact_model(scene, assembled_model(scene, backend))
+            return BodyContactModel(scene, assembled_model(scene, backend))
         return assembled_model(scene, backend)
     if scene.dim == 3:
         for body, gauge in zip(scene.bodies, (b.gauge for b in scene.topology().bodies)):
