@@ -41,6 +41,8 @@ FUNCTIONS = {
     "gaps": "Ground gap of every contact (particle * n_grounds + ground), m; < 0 is penetration.",
     "gap_jacobian": "d gaps / dq (with q' = u, gap rates are gap_jacobian @ u).",
     "gap_bias": "d/dt(gap_jacobian) @ u: gap accelerations are gap_jacobian @ u' + gap_bias.",
+    "particle_jacobian": "d velocities / du, rows particle-major (particle * dim + axis): velocities = this @ u.",
+    "particle_bias": "d/dt(particle_jacobian) @ u: particle accelerations are particle_jacobian @ u' + this.",
     "jacobian_q": "d(F - M a)/dq at acceleration a.",
     "jacobian_u": "dF/du.",
 }
@@ -112,7 +114,7 @@ def build_blocks(model: SymbolicModel) -> list[Block]:
     for name, doc in (FUNCTIONS | extra_docs).items():
         exprs = reduced[name]
         shape = model.outputs[name].shape
-        shape = (shape[0],) if shape[1] == 1 and name not in ("positions", "velocities") else shape
+        shape = (shape[0],) if shape[1] == 1 and name not in ("positions", "velocities", "particle_bias") else shape
         shape = (max(shape[0], 1),) + tuple(shape[1:])  # C has no zero-length arrays
         needed: set[sp.Symbol] = set()
         stack = [s for e in exprs for s in e.free_symbols if s in defined]

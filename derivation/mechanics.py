@@ -451,6 +451,11 @@ def derive(top: Topology, formulation: str) -> SymbolicModel:
     gap_vec = sp.Matrix([to_plain(g) for g in gaps])
     Jg = jacobian(gap_vec, qs) if gaps else sp.zeros(0, len(qs))
     bias = jacobian(Jg * sp.Matrix(us), qs) * sp.Matrix(us) if gaps else sp.zeros(0, 1)
+    # Particle velocities are linear in u: v = P(q) u, and their accelerations P u' + P' u.
+    # Contacts between bodies need both to constrain a particle against another's surface.
+    V = sp.Matrix([to_plain(v.dot(unit)) for v in velocities for _, unit in axes])
+    P = jacobian(V, us)
+    particle_bias = (jacobian(V, qs) * sp.Matrix(us)).reshape(len(velocities), top.dim)
     outputs = {
         "mass_matrix": M,
         "forcing": F,
@@ -461,6 +466,8 @@ def derive(top: Topology, formulation: str) -> SymbolicModel:
         "gaps": gap_vec,
         "gap_jacobian": Jg,
         "gap_bias": bias,
+        "particle_jacobian": P,
+        "particle_bias": particle_bias,
         # d(F - M a)/dq and dF/du: with q' = u these give the Jacobian of the first-order RHS.
         "jacobian_q": jacobian(F - M * sp.Matrix(a), qs),
         "jacobian_u": jacobian(F, us),

@@ -395,15 +395,6 @@ def test_run_refuses_friction_between_bodies_naming_them(tmp_path, capsys):
              "between bodies is not simulated yet")
 
 
-def test_run_refuses_a_rigid_body_touching_another(tmp_path, capsys):
-    contacts = '[[contacts]]\nbodies = ["block", "ball"]'
-    # a rigid body has no springs or dampers: the ring's constants are dropped
-    path = _toml(tmp_path, TWO_RINGS.format(ball="rigid = true", contacts=contacts).replace(
-        "    stiffness = 2000.0\n    damping = 0.5\n    position = [0.0, 0.5]", "    position = [0.0, 0.5]", 1))
-    _refused(tmp_path, capsys, path, "bodies 'ball' and 'block' may touch each other, and a rigid body touches the "
-             "grounds only: contact between a rigid body and another body is not simulated yet")
-
-
 def test_the_refusal_is_exit_code_2_of_the_real_command(tmp_path):
     path = _toml(tmp_path, TWO_RINGS.format(ball="self_contact = true", contacts=""))
     run = subprocess.run([sys.executable, "-m", "flexbody.cli", "run", str(path), "--out", str(tmp_path / "out")],

@@ -24,9 +24,14 @@ way round.  The slots come after the ground contacts, so the phase machine
   the neighbour across that boundary: it stays held there if it meets it tangentially,
   hits it if it approaches (a concave corner) and is freed if it leaves (a convex one).
 
-Ground contacts that share no particle with a held slot keep the per-particle closed form
-of the assembled model (its C or NumPy right-hand side); only the coupled ones are solved
-here, densely (the held slots of a scene are few).  Segments integrate with SciPy's
+The model inside is the assembled particles formulation (q: the particle positions, M
+diagonal) or a whole-scene derived one (the floating formulation: rigid bodies, frames T),
+whose particles move with q through ``v = P(q) u``: a contact row on particles is mapped
+to q by the derived ``particle_jacobian`` P and ``particle_bias`` (``P' u``), and solved
+with the dense mass matrix (such scenes are small).  Ground contacts that share no particle
+with a held slot keep the assembled model's per-particle closed form (its C or NumPy
+right-hand side); only the coupled ones are solved here, densely (the held slots of a
+scene are few).  Segments integrate with SciPy's
 explicit or implicit steppers (the compiled loop knows only ground contacts); an implicit
 stepper gets the assembled model's Jacobian without the body contacts' coupling, which
 slows its Newton iterations, not its answer.
@@ -42,7 +47,7 @@ import numpy as np
 from .assembly import AssembledModel, _kernels_module
 from .broadphase import CandidateList
 from .dynamics import contact_solve
-from .model import Model
+from .model import GeneratedModel, Model
 from .scene import Scene
 from .surface_contact import FACE, closest_features, segment_normals, triangle_normals
 
@@ -56,9 +61,10 @@ class BodyContactModel(Model):
     Parameters
     ----------
     scene : Scene
-        With ``scene.contacts`` between flexible bodies (no self-contact).
-    inner : AssembledModel
-        The scene's assembled model (ground contacts), C or NumPy.
+        With ``scene.contacts`` between bodies (no self-contact).
+    inner : AssembledModel or GeneratedModel
+        The scene's model with its ground contacts, C or NumPy: assembled (particles
+        formulation), or derived whole (floating formulation; rigid bodies).
 
     Attributes
     ----------
@@ -73,13 +79,14 @@ class BodyContactModel(Model):
 
     coupled = True
     compiled_segments = False
-    formulation = "particles"
 
-    def __init__(self, scene: Scene, inner: AssembledModel) -> None:
+    def __init__(self, scene: Scene, inner: AssembledModel | GeneratedModel) -> None:
         self.inner = inner
-        self.backend, self.dim = inner.backend, inner.dim
+        self.backend, self.dim, self.formulation = inner.backend, inner.dim, inner.formulation
         self.nq, self.nu, self.ny, self.n_particles = inner.nq, inner.nu, inner.ny, inner.n_particles
-        self.masses, self.laws, self.n_grounds = inner.masses, inner.laws, inner.n_grounds
+        self.masses, self.n_grounds = scene.masses.copy(), len(scene.grounds)
+        self._coordinates = (_ParticleCoordinates(inner, self.masses) if isinstance(inner, AssembledModel)
+                             else _FrameCoordinates(inner))
         self.elements, self.element_body = scene.surfaces()
         counts = [b.n_particles for b in scene.bodies]
         self.particle_body = np.repeat(np.arange(len(counts)), counts)
@@ -123,6 +130,11 @@ class BodyContactModel(Model):
     def n_ground_contacts(self) -> int:
         return self.inner.n_contacts
 
+    @property
+    def manifest(self) -> dict:
+        """The derived model's manifest (a whole-scene model inside only)."""
+        return self.inner.manifest
+
     def parameters(self, scene: Scene) -> FloatArray:
         return self.inner.parameters(scene)
 
@@ -133,12 +145,12 @@ class BodyContactModel(Model):
         return np.zeros((self.n_contacts, self.dim))
 
     def gaps(self, q, p) -> FloatArray:
-        x = np.asarray(q, float)[: self.nq].reshape(-1, self.dim)
+        x = self._coordinates.particles(q, None, p)[0]
         return np.concatenate([self.inner.gaps(q, p), self._surface_gaps(x)[0]])
 
     def energies(self, q, u, p) -> FloatArray:
         """Kinetic energy (J), shape (1,): what :func:`flexbody.coupled.coupled_impact` needs."""
-        v = np.asarray(u, float).reshape(-1, self.dim)
+        v = self._coordinates.particles(q, u, p)[1]
         return np.array([0.5 * float(np.sum(self.masses * np.sum(v * v, axis=1)))])
 
     def rhs(self, y, p, held, push):
@@ -150,18 +162,19 @@ class BodyContactModel(Model):
         if not len(held_slots):
             ydot, lam[:ng] = self.inner.rhs(y, p, held[:ng], push[:ng])
             return ydot, lam
-        x, v = self._split(y)
+        q, u = y[: self.nq], y[self.nq : self.nq + self.nu]
+        x, v = self._coordinates.particles(q, u, p)
         self._constrain_elements(held_slots, x)
         # Ground contacts of the particles these slots move couple with them: solved here.
         moved = np.zeros(self.n_particles, bool)
         moved[self.slot_particle[held_slots]] = True
         moved[self.elements[self.element_of[held_slots]].ravel()] = True
-        ground_rows = np.flatnonzero((held[:ng] != 0) & moved[self.inner.contacts[:, 0]])
+        ground_rows = np.flatnonzero(self._coordinates.coupled_grounds(held[:ng] != 0, moved))
         fast = held[:ng].copy()
         fast[ground_rows] = 0
         ydot, lam[:ng] = self.inner.rhs(y, p, fast, push[:ng])
-        acc = ydot[self.nq : 2 * self.nq]
-        columns, J, scaled, bias = self._rows(ground_rows, held_slots, x, v, p)
+        acc = ydot[self.nq : self.nq + self.nu]
+        columns, J, scaled, bias = self._rows(ground_rows, held_slots, q, u, p)
         force = contact_solve(scaled @ J.T, -(J @ acc[columns] + bias))
         acc[columns] += scaled.T @ force
         rows = np.concatenate([ground_rows, ng + held_slots])
@@ -170,7 +183,7 @@ class BodyContactModel(Model):
 
     def contact_state(self, y, p, held, push):
         y = np.asarray(y, float)
-        x, v = self._split(y)
+        x, v = self._state(y, p)
         ng = self.n_ground_contacts
         gaps_g, vn_g, _ = self.inner.contact_state(y, p, np.zeros(ng, np.intc), np.zeros(ng))
         gaps_s, near = self._surface_gaps(x)
@@ -191,19 +204,18 @@ class BodyContactModel(Model):
             On the coordinates ``columns`` of the particles the rows move.
         columns : ndarray of int, shape (c,)
         W : ndarray, shape (k, k)
-            ``J M^-1 J^T`` (M diagonal: the particle masses).
+            ``J M^-1 J^T``.
         response : callable
             ``P (k,) -> M^-1 J^T P``, shape (nu,).
         bias : ndarray, shape (k,)
             The gap accelerations' velocity terms.
         """
-        x = np.asarray(q, float)[: self.nq].reshape(-1, self.dim)
-        v = np.asarray(u, float)[: self.nu].reshape(-1, self.dim)
+        x = self._coordinates.particles(q, None, p)[0]
         rows = np.asarray(rows)
         ng = self.n_ground_contacts
         slots = rows[rows >= ng] - ng
         self._constrain_elements(slots, x)
-        columns, J, scaled, bias = self._rows(rows[rows < ng], slots, x, v, p)
+        columns, J, scaled, bias = self._rows(rows[rows < ng], slots, q, u, p)
 
         def response(P):
             out = np.zeros(self.nu)
@@ -259,7 +271,7 @@ class BodyContactModel(Model):
         ng = self.n_ground_contacts
         slots = np.flatnonzero(np.asarray(held)[ng:] != 0)
         if len(slots):
-            x, v = self._split(np.asarray(y, float))
+            x, v = self._state(np.asarray(y, float), p)
             self._constrain_elements(slots, x)
             weights = self._element_terms(slots, x, v)[1]
             out[ng + slots] = weights.min(axis=1) * self._sizes(slots, x)
@@ -281,7 +293,7 @@ class BodyContactModel(Model):
         empty = np.zeros(0, np.intp)
         if not len(slots):
             return empty, empty, empty
-        x, v = self._split(np.asarray(y, float))
+        x, v = self._state(np.asarray(y, float), p)
         weights = self._element_terms(slots, x, v)[1]
         passed = weights.min(axis=1) * self._sizes(slots, x) <= gap_tolerance
         out = slots[passed]
@@ -294,8 +306,9 @@ class BodyContactModel(Model):
             ng + out[rate > speed_tolerance]
 
     # ------------------------------------------------------------------ geometry
-    def _split(self, y):
-        return y[: self.nq].reshape(-1, self.dim), y[self.nq : 2 * self.nq].reshape(-1, self.dim)
+    def _state(self, y, p) -> tuple[FloatArray, FloatArray]:
+        """Particle positions and velocities (n, dim) each at state ``y``."""
+        return self._coordinates.particles(y[: self.nq], y[self.nq : self.nq + self.nu], p)
 
     def _sizes(self, slots, x) -> FloatArray:
         e = self.elements[self.element_of[slots]]
@@ -364,41 +377,105 @@ class BodyContactModel(Model):
         rates = [v[self.slot_particle[slots]]] + [v[e[:, k]] for k in range(self.dim)]
         return self._element(points, rates)
 
-    def _rows(self, ground_rows, slots, x, v, p) -> tuple[IntArray, FloatArray, FloatArray, FloatArray]:
-        """Constraint rows (ground rows, then slots) on the particles they move.
+    def _rows(self, ground_rows, slots, q, u, p) -> tuple[IntArray, FloatArray, FloatArray, FloatArray]:
+        """Constraint rows (ground rows, then slots) on the coordinates they move.
 
         Returns
         -------
         columns : ndarray of int, shape (c,)
-            The coordinates of the particles the rows touch (particles ascending).
+            The coordinates the rows touch (ascending).
         J : ndarray, shape (k, c)
             The rows' Jacobian with respect to those coordinates.
         scaled : ndarray, shape (k, c)
-            ``J M^-1`` (M diagonal: the particle masses).
+            ``J M^-1`` on them.
         bias : ndarray, shape (k,)
-            Their gap accelerations' velocity terms (0 for a flat ground).
+            Their gap accelerations' velocity terms.
         """
         d = self.dim
-        grounds = np.asarray(p, float)[-self.n_grounds * 2 * d :].reshape(self.n_grounds, 2, d) \
-            if self.n_grounds else np.zeros((0, 2, d))
+        x, v = self._coordinates.particles(q, u, p)
         k_g = len(ground_rows)
         points = [self.inner.contacts[ground_rows, :1]]
-        coefficients = [grounds[self.inner.contacts[ground_rows, 1], 1, :][:, None, :]]
+        coefficients = [self._coordinates.ground_normals(p)[self.inner.contacts[ground_rows, 1]][:, None, :]]
         bias = np.zeros(k_g + len(slots))
         if len(slots):
             _, weights, normal, _, bias[k_g:] = self._element_terms(slots, x, v)
             points.append(np.column_stack([self.slot_particle[slots], self.elements[self.element_of[slots]]]))
             coefficients.append(np.column_stack([np.ones(len(slots)), -weights])[:, :, None] * normal[:, None, :])
-        particles = np.unique(np.concatenate([q.ravel() for q in points]))
+        particles = np.unique(np.concatenate([z.ravel() for z in points]))
         J = np.zeros((k_g + len(slots), len(particles), d))
         start = 0
-        for q, c in zip(points, coefficients):
-            rows = np.repeat(np.arange(start, start + len(q)), q.shape[1])
-            np.add.at(J, (rows, np.searchsorted(particles, q.ravel())), c.reshape(-1, d))
-            start += len(q)
-        J = J.reshape(len(J), -1)
+        for z, c in zip(points, coefficients):
+            rows = np.repeat(np.arange(start, start + len(z)), z.shape[1])
+            np.add.at(J, (rows, np.searchsorted(particles, z.ravel())), c.reshape(-1, d))
+            start += len(z)
+        return self._coordinates.rows(particles, J.reshape(len(J), -1), bias, q, u, p)
+
+
+class _ParticleCoordinates:
+    """q are the particle positions (the assembled model): a row on particles is a row on
+    their coordinates, and M is diagonal (the particle masses)."""
+
+    def __init__(self, inner: AssembledModel, masses: FloatArray) -> None:
+        self.inner, self.masses = inner, masses
+
+    def particles(self, q, u, p) -> tuple[FloatArray, FloatArray | None]:
+        """Positions and velocities (n, dim) each (velocities None without ``u``)."""
+        d = self.inner.dim
+        x = np.asarray(q, float)[: self.inner.nq].reshape(-1, d)
+        return x, None if u is None else np.asarray(u, float)[: self.inner.nu].reshape(-1, d)
+
+    def ground_normals(self, p) -> FloatArray:
+        """Each ground's unit normal, shape (n_grounds, dim): the end of ``p`` (point, normal)."""
+        d, k = self.inner.dim, self.inner.n_grounds
+        return np.asarray(p, float)[len(p) - 2 * d * k :].reshape(k, 2, d)[:, 1]
+
+    def coupled_grounds(self, held: np.ndarray, moved: np.ndarray) -> np.ndarray:
+        """Which held ground contacts (bool (ng,)) couple with rows moving particles ``moved``
+        (bool (n,)): those of the same particles."""
+        return held & moved[self.inner.contacts[:, 0]]
+
+    def rows(self, particles: IntArray, J: FloatArray, bias: FloatArray, q, u, p):
+        """``columns, J, J M^-1, bias`` of rows ``J (k, m * dim)`` on ``particles (m,)``."""
+        d = self.inner.dim
         columns = (particles[:, None] * d + np.arange(d)).ravel()
         return columns, J, J / np.repeat(self.masses[particles], d), bias
+
+
+class _FrameCoordinates:
+    """A whole-scene derived model (frames T, rigid bodies): its particles move with q as
+    ``v = P(q) u``, ``a = P u' + P' u``, and M is dense; every coordinate may take part."""
+
+    def __init__(self, inner: GeneratedModel) -> None:
+        self.inner = inner
+        k = inner.n_contacts // max(inner.n_particles, 1)
+        self._normals = [[inner.p_names.index(f"n{g}_{a}") for a in "xyz"[: inner.dim]] for g in range(k)]
+
+    def ground_normals(self, p) -> FloatArray:
+        """Each ground's unit normal, shape (n_grounds, dim): the derived model's parameters
+        ``n<g>_<axis>``."""
+        return np.asarray(p, float)[np.array(self._normals, np.intp).reshape(-1, self.inner.dim)]
+
+    def particles(self, q, u, p) -> tuple[FloatArray, FloatArray | None]:
+        """Positions and velocities (n, dim) each (velocities None without ``u``)."""
+        q = np.asarray(q, float)[: self.inner.nq]
+        x = self.inner.positions(q, p)
+        return x, None if u is None else self.inner.velocities(q, np.asarray(u, float)[: self.inner.nu], p)
+
+    def coupled_grounds(self, held: np.ndarray, moved: np.ndarray) -> np.ndarray:
+        """Every held ground contact: the dense mass matrix couples them all."""
+        return held
+
+    def rows(self, particles: IntArray, J: FloatArray, bias: FloatArray, q, u, p):
+        """``columns, J, J M^-1, bias`` of rows ``J (k, m * dim)`` on ``particles (m,)``,
+        mapped to every coordinate."""
+        d, inner = self.inner.dim, self.inner
+        q = np.asarray(q, float)[: inner.nq]
+        u = np.asarray(u, float)[: inner.nu]
+        on = (particles[:, None] * d + np.arange(d)).ravel()
+        Jq = J @ inner.particle_jacobian(q, p)[on]
+        bias = bias + J @ inner.particle_bias(q, u, p).reshape(-1)[on]
+        scaled = np.linalg.solve(inner.mass_matrix(q, p), Jq.T).T  # M symmetric
+        return np.arange(inner.nu), Jq, scaled, bias
 
 
 class ElementKernels:

@@ -155,9 +155,6 @@ def _body_contact_problems(scene: Scene, values: dict) -> list[str]:
         who = f"bodies {first!r} and {second!r} may touch each other"
         if first == second:
             out.append(f"body {first!r} may touch itself (self_contact = true): self-contact is not simulated yet")
-        elif scene.bodies[c.bodies[0]].rigid or scene.bodies[c.bodies[1]].rigid:
-            out.append(f"{who}, and a rigid body touches the grounds only: contact between a rigid body and "
-                       "another body is not simulated yet")
         if c.friction > 0.0:
             out.append(f"{who} with friction = {c.friction!r}: friction between bodies is not simulated yet (their "
                        "contacts are frictionless); set friction = 0")
@@ -694,7 +691,7 @@ class _Run:
         result.stats = {
             "scene": self.scene.name, "source": self.scene.source,
             "method": s.method, "rtol": s.rtol, "atol": s.atol, "backend": model.backend,
-            "formulation": model.formulation, "model": "assembled" if isinstance(model, AssembledModel) else "derived",
+            "formulation": model.formulation, "model": "assembled" if isinstance(getattr(model, "inner", model), AssembledModel) else "derived",
             "impact": s.impact, "impact_dt": s.impact_dt,
             "t_end": s.t_end, "t_reached": float(T[-1]) if len(T) else 0.0,
             "wall_time_s": wall, "rhs_evaluations": self.nfev + int(self.counters[0]),

@@ -197,6 +197,14 @@ class GeneratedModel(Model):
         """d/dt(gap_jacobian) u, shape (nc,)."""
         return self._call("gap_bias", q, u, p)
 
+    def particle_jacobian(self, q, p) -> FloatArray:
+        """d velocities / du, shape (n * dim, nu): rows particle-major."""
+        return self._call("particle_jacobian", q, None, p)
+
+    def particle_bias(self, q, u, p) -> FloatArray:
+        """The particles' accelerations at u' = 0, shape (n, dim)."""
+        return self._call("particle_bias", q, u, p)
+
     def forcing_jacobians(self, q, u, p, a) -> tuple[FloatArray, FloatArray]:
         """d(F - M a)/dq, shape (nu, nq), and dF/du, shape (nu, nu)."""
         return self._call("jacobian_q", q, u, p, a), self._call("jacobian_u", q, u, p)
@@ -357,7 +365,8 @@ def derive_on_demand(scene: Scene, formulation: str) -> Path:
     digest = scene.topology().digest(formulation)
     out = cache_root() / "models" / digest
     n = scene.n_particles
-    estimate = derivation_seconds(n, formulation)
+    # a rigid body costs its frame T alone (about what three particles of a flexible one do)
+    estimate = derivation_seconds(sum(b.n_particles if not b.rigid else 3 for b in scene.bodies), formulation)
     print(f"deriving the equations of {scene.name} ({n} particles, formulation {formulation}) with SymPy; "
           f"this usually takes ~{estimate:.0f} s (once: the model is cached in {out})", file=sys.stderr, flush=True)
     env = dict(os.environ, PYTHONHASHSEED="0")
@@ -452,4 +461,9 @@ def load_model(scene: Scene | str | Path, backend: str = "c", formulation: str |
             f"derived whole per topology and is offered up to {FLOATING_MAX_PARTICLES} of them; use the particles "
             "formulation (the default), which runs any size at once"
         )
-    return load_derived_model(scene, backend, formulation)
+    model = load_derived_model(scene, backend, formulation)
+    if scene.contacts:  # bodies that may touch each other (rigid ones among them): their contacts are added
+        from .body_contact import BodyContactModel
+
+        return BodyContactModel(scene, model)
+    return model
