@@ -251,6 +251,14 @@ def _surface_kernels(d: int) -> list[Kernel]:
     else:
         name, element, projection = "triangle_3d", "triangle a, b, c", {"barycentric": sp.Matrix(weights)}
         what = "the barycentrics of x's projection (unclamped)"
+    velocity_outputs = {"gap_rate": rate,
+                        "tangential_velocity": sp.Matrix([tangential.dot(e) for e in axes]),
+                        "gap_bias": rate.jacobian(coordinates) * velocities}
+    if d == 2:
+        # Coulomb friction between bodies (2D): the slip rate along t = (-n_y, n_x), linear in the
+        # velocities with the Jacobian [t, -w_a t, -w_b t], and its acceleration's velocity term.
+        slip = sp.Matrix([relative.dot(N.z.cross(normal))])
+        velocity_outputs |= {"slip_rate": slip, "slip_bias": slip.jacobian(coordinates) * velocities}
     return [
         Kernel(name, f"Particle x against the {element} of another body: signed gap (x - a) . n (m, < 0 "
                f"inside), {what}, the outward unit normal n and d gap / d[x, {', '.join(corners)}].",
@@ -260,11 +268,10 @@ def _surface_kernels(d: int) -> list[Kernel]:
         Kernel(f"{name}_velocity", f"Gap rate (m/s) of particle x against the {element}: d gap / dt, the gap "
                "Jacobian times the velocities; the tangential part (m/s) of x's velocity relative to the "
                "element's material point under x; and the gap acceleration's velocity term (m/s^2), "
-               "d2 gap / dt2 - J a.",
+               "d2 gap / dt2 - J a" + ("; in 2D also the slip rate along t = (-n_y, n_x) (m/s) and its "
+                                       "acceleration's velocity term (m/s^2)." if d == 2 else "."),
                positions + [("v", v)] + [(f"v{c}", V[c]) for c in corners],
-               {"gap_rate": rate,
-                "tangential_velocity": sp.Matrix([tangential.dot(e) for e in axes]),
-                "gap_bias": rate.jacobian(coordinates) * velocities}),
+               velocity_outputs),
     ]
 
 

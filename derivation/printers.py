@@ -1,8 +1,8 @@
 """Code printers: SymPy expressions to C99 and NumPy source text.
 
 Inputs print as flat-array reads (``q[3]``, ``p[12]``) in C and as local names in Python;
-small integer powers print as products, which compilers and NumPy evaluate faster and
-exactly.
+small integer powers print as parenthesised products, which compilers and NumPy evaluate
+faster and exactly (without the parentheses ``a/b**2`` printed as ``a/b*b``, which is ``a``).
 """
 
 from __future__ import annotations
@@ -26,7 +26,7 @@ class CPrinter(C99CodePrinter):
         base, exp = expr.as_base_exp()
         if exp.is_Integer and 2 <= abs(int(exp)) <= 4:
             product = "*".join([self.parenthesize(base, 100)] * abs(int(exp)))
-            return product if exp > 0 else f"1.0/({product})"
+            return f"({product})" if exp > 0 else f"1.0/({product})"  # (): it may be a divisor, a/(b*b)
         if exp == -1:
             return f"1.0/{self.parenthesize(base, 100)}"
         if exp == sp.Rational(-1, 2):
@@ -50,7 +50,7 @@ class PyPrinter(NumPyPrinter):
         base, exp = expr.as_base_exp()
         if exp.is_Integer and 2 <= abs(int(exp)) <= 4:
             product = "*".join([self.parenthesize(base, 100)] * abs(int(exp)))
-            return product if exp > 0 else f"1.0/({product})"
+            return f"({product})" if exp > 0 else f"1.0/({product})"  # (): it may be a divisor, a/(b*b)
         return super()._print_Pow(expr, rational=rational)
 
     def _print_CopySign1(self, expr) -> str:

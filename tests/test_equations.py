@@ -109,7 +109,7 @@ def test_numpy_and_c_backends_agree(ball, ball_models, rng, formulation):
         q, u = random_state(c, ball, rng)
         a = rng.standard_normal(c.nu)
         for name in ("mass_matrix", "forcing", "energies", "positions", "velocities", "gaps",
-                     "gap_jacobian", "gap_bias", "jacobian_q", "jacobian_u"):
+                     "gap_jacobian", "gap_bias", "particle_jacobian", "particle_bias", "jacobian_q", "jacobian_u"):
             x, y = c._call(name, q, u, p, a), py._call(name, q, u, p, a)
             assert np.abs(x - y).max() <= 1e-12 * max(1.0, np.abs(y).max()), name
         held = (rng.random(c.n_contacts) < 0.3).astype(int)
@@ -291,3 +291,19 @@ def test_floating_one_link_matches_hand_derivation(backend, rng):
         assert T == pytest.approx(0.5 * (m0 * v0 @ v0 + m1 * v1 @ v1), rel=1e-12)
         assert V == pytest.approx(0.5 * k * (r - L) ** 2, rel=1e-12)
         assert G == pytest.approx(-(m0 * g @ q[:2] + m1 * g @ (q[:2] - d)), rel=1e-12)
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_particle_jacobian_and_bias_give_the_particles_motion(ball, ball_models, rng, backend):
+    """On frames T the particles move as ``v = P u`` and ``a = P u' + particle_bias``: checked
+    against the particle velocities and the accelerations the ground gaps' kinematics give."""
+    model = ball_models["floating", backend]
+    p = model.parameters(ball)
+    for _ in range(3):
+        q, u = random_state(model, ball, rng)
+        P = model.particle_jacobian(q, p)
+        np.testing.assert_allclose(P @ u, model.velocities(q, u, p).ravel(), rtol=1e-12, atol=1e-12)
+        udot = model.rhs(np.concatenate([q, u, [0, 0]]), p, np.zeros(model.n_contacts, int),
+                         np.zeros(model.n_contacts))[0][model.nq : model.nq + model.nu]
+        acc = (P @ udot + model.particle_bias(q, u, p).ravel()).reshape(-1, 2)
+        np.testing.assert_allclose(acc, particle_accelerations(model, q, u, p), rtol=1e-9, atol=1e-9)

@@ -9,11 +9,13 @@ law with moments, and a polygon's offset curve walked at a constant gap.
 from __future__ import annotations
 
 import ctypes
+import json
 
 import numpy as np
 import pytest
 
 from flexbody.assembly import _kernels_module
+from flexbody.cbuild import kernels_dir
 from flexbody.surface_contact import EDGE, FACE, VERTEX, closest_features, point_edge, triangle_normals
 
 from .conftest import HAS_CC
@@ -143,8 +145,10 @@ def test_c_kernels_equal_numpy_kernels(rng):
     lib, m = runtime.library(), 9
     manifest = {"segment_2d": [("x", 2), ("a", 2), ("b", 2)],
                 "triangle_3d": [("x", 3), ("a", 3), ("b", 3), ("c", 3)]}
-    outputs = {"segment_2d": [1, 1, 2, 6], "segment_2d_velocity": [1, 2, 1],
-               "triangle_3d": [1, 3, 3, 12], "triangle_3d_velocity": [1, 3, 1]}
+    kernels = json.loads((kernels_dir() / "manifest.json").read_text())["kernels"]
+    outputs = {name: [int(np.prod(shape)) for shape in kernels[name]["outputs"].values()]
+               for name in ("segment_2d", "segment_2d_velocity", "triangle_3d", "triangle_3d_velocity")}
+    assert outputs["segment_2d_velocity"] == [1, 2, 1, 1, 1] and outputs["triangle_3d"] == [1, 3, 3, 12]
     for base, positions in manifest.items():
         d = positions[0][1]
         for name, inputs in ((base, positions),
@@ -162,7 +166,8 @@ def test_c_kernels_equal_numpy_kernels(rng):
 def test_gap_rate_is_the_time_derivative_of_the_gap(rng):
     """Along a random motion of the particle and the element's vertices, the gap rate equals
     the central difference of the gap, and ``J a + gap_bias`` its second difference; the tangential velocity is the relative velocity of x
-    and the material point under it, less its normal part (which is the gap rate)."""
+    and the material point under it, less its normal part (which is the gap rate); in 2D the
+    slip rate is its component along t, and ``J_t a + slip_bias`` the slip rate's derivative."""
     for _ in range(20):
         for d, corners in ((2, 2), (3, 3)):
             if d == 2:
@@ -177,7 +182,7 @@ def test_gap_rate_is_the_time_derivative_of_the_gap(rng):
                 return (segment(*q) if d == 2 else triangle(*q))[0]
 
             kernel = K.segment_2d_velocity if d == 2 else K.triangle_3d_velocity
-            rate, tangential, bias = kernel(*q0, *v)
+            rate, tangential, bias, *slip = kernel(*q0, *v)
             h = 1e-5
             assert rate[0] == pytest.approx((gap(h) - gap(-h)) / (2 * h), rel=1e-7, abs=1e-9)
             # The gap's acceleration is J a + bias (what a held contact between bodies keeps at 0).
@@ -191,6 +196,19 @@ def test_gap_rate_is_the_time_derivative_of_the_gap(rng):
             assert rate[0] == pytest.approx(relative @ n, rel=1e-12, abs=1e-12)
             np.testing.assert_allclose(tangential, relative - (relative @ n) * n, atol=1e-12)
             assert abs(tangential @ n) < 1e-12
+            if d == 2:  # the slip rate along t = (-n_y, n_x), and its acceleration J_t a + slip_bias
+                rate_t, bias_t = slip
+                t_axis = np.array([-n[1], n[0]])
+                assert rate_t[0] == pytest.approx(relative @ t_axis, rel=1e-12, abs=1e-12)
+
+                def slip_rate(t, q0=q0, v=v, acc=acc):
+                    q, qd = q0 + v * t + acc * t**2 / 2, v + acc * t
+                    return K.segment_2d_velocity(*q, *qd)[3][0]
+
+                jacobian_t = np.concatenate([t_axis, -(1 - w) * t_axis, -w * t_axis])
+                h = 1e-5
+                derivative = (slip_rate(h) - slip_rate(-h)) / (2 * h)
+                assert jacobian_t @ acc.ravel() + bias_t[0] == pytest.approx(derivative, rel=1e-6, abs=1e-6)
 
 
 def _moment(r, f):

@@ -120,10 +120,10 @@ void fb_kb_segment_2d(long n_elements, const double *x, const double *a, const d
         fb_k_segment_2d(x + e * 2, a + e * 2, b + e * 2, gap + e * 1, s + e * 1, normal + e * 2, gap_jacobian + e * 6);
 }
 
-void fb_kb_segment_2d_velocity(long n_elements, const double *x, const double *a, const double *b, const double *v, const double *va, const double *vb, double *gap_rate, double *tangential_velocity, double *gap_bias)
+void fb_kb_segment_2d_velocity(long n_elements, const double *x, const double *a, const double *b, const double *v, const double *va, const double *vb, double *gap_rate, double *tangential_velocity, double *gap_bias, double *slip_rate, double *slip_bias)
 {
     for (long e = 0; e < n_elements; ++e)
-        fb_k_segment_2d_velocity(x + e * 2, a + e * 2, b + e * 2, v + e * 2, va + e * 2, vb + e * 2, gap_rate + e * 1, tangential_velocity + e * 2, gap_bias + e * 1);
+        fb_k_segment_2d_velocity(x + e * 2, a + e * 2, b + e * 2, v + e * 2, va + e * 2, vb + e * 2, gap_rate + e * 1, tangential_velocity + e * 2, gap_bias + e * 1, slip_rate + e * 1, slip_bias + e * 1);
 }
 
 void fb_kb_triangle_3d(long n_elements, const double *x, const double *a, const double *b, const double *c, double *gap, double *barycentric, double *normal, double *gap_jacobian)

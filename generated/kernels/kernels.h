@@ -19,12 +19,12 @@ static inline void fb_k_link_relative_2d_force(const double *restrict xi, const 
     const double w0 = -vi[0] + vj[0];
     const double w1 = xi[0] - xj[0];
     const double w2 = xi[1] - xj[1];
-    const double w3 = sqrt(w1*w1 + w2*w2);
+    const double w3 = sqrt((w1*w1) + (w2*w2));
     const double w4 = par[0]*(par[2] - w3)/w3;
     const double w5 = -vi[1] + vj[1];
     force[0] = par[1]*w0 + w1*w4;
     force[1] = par[1]*w5 + w2*w4;
-    power[0] = par[1]*(w0*w0 + w5*w5);
+    power[0] = par[1]*((w0*w0) + (w5*w5));
 }
 
 /* Spring energy k (|x_i - x_j| - L)^2 / 2 (J); par = [k, c, L].
@@ -32,7 +32,7 @@ static inline void fb_k_link_relative_2d_force(const double *restrict xi, const 
 static inline void fb_k_link_relative_2d_energy(const double *restrict xi, const double *restrict xj, const double *restrict vi, const double *restrict vj, const double *restrict par, double *restrict energy)
 {
 (void)xi; (void)xj; (void)vi; (void)vj; (void)par; 
-    energy[0] = (1.0/2.0)*par[0]*(-par[2] + sqrt((xi[0] - xj[0])*(xi[0] - xj[0]) + (xi[1] - xj[1])*(xi[1] - xj[1])))*(-par[2] + sqrt((xi[0] - xj[0])*(xi[0] - xj[0]) + (xi[1] - xj[1])*(xi[1] - xj[1])));
+    energy[0] = (1.0/2.0)*par[0]*((-par[2] + sqrt(((xi[0] - xj[0])*(xi[0] - xj[0])) + ((xi[1] - xj[1])*(xi[1] - xj[1]))))*(-par[2] + sqrt(((xi[0] - xj[0])*(xi[0] - xj[0])) + ((xi[1] - xj[1])*(xi[1] - xj[1])))));
 }
 
 /* d(force on i) / d[x_i, x_j, v_i, v_j], shape (d, 4d); par = [k, c, L].
@@ -41,9 +41,9 @@ static inline void fb_k_link_relative_2d_jacobian(const double *restrict xi, con
 {
 (void)xi; (void)xj; (void)vi; (void)vj; (void)par; 
     const double w0 = xi[0] - xj[0];
-    const double w1 = w0*w0;
+    const double w1 = (w0*w0);
     const double w2 = xi[1] - xj[1];
-    const double w3 = w2*w2;
+    const double w3 = (w2*w2);
     const double w4 = w1 + w3;
     const double w5 = sqrt(w4);
     const double w6 = par[2] - w5;
@@ -86,7 +86,7 @@ static inline void fb_k_link_axial_2d_force(const double *restrict xi, const dou
 (void)xi; (void)xj; (void)vi; (void)vj; (void)par; 
     const double w0 = xi[0] - xj[0];
     const double w1 = xi[1] - xj[1];
-    const double w2 = sqrt(w0*w0 + w1*w1);
+    const double w2 = sqrt((w0*w0) + (w1*w1));
     const double w3 = 1.0/w2;
     const double w4 = w0*w3;
     const double w5 = w1*w3;
@@ -95,7 +95,7 @@ static inline void fb_k_link_axial_2d_force(const double *restrict xi, const dou
     const double w8 = par[0]*(par[2] - w2);
     force[0] = w4*w7 + w4*w8;
     force[1] = w5*w7 + w5*w8;
-    power[0] = par[1]*w6*w6;
+    power[0] = par[1]*(w6*w6);
 }
 
 /* Spring energy k (|x_i - x_j| - L)^2 / 2 (J); par = [k, c, L].
@@ -103,7 +103,7 @@ static inline void fb_k_link_axial_2d_force(const double *restrict xi, const dou
 static inline void fb_k_link_axial_2d_energy(const double *restrict xi, const double *restrict xj, const double *restrict vi, const double *restrict vj, const double *restrict par, double *restrict energy)
 {
 (void)xi; (void)xj; (void)vi; (void)vj; (void)par; 
-    energy[0] = (1.0/2.0)*par[0]*(-par[2] + sqrt((xi[0] - xj[0])*(xi[0] - xj[0]) + (xi[1] - xj[1])*(xi[1] - xj[1])))*(-par[2] + sqrt((xi[0] - xj[0])*(xi[0] - xj[0]) + (xi[1] - xj[1])*(xi[1] - xj[1])));
+    energy[0] = (1.0/2.0)*par[0]*((-par[2] + sqrt(((xi[0] - xj[0])*(xi[0] - xj[0])) + ((xi[1] - xj[1])*(xi[1] - xj[1]))))*(-par[2] + sqrt(((xi[0] - xj[0])*(xi[0] - xj[0])) + ((xi[1] - xj[1])*(xi[1] - xj[1])))));
 }
 
 /* d(force on i) / d[x_i, x_j, v_i, v_j], shape (d, 4d); par = [k, c, L].
@@ -112,9 +112,9 @@ static inline void fb_k_link_axial_2d_jacobian(const double *restrict xi, const 
 {
 (void)xi; (void)xj; (void)vi; (void)vj; (void)par; 
     const double w0 = xi[0] - xj[0];
-    const double w1 = w0*w0;
+    const double w1 = (w0*w0);
     const double w2 = xi[1] - xj[1];
-    const double w3 = w2*w2;
+    const double w3 = (w2*w2);
     const double w4 = w1 + w3;
     const double w5 = 1.0/w4;
     const double w6 = w1*w5;
@@ -193,7 +193,7 @@ static inline void fb_k_particle_2d(const double *restrict x, const double *rest
     force[0] = w0;
     force[1] = w1;
     potential[0] = -w0*x[0] - w1*x[1];
-    kinetic[0] = (1.0/2.0)*m[0]*(v[0]*v[0] + v[1]*v[1]);
+    kinetic[0] = (1.0/2.0)*m[0]*((v[0]*v[0]) + (v[1]*v[1]));
 }
 
 /* Gap (x - P) . n (m, < 0 inside), d gap / dx, the normal and a tangent basis ((1, 2), orthonormal, rows) of a plane ground with unit normal n.
@@ -221,7 +221,7 @@ static inline void fb_k_split_2d(const double *restrict w, const double *restric
     normal[0] = w0;
     tangential[0] = w1;
     tangential[1] = w2;
-    tangential_norm[0] = sqrt(w1*w1 + w2*w2);
+    tangential_norm[0] = sqrt((w1*w1) + (w2*w2));
 }
 
 /* Force on particle i of a spring (eq. 3.7) and relative (thesis eq. 3.8) damper, and the damping power (W, >= 0); par = [k, c, L]. The force on j is minus it.
@@ -233,14 +233,14 @@ static inline void fb_k_link_relative_3d_force(const double *restrict xi, const 
     const double w1 = xi[0] - xj[0];
     const double w2 = xi[1] - xj[1];
     const double w3 = xi[2] - xj[2];
-    const double w4 = sqrt(w1*w1 + w2*w2 + w3*w3);
+    const double w4 = sqrt((w1*w1) + (w2*w2) + (w3*w3));
     const double w5 = par[0]*(par[2] - w4)/w4;
     const double w6 = -vi[1] + vj[1];
     const double w7 = -vi[2] + vj[2];
     force[0] = par[1]*w0 + w1*w5;
     force[1] = par[1]*w6 + w2*w5;
     force[2] = par[1]*w7 + w3*w5;
-    power[0] = par[1]*(w0*w0 + w6*w6 + w7*w7);
+    power[0] = par[1]*((w0*w0) + (w6*w6) + (w7*w7));
 }
 
 /* Spring energy k (|x_i - x_j| - L)^2 / 2 (J); par = [k, c, L].
@@ -248,7 +248,7 @@ static inline void fb_k_link_relative_3d_force(const double *restrict xi, const 
 static inline void fb_k_link_relative_3d_energy(const double *restrict xi, const double *restrict xj, const double *restrict vi, const double *restrict vj, const double *restrict par, double *restrict energy)
 {
 (void)xi; (void)xj; (void)vi; (void)vj; (void)par; 
-    energy[0] = (1.0/2.0)*par[0]*(-par[2] + sqrt((xi[0] - xj[0])*(xi[0] - xj[0]) + (xi[1] - xj[1])*(xi[1] - xj[1]) + (xi[2] - xj[2])*(xi[2] - xj[2])))*(-par[2] + sqrt((xi[0] - xj[0])*(xi[0] - xj[0]) + (xi[1] - xj[1])*(xi[1] - xj[1]) + (xi[2] - xj[2])*(xi[2] - xj[2])));
+    energy[0] = (1.0/2.0)*par[0]*((-par[2] + sqrt(((xi[0] - xj[0])*(xi[0] - xj[0])) + ((xi[1] - xj[1])*(xi[1] - xj[1])) + ((xi[2] - xj[2])*(xi[2] - xj[2]))))*(-par[2] + sqrt(((xi[0] - xj[0])*(xi[0] - xj[0])) + ((xi[1] - xj[1])*(xi[1] - xj[1])) + ((xi[2] - xj[2])*(xi[2] - xj[2])))));
 }
 
 /* d(force on i) / d[x_i, x_j, v_i, v_j], shape (d, 4d); par = [k, c, L].
@@ -257,11 +257,11 @@ static inline void fb_k_link_relative_3d_jacobian(const double *restrict xi, con
 {
 (void)xi; (void)xj; (void)vi; (void)vj; (void)par; 
     const double w0 = xi[0] - xj[0];
-    const double w1 = w0*w0;
+    const double w1 = (w0*w0);
     const double w2 = xi[1] - xj[1];
-    const double w3 = w2*w2;
+    const double w3 = (w2*w2);
     const double w4 = xi[2] - xj[2];
-    const double w5 = w4*w4;
+    const double w5 = (w4*w4);
     const double w6 = w1 + w3 + w5;
     const double w7 = sqrt(w6);
     const double w8 = par[2] - w7;
@@ -332,7 +332,7 @@ static inline void fb_k_link_axial_3d_force(const double *restrict xi, const dou
     const double w0 = xi[0] - xj[0];
     const double w1 = xi[1] - xj[1];
     const double w2 = xi[2] - xj[2];
-    const double w3 = sqrt(w0*w0 + w1*w1 + w2*w2);
+    const double w3 = sqrt((w0*w0) + (w1*w1) + (w2*w2));
     const double w4 = 1.0/w3;
     const double w5 = w0*w4;
     const double w6 = w1*w4;
@@ -343,7 +343,7 @@ static inline void fb_k_link_axial_3d_force(const double *restrict xi, const dou
     force[0] = w10*w5 + w5*w9;
     force[1] = w10*w6 + w6*w9;
     force[2] = w10*w7 + w7*w9;
-    power[0] = par[1]*w8*w8;
+    power[0] = par[1]*(w8*w8);
 }
 
 /* Spring energy k (|x_i - x_j| - L)^2 / 2 (J); par = [k, c, L].
@@ -351,7 +351,7 @@ static inline void fb_k_link_axial_3d_force(const double *restrict xi, const dou
 static inline void fb_k_link_axial_3d_energy(const double *restrict xi, const double *restrict xj, const double *restrict vi, const double *restrict vj, const double *restrict par, double *restrict energy)
 {
 (void)xi; (void)xj; (void)vi; (void)vj; (void)par; 
-    energy[0] = (1.0/2.0)*par[0]*(-par[2] + sqrt((xi[0] - xj[0])*(xi[0] - xj[0]) + (xi[1] - xj[1])*(xi[1] - xj[1]) + (xi[2] - xj[2])*(xi[2] - xj[2])))*(-par[2] + sqrt((xi[0] - xj[0])*(xi[0] - xj[0]) + (xi[1] - xj[1])*(xi[1] - xj[1]) + (xi[2] - xj[2])*(xi[2] - xj[2])));
+    energy[0] = (1.0/2.0)*par[0]*((-par[2] + sqrt(((xi[0] - xj[0])*(xi[0] - xj[0])) + ((xi[1] - xj[1])*(xi[1] - xj[1])) + ((xi[2] - xj[2])*(xi[2] - xj[2]))))*(-par[2] + sqrt(((xi[0] - xj[0])*(xi[0] - xj[0])) + ((xi[1] - xj[1])*(xi[1] - xj[1])) + ((xi[2] - xj[2])*(xi[2] - xj[2])))));
 }
 
 /* d(force on i) / d[x_i, x_j, v_i, v_j], shape (d, 4d); par = [k, c, L].
@@ -360,11 +360,11 @@ static inline void fb_k_link_axial_3d_jacobian(const double *restrict xi, const 
 {
 (void)xi; (void)xj; (void)vi; (void)vj; (void)par; 
     const double w0 = xi[0] - xj[0];
-    const double w1 = w0*w0;
+    const double w1 = (w0*w0);
     const double w2 = xi[1] - xj[1];
-    const double w3 = w2*w2;
+    const double w3 = (w2*w2);
     const double w4 = xi[2] - xj[2];
-    const double w5 = w4*w4;
+    const double w5 = (w4*w4);
     const double w6 = w1 + w3 + w5;
     const double w7 = 1.0/w6;
     const double w8 = w1*w7;
@@ -495,7 +495,7 @@ static inline void fb_k_particle_3d(const double *restrict x, const double *rest
     force[1] = w1;
     force[2] = w2;
     potential[0] = -w0*x[0] - w1*x[1] - w2*x[2];
-    kinetic[0] = (1.0/2.0)*m[0]*(v[0]*v[0] + v[1]*v[1] + v[2]*v[2]);
+    kinetic[0] = (1.0/2.0)*m[0]*((v[0]*v[0]) + (v[1]*v[1]) + (v[2]*v[2]));
 }
 
 /* Gap (x - P) . n (m, < 0 inside), d gap / dx, the normal and a tangent basis ((2, 3), orthonormal, rows) of a plane ground with unit normal n.
@@ -514,11 +514,11 @@ static inline void fb_k_ground_3d(const double *restrict x, const double *restri
     normal[0] = n[0];
     normal[1] = n[1];
     normal[2] = n[2];
-    tangents[0] = -n[0]*n[0]*w0*w1 + 1;
+    tangents[0] = -(n[0]*n[0])*w0*w1 + 1;
     tangents[1] = -w2*w3;
     tangents[2] = -w2;
     tangents[3] = -n[0]*w3;
-    tangents[4] = -n[1]*n[1]*w1 + w0;
+    tangents[4] = -(n[1]*n[1])*w1 + w0;
     tangents[5] = -n[1];
 }
 
@@ -535,7 +535,7 @@ static inline void fb_k_split_3d(const double *restrict w, const double *restric
     tangential[0] = w1;
     tangential[1] = w2;
     tangential[2] = w3;
-    tangential_norm[0] = sqrt(w1*w1 + w2*w2 + w3*w3);
+    tangential_norm[0] = sqrt((w1*w1) + (w2*w2) + (w3*w3));
 }
 
 /* Particle x against the segment a, b of another body: signed gap (x - a) . n (m, < 0 inside), the closest-point parameter s on the line (0..1 on the segment, unclamped), the outward unit normal n and d gap / d[x, a, b].
@@ -545,10 +545,10 @@ static inline void fb_k_segment_2d(const double *restrict x, const double *restr
 (void)x; (void)a; (void)b; 
     const double w0 = -a[1] + x[1];
     const double w1 = a[0] - b[0];
-    const double w2 = w1*w1;
+    const double w2 = (w1*w1);
     const double w3 = a[1] - b[1];
     const double w4 = -w3;
-    const double w5 = w4*w4;
+    const double w5 = (w4*w4);
     const double w6 = w2 + w5;
     const double w7 = 1.0/sqrt(w6);
     const double w8 = w1*w7;
@@ -565,7 +565,7 @@ static inline void fb_k_segment_2d(const double *restrict x, const double *restr
     const double w19 = w15*w9;
     const double w20 = w19*w4;
     gap[0] = w0*w8 + w10*w9;
-    s[0] = (w12 + w13)/(w11*w11 + w5);
+    s[0] = (w12 + w13)/((w11*w11) + w5);
     normal[0] = w10;
     normal[1] = w8;
     gap_jacobian[0] = w10;
@@ -576,16 +576,16 @@ static inline void fb_k_segment_2d(const double *restrict x, const double *restr
     gap_jacobian[5] = w17*w3 + w18 + w20*w3;
 }
 
-/* Gap rate (m/s) of particle x against the segment a, b: d gap / dt, the gap Jacobian times the velocities; the tangential part (m/s) of x's velocity relative to the element's material point under x; and the gap acceleration's velocity term (m/s^2), d2 gap / dt2 - J a.
- * in: x[2], a[2], b[2], v[2], va[2], vb[2]; out: gap_rate[1], tangential_velocity[2], gap_bias[1]. Operations after CSE: 315. */
-static inline void fb_k_segment_2d_velocity(const double *restrict x, const double *restrict a, const double *restrict b, const double *restrict v, const double *restrict va, const double *restrict vb, double *restrict gap_rate, double *restrict tangential_velocity, double *restrict gap_bias)
+/* Gap rate (m/s) of particle x against the segment a, b: d gap / dt, the gap Jacobian times the velocities; the tangential part (m/s) of x's velocity relative to the element's material point under x; and the gap acceleration's velocity term (m/s^2), d2 gap / dt2 - J a; in 2D also the slip rate along t = (-n_y, n_x) (m/s) and its acceleration's velocity term (m/s^2).
+ * in: x[2], a[2], b[2], v[2], va[2], vb[2]; out: gap_rate[1], tangential_velocity[2], gap_bias[1], slip_rate[1], slip_bias[1]. Operations after CSE: 465. */
+static inline void fb_k_segment_2d_velocity(const double *restrict x, const double *restrict a, const double *restrict b, const double *restrict v, const double *restrict va, const double *restrict vb, double *restrict gap_rate, double *restrict tangential_velocity, double *restrict gap_bias, double *restrict slip_rate, double *restrict slip_bias)
 {
 (void)x; (void)a; (void)b; (void)v; (void)va; (void)vb; 
     const double w0 = a[0] - b[0];
-    const double w1 = w0*w0;
+    const double w1 = (w0*w0);
     const double w2 = a[1] - b[1];
     const double w3 = -w2;
-    const double w4 = w3*w3;
+    const double w4 = (w3*w3);
     const double w5 = w1 + w4;
     const double w6 = 1.0/sqrt(w5);
     const double w7 = -a[1] + x[1];
@@ -606,59 +606,87 @@ static inline void fb_k_segment_2d_velocity(const double *restrict x, const doub
     const double w22 = w14*w16;
     const double w23 = w12*w7;
     const double w24 = w16*w2;
-    const double w25 = (w15 + w20)/(w10*w10 + w4);
-    const double w26 = 1 - w25;
-    const double w27 = -v[1] + va[1]*w26 + vb[1]*w25;
-    const double w28 = -v[0] + va[0]*w26 + vb[0]*w25;
-    const double w29 = -w17*w27 - w28*w9;
-    const double w30 = -w6;
-    const double w31 = w10*w16;
-    const double w32 = w0*w16;
-    const double w33 = w21 + w30;
-    const double w34 = w12*w2;
-    const double w35 = v[1]*w6;
-    const double w36 = w11*w7;
-    const double w37 = w10*w36;
-    const double w38 = pow(w5, -5.0/2.0);
-    const double w39 = 3*a[0] - 3*b[0];
-    const double w40 = -w38*w39;
-    const double w41 = w0*w40;
-    const double w42 = w41*w7;
-    const double w43 = w3*w40;
-    const double w44 = -w22 - w23;
-    const double w45 = w14*w4;
-    const double w46 = w11*w20;
-    const double w47 = w11*w15;
-    const double w48 = -w13 - w19 + w46 - w47;
-    const double w49 = 2*a[0] - 2*b[0];
-    const double w50 = w1*w7;
-    const double w51 = w14*w3;
-    const double w52 = w22 - w32 - w37;
-    const double w53 = w2*w36;
-    const double w54 = -w24 + w30 + w47 + w53;
-    const double w55 = 3*a[1] - 3*b[1];
-    const double w56 = -w38*w55;
-    const double w57 = w0*w56;
-    const double w58 = w57*w7;
-    const double w59 = w15*w3;
-    const double w60 = 2*a[1] - 2*b[1];
-    const double w61 = w11*w14;
-    const double w62 = w12*w14;
-    const double w63 = w2*w51;
-    const double w64 = w2*w61;
-    const double w65 = w23 - w34 - w64;
-    const double w66 = v[0]*w6;
-    const double w67 = w38*w39;
-    const double w68 = w0*w67;
-    const double w69 = w68*w7;
-    const double w70 = -w53 + w62;
-    const double w71 = w38*w55;
-    const double w72 = w0*w71;
-    const double w73 = w7*w72;
+    const double w25 = (w10*w10) + w4;
+    const double w26 = 1.0/w25;
+    const double w27 = w15 + w20;
+    const double w28 = w26*w27;
+    const double w29 = 1 - w28;
+    const double w30 = -v[1] + va[1]*w29 + vb[1]*w28;
+    const double w31 = -w30;
+    const double w32 = -v[0] + va[0]*w29 + vb[0]*w28;
+    const double w33 = -w32;
+    const double w34 = w17*w31 + w33*w9;
+    const double w35 = -w6;
+    const double w36 = w10*w16;
+    const double w37 = w0*w16;
+    const double w38 = w21 + w35;
+    const double w39 = w12*w2;
+    const double w40 = v[1]*w6;
+    const double w41 = w11*w7;
+    const double w42 = w10*w41;
+    const double w43 = pow(w5, -5.0/2.0);
+    const double w44 = 3*a[0] - 3*b[0];
+    const double w45 = -w43*w44;
+    const double w46 = w0*w45;
+    const double w47 = w46*w7;
+    const double w48 = w3*w45;
+    const double w49 = -w22 - w23;
+    const double w50 = w14*w4;
+    const double w51 = w11*w20;
+    const double w52 = w11*w15;
+    const double w53 = -w13 - w19 + w51 - w52;
+    const double w54 = 2*a[0];
+    const double w55 = -2*b[0] + w54;
+    const double w56 = w1*w7;
+    const double w57 = w14*w3;
+    const double w58 = w22 - w37 - w42;
+    const double w59 = w2*w41;
+    const double w60 = -w24 + w35 + w52 + w59;
+    const double w61 = 3*a[1] - 3*b[1];
+    const double w62 = -w43*w61;
+    const double w63 = w0*w62;
+    const double w64 = w63*w7;
+    const double w65 = w15*w3;
+    const double w66 = 2*a[1];
+    const double w67 = -2*b[1] + w66;
+    const double w68 = w11*w14;
+    const double w69 = w12*w14;
+    const double w70 = w2*w57;
+    const double w71 = w2*w68;
+    const double w72 = w23 - w39 - w71;
+    const double w73 = v[0]*w6;
+    const double w74 = w43*w44;
+    const double w75 = w0*w74;
+    const double w76 = w7*w75;
+    const double w77 = -w55;
+    const double w78 = -w59 + w69;
+    const double w79 = w43*w61;
+    const double w80 = w0*w79;
+    const double w81 = w7*w80;
+    const double w82 = -w67;
+    const double w83 = w10*w26;
+    const double w84 = w26*w3;
+    const double w85 = w33*w6;
+    const double w86 = w26*(-b[0] + w54 - x[0]);
+    const double w87 = w27/(w25*w25);
+    const double w88 = w77*w87;
+    const double w89 = -w86 - w88;
+    const double w90 = w31*w6;
+    const double w91 = w26*(-b[1] + w66 - x[1]);
+    const double w92 = w82*w87;
+    const double w93 = -w91 - w92;
+    const double w94 = w14*w26;
+    const double w95 = w55*w87;
+    const double w96 = -w94 - w95;
+    const double w97 = w26*w7;
+    const double w98 = w67*w87;
+    const double w99 = -w97 - w98;
     gap_rate[0] = v[0]*w9 + v[1]*w17 + va[0]*(w13*w7 + w15*w16 + w8 - w9) + va[1]*(w12*w20 + w14*w19 - w17 - w18) + vb[0]*(w0*w22 + w21*w7 - w8) + vb[1]*(w14*w24 + w18 + w2*w23);
-    tangential_velocity[0] = -w28 - w29*w9;
-    tangential_velocity[1] = -w17*w29 - w27;
-    gap_bias[0] = v[0]*(va[0]*w31 + va[1]*(w19 + w30) + vb[0]*w32 + vb[1]*(w24 + w6)) + v[1]*(va[0]*(w13 + w6) + va[1]*w32 + vb[0]*w33 + vb[1]*w34) + va[0]*(v[0]*w31 + v[1]*w13 + va[0]*(w10*w42 + w15*w43 - 2*w31 + 2*w37 + w44) + va[1]*(w20*w41 + w40*w45 + w48) + vb[0]*(w36*w49 + w40*w50 + w41*w51 + w52) + vb[1]*(w14*w2*w43 + w2*w42 + w54) + w35) + va[1]*(v[0]*w19 + v[1]*w32 + va[0]*(w10*w58 + w48 + w56*w59) + va[1]*(w20*w57 - 2*w32 + w44 + w45*w56 + w60*w61) + vb[0]*(-w21 - w46 + w50*w56 + w51*w57 + w6 - w62) + vb[1]*(w2*w58 + 2*w22 + w56*w63 + w65) - w66) + vb[0]*(v[0]*w32 + v[1]*w21 + va[0]*(w10*w69 + 2*w23 + w52 + w59*w67) + va[1]*(w0*w3*w38*w39*w7 + w14*w38*w39*w4 - w33 - w46 - w62) + vb[0]*(-w36*w49 + w44 + w50*w67 + w51*w68) + vb[1]*(w2*w69 + w63*w67 + w70) - w35) + vb[1]*(v[0]*w24 + v[1]*w34 + va[0]*(w10*w73 + w54 + w59*w71) + va[1]*(w20*w72 + w45*w71 - w60*w61 + w65) + vb[0]*(w50*w71 + w51*w72 + w70) + vb[1]*(w2*w73 + w44 + w63*w71 + 2*w64) + w66);
+    tangential_velocity[0] = -w32 - w34*w9;
+    tangential_velocity[1] = -w17*w34 - w30;
+    gap_bias[0] = v[0]*(va[0]*w36 + va[1]*(w19 + w35) + vb[0]*w37 + vb[1]*(w24 + w6)) + v[1]*(va[0]*(w13 + w6) + va[1]*w37 + vb[0]*w38 + vb[1]*w39) + va[0]*(v[0]*w36 + v[1]*w13 + va[0]*(w10*w47 + w15*w48 - 2*w36 + 2*w42 + w49) + va[1]*(w20*w46 + w45*w50 + w53) + vb[0]*(w41*w55 + w45*w56 + w46*w57 + w58) + vb[1]*(w14*w2*w48 + w2*w47 + w60) + w40) + va[1]*(v[0]*w19 + v[1]*w37 + va[0]*(w10*w64 + w53 + w62*w65) + va[1]*(w20*w63 - 2*w37 + w49 + w50*w62 + w67*w68) + vb[0]*(-w21 - w51 + w56*w62 + w57*w63 + w6 - w69) + vb[1]*(w2*w64 + 2*w22 + w62*w70 + w72) - w73) + vb[0]*(v[0]*w37 + v[1]*w21 + va[0]*(w10*w76 + 2*w23 + w58 + w65*w74) + va[1]*(w0*w3*w43*w44*w7 + w14*w4*w43*w44 - w38 - w51 - w69) + vb[0]*(w41*w77 + w49 + w56*w74 + w57*w75) + vb[1]*(w2*w76 + w70*w74 + w78) - w40) + vb[1]*(v[0]*w24 + v[1]*w39 + va[0]*(w10*w81 + w60 + w65*w79) + va[1]*(w20*w80 + w50*w79 + w68*w82 + w72) + vb[0]*(w56*w79 + w57*w80 + w78) + vb[1]*(w2*w81 + w49 + w70*w79 + 2*w71) + w73);
+    slip_rate[0] = -w17*w33 + w3*w31*w6;
+    slip_bias[0] = v[0]*(-w17*(va[0]*w83 - vb[0]*w83) + w3*w6*(va[1]*w83 - vb[1]*w83)) + v[1]*(-w17*(va[0]*w84 - vb[0]*w84) + w3*w6*(va[1]*w84 - vb[1]*w84)) + va[0]*(w10*w11*w3*w31 - w13*w33 - w17*(-va[0]*w89 - vb[0]*w86 - vb[0]*w88) + w3*w6*(-va[1]*w89 - vb[1]*w86 - vb[1]*w88) - w85) + va[1]*(w11*w31*w4 - w17*(-va[0]*w93 - vb[0]*w91 - vb[0]*w92) + w3*w6*(-va[1]*w93 - vb[1]*w91 - vb[1]*w92) - w33*w37 - w90) + vb[0]*(-w17*(-va[0]*w96 - vb[0]*w94 - vb[0]*w95) - w21*w33 + w31*w37 + w85 + w9*(-va[1]*w96 - vb[1]*w94 - vb[1]*w95)) + vb[1]*(-w17*(-va[0]*w99 - vb[0]*w97 - vb[0]*w98) + w24*w31 - w33*w39 + w9*(-va[1]*w99 - vb[1]*w97 - vb[1]*w98) + w90);
 }
 
 /* Particle x against the triangle a, b, c of another body: signed gap (x - a) . n (m, < 0 inside), the barycentrics of x's projection (unclamped), the outward unit normal n and d gap / d[x, a, b, c].
@@ -687,7 +715,7 @@ static inline void fb_k_triangle_3d(const double *restrict x, const double *rest
     const double w18 = -w17;
     const double w19 = w16*w9 - w18*w7;
     const double w20 = w12*w18 - w16*w4;
-    const double w21 = w13*w13 + w19*w19 + w20*w20;
+    const double w21 = (w13*w13) + (w19*w19) + (w20*w20);
     const double w22 = 1.0/sqrt(w21);
     const double w23 = w19*w22;
     const double w24 = -x[1];
@@ -796,7 +824,7 @@ static inline void fb_k_triangle_3d_velocity(const double *restrict x, const dou
     const double w22 = w10*w18;
     const double w23 = w21 - w22;
     const double w24 = -w23;
-    const double w25 = w12*w12 + w20*w20 + w24*w24;
+    const double w25 = (w12*w12) + (w20*w20) + (w24*w24);
     const double w26 = 1.0/sqrt(w25);
     const double w27 = w20*w26;
     const double w28 = -x[2];

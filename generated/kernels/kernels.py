@@ -25,7 +25,7 @@ def link_relative_2d_force(xi, xj, vi, vj, par):
     w0 = -vi_x + vj_x
     w1 = xi_x - xj_x
     w2 = xi_y - xj_y
-    w3 = numpy.sqrt(w1*w1 + w2*w2)
+    w3 = numpy.sqrt((w1*w1) + (w2*w2))
     w4 = k*(L - w3)/w3
     w5 = -vi_y + vj_y
     batch = numpy.shape(xi)[1:]
@@ -33,7 +33,7 @@ def link_relative_2d_force(xi, xj, vi, vj, par):
     force[0] = c*w0 + w1*w4
     force[1] = c*w5 + w2*w4
     power = numpy.zeros((1,) + batch)
-    power[0] = c*(w0*w0 + w5*w5)
+    power[0] = c*((w0*w0) + (w5*w5))
     return force, power
 
 
@@ -51,7 +51,7 @@ def link_relative_2d_energy(xi, xj, vi, vj, par):
     k, c, L = par
     batch = numpy.shape(xi)[1:]
     energy = numpy.zeros((1,) + batch)
-    energy[0] = (1/2)*k*(-L + numpy.sqrt((xi_x - xj_x)*(xi_x - xj_x) + (xi_y - xj_y)*(xi_y - xj_y)))*(-L + numpy.sqrt((xi_x - xj_x)*(xi_x - xj_x) + (xi_y - xj_y)*(xi_y - xj_y)))
+    energy[0] = (1/2)*k*((-L + numpy.sqrt(((xi_x - xj_x)*(xi_x - xj_x)) + ((xi_y - xj_y)*(xi_y - xj_y))))*(-L + numpy.sqrt(((xi_x - xj_x)*(xi_x - xj_x)) + ((xi_y - xj_y)*(xi_y - xj_y)))))
     return energy, 
 
 
@@ -68,9 +68,9 @@ def link_relative_2d_jacobian(xi, xj, vi, vj, par):
     vj_x, vj_y = vj
     k, c, L = par
     w0 = xi_x - xj_x
-    w1 = w0*w0
+    w1 = (w0*w0)
     w2 = xi_y - xj_y
-    w3 = w2*w2
+    w3 = (w2*w2)
     w4 = w1 + w3
     w5 = numpy.sqrt(w4)
     w6 = L - w5
@@ -119,7 +119,7 @@ def link_axial_2d_force(xi, xj, vi, vj, par):
     k, c, L = par
     w0 = xi_x - xj_x
     w1 = xi_y - xj_y
-    w2 = numpy.sqrt(w0*w0 + w1*w1)
+    w2 = numpy.sqrt((w0*w0) + (w1*w1))
     w3 = w2**(-1.0)
     w4 = w0*w3
     w5 = w1*w3
@@ -131,7 +131,7 @@ def link_axial_2d_force(xi, xj, vi, vj, par):
     force[0] = w4*w7 + w4*w8
     force[1] = w5*w7 + w5*w8
     power = numpy.zeros((1,) + batch)
-    power[0] = c*w6*w6
+    power[0] = c*(w6*w6)
     return force, power
 
 
@@ -149,7 +149,7 @@ def link_axial_2d_energy(xi, xj, vi, vj, par):
     k, c, L = par
     batch = numpy.shape(xi)[1:]
     energy = numpy.zeros((1,) + batch)
-    energy[0] = (1/2)*k*(-L + numpy.sqrt((xi_x - xj_x)*(xi_x - xj_x) + (xi_y - xj_y)*(xi_y - xj_y)))*(-L + numpy.sqrt((xi_x - xj_x)*(xi_x - xj_x) + (xi_y - xj_y)*(xi_y - xj_y)))
+    energy[0] = (1/2)*k*((-L + numpy.sqrt(((xi_x - xj_x)*(xi_x - xj_x)) + ((xi_y - xj_y)*(xi_y - xj_y))))*(-L + numpy.sqrt(((xi_x - xj_x)*(xi_x - xj_x)) + ((xi_y - xj_y)*(xi_y - xj_y)))))
     return energy, 
 
 
@@ -166,9 +166,9 @@ def link_axial_2d_jacobian(xi, xj, vi, vj, par):
     vj_x, vj_y = vj
     k, c, L = par
     w0 = xi_x - xj_x
-    w1 = w0*w0
+    w1 = (w0*w0)
     w2 = xi_y - xj_y
-    w3 = w2*w2
+    w3 = (w2*w2)
     w4 = w1 + w3
     w5 = w4**(-1.0)
     w6 = w1*w5
@@ -260,7 +260,7 @@ def particle_2d(x, v, m, g):
     potential = numpy.zeros((1,) + batch)
     potential[0] = -w0*x_x - w1*x_y
     kinetic = numpy.zeros((1,) + batch)
-    kinetic[0] = (1/2)*m*(v_x*v_x + v_y*v_y)
+    kinetic[0] = (1/2)*m*((v_x*v_x) + (v_y*v_y))
     return force, potential, kinetic
 
 
@@ -308,7 +308,7 @@ def split_2d(w, n):
     tangential[0] = w1
     tangential[1] = w2
     tangential_norm = numpy.zeros((1,) + batch)
-    tangential_norm[0] = numpy.sqrt(w1*w1 + w2*w2)
+    tangential_norm[0] = numpy.sqrt((w1*w1) + (w2*w2))
     return normal, tangential, tangential_norm
 
 
@@ -328,7 +328,7 @@ def link_relative_3d_force(xi, xj, vi, vj, par):
     w1 = xi_x - xj_x
     w2 = xi_y - xj_y
     w3 = xi_z - xj_z
-    w4 = numpy.sqrt(w1*w1 + w2*w2 + w3*w3)
+    w4 = numpy.sqrt((w1*w1) + (w2*w2) + (w3*w3))
     w5 = k*(L - w4)/w4
     w6 = -vi_y + vj_y
     w7 = -vi_z + vj_z
@@ -338,7 +338,7 @@ def link_relative_3d_force(xi, xj, vi, vj, par):
     force[1] = c*w6 + w2*w5
     force[2] = c*w7 + w3*w5
     power = numpy.zeros((1,) + batch)
-    power[0] = c*(w0*w0 + w6*w6 + w7*w7)
+    power[0] = c*((w0*w0) + (w6*w6) + (w7*w7))
     return force, power
 
 
@@ -356,7 +356,7 @@ def link_relative_3d_energy(xi, xj, vi, vj, par):
     k, c, L = par
     batch = numpy.shape(xi)[1:]
     energy = numpy.zeros((1,) + batch)
-    energy[0] = (1/2)*k*(-L + numpy.sqrt((xi_x - xj_x)*(xi_x - xj_x) + (xi_y - xj_y)*(xi_y - xj_y) + (xi_z - xj_z)*(xi_z - xj_z)))*(-L + numpy.sqrt((xi_x - xj_x)*(xi_x - xj_x) + (xi_y - xj_y)*(xi_y - xj_y) + (xi_z - xj_z)*(xi_z - xj_z)))
+    energy[0] = (1/2)*k*((-L + numpy.sqrt(((xi_x - xj_x)*(xi_x - xj_x)) + ((xi_y - xj_y)*(xi_y - xj_y)) + ((xi_z - xj_z)*(xi_z - xj_z))))*(-L + numpy.sqrt(((xi_x - xj_x)*(xi_x - xj_x)) + ((xi_y - xj_y)*(xi_y - xj_y)) + ((xi_z - xj_z)*(xi_z - xj_z)))))
     return energy, 
 
 
@@ -373,11 +373,11 @@ def link_relative_3d_jacobian(xi, xj, vi, vj, par):
     vj_x, vj_y, vj_z = vj
     k, c, L = par
     w0 = xi_x - xj_x
-    w1 = w0*w0
+    w1 = (w0*w0)
     w2 = xi_y - xj_y
-    w3 = w2*w2
+    w3 = (w2*w2)
     w4 = xi_z - xj_z
-    w5 = w4*w4
+    w5 = (w4*w4)
     w6 = w1 + w3 + w5
     w7 = numpy.sqrt(w6)
     w8 = L - w7
@@ -446,7 +446,7 @@ def link_axial_3d_force(xi, xj, vi, vj, par):
     w0 = xi_x - xj_x
     w1 = xi_y - xj_y
     w2 = xi_z - xj_z
-    w3 = numpy.sqrt(w0*w0 + w1*w1 + w2*w2)
+    w3 = numpy.sqrt((w0*w0) + (w1*w1) + (w2*w2))
     w4 = w3**(-1.0)
     w5 = w0*w4
     w6 = w1*w4
@@ -460,7 +460,7 @@ def link_axial_3d_force(xi, xj, vi, vj, par):
     force[1] = w10*w6 + w6*w9
     force[2] = w10*w7 + w7*w9
     power = numpy.zeros((1,) + batch)
-    power[0] = c*w8*w8
+    power[0] = c*(w8*w8)
     return force, power
 
 
@@ -478,7 +478,7 @@ def link_axial_3d_energy(xi, xj, vi, vj, par):
     k, c, L = par
     batch = numpy.shape(xi)[1:]
     energy = numpy.zeros((1,) + batch)
-    energy[0] = (1/2)*k*(-L + numpy.sqrt((xi_x - xj_x)*(xi_x - xj_x) + (xi_y - xj_y)*(xi_y - xj_y) + (xi_z - xj_z)*(xi_z - xj_z)))*(-L + numpy.sqrt((xi_x - xj_x)*(xi_x - xj_x) + (xi_y - xj_y)*(xi_y - xj_y) + (xi_z - xj_z)*(xi_z - xj_z)))
+    energy[0] = (1/2)*k*((-L + numpy.sqrt(((xi_x - xj_x)*(xi_x - xj_x)) + ((xi_y - xj_y)*(xi_y - xj_y)) + ((xi_z - xj_z)*(xi_z - xj_z))))*(-L + numpy.sqrt(((xi_x - xj_x)*(xi_x - xj_x)) + ((xi_y - xj_y)*(xi_y - xj_y)) + ((xi_z - xj_z)*(xi_z - xj_z)))))
     return energy, 
 
 
@@ -495,11 +495,11 @@ def link_axial_3d_jacobian(xi, xj, vi, vj, par):
     vj_x, vj_y, vj_z = vj
     k, c, L = par
     w0 = xi_x - xj_x
-    w1 = w0*w0
+    w1 = (w0*w0)
     w2 = xi_y - xj_y
-    w3 = w2*w2
+    w3 = (w2*w2)
     w4 = xi_z - xj_z
-    w5 = w4*w4
+    w5 = (w4*w4)
     w6 = w1 + w3 + w5
     w7 = w6**(-1.0)
     w8 = w1*w7
@@ -643,7 +643,7 @@ def particle_3d(x, v, m, g):
     potential = numpy.zeros((1,) + batch)
     potential[0] = -w0*x_x - w1*x_y - w2*x_z
     kinetic = numpy.zeros((1,) + batch)
-    kinetic[0] = (1/2)*m*(v_x*v_x + v_y*v_y + v_z*v_z)
+    kinetic[0] = (1/2)*m*((v_x*v_x) + (v_y*v_y) + (v_z*v_z))
     return force, potential, kinetic
 
 
@@ -673,11 +673,11 @@ def ground_3d(x, P, n):
     normal[1] = n_y
     normal[2] = n_z
     tangents = numpy.zeros((2, 3) + batch)
-    tangents[0, 0] = -n_x*n_x*w0*w1 + 1
+    tangents[0, 0] = -(n_x*n_x)*w0*w1 + 1
     tangents[0, 1] = -w2*w3
     tangents[0, 2] = -w2
     tangents[1, 0] = -n_x*w3
-    tangents[1, 1] = -n_y*n_y*w1 + w0
+    tangents[1, 1] = -(n_y*n_y)*w1 + w0
     tangents[1, 2] = -n_y
     return gap, gap_jacobian, normal, tangents
 
@@ -703,7 +703,7 @@ def split_3d(w, n):
     tangential[1] = w2
     tangential[2] = w3
     tangential_norm = numpy.zeros((1,) + batch)
-    tangential_norm[0] = numpy.sqrt(w1*w1 + w2*w2 + w3*w3)
+    tangential_norm[0] = numpy.sqrt((w1*w1) + (w2*w2) + (w3*w3))
     return normal, tangential, tangential_norm
 
 
@@ -719,10 +719,10 @@ def segment_2d(x, a, b):
     b_x, b_y = b
     w0 = -a_y + x_y
     w1 = a_x - b_x
-    w2 = w1*w1
+    w2 = (w1*w1)
     w3 = a_y - b_y
     w4 = -w3
-    w5 = w4*w4
+    w5 = (w4*w4)
     w6 = w2 + w5
     w7 = 1/numpy.sqrt(w6)
     w8 = w1*w7
@@ -742,7 +742,7 @@ def segment_2d(x, a, b):
     gap = numpy.zeros((1,) + batch)
     gap[0] = w0*w8 + w10*w9
     s = numpy.zeros((1,) + batch)
-    s[0] = (w12 + w13)/(w11*w11 + w5)
+    s[0] = (w12 + w13)/((w11*w11) + w5)
     normal = numpy.zeros((2,) + batch)
     normal[0] = w10
     normal[1] = w8
@@ -757,11 +757,11 @@ def segment_2d(x, a, b):
 
 
 def segment_2d_velocity(x, a, b, v, va, vb):
-    """Gap rate (m/s) of particle x against the segment a, b: d gap / dt, the gap Jacobian times the velocities; the tangential part (m/s) of x's velocity relative to the element's material point under x; and the gap acceleration's velocity term (m/s^2), d2 gap / dt2 - J a.
+    """Gap rate (m/s) of particle x against the segment a, b: d gap / dt, the gap Jacobian times the velocities; the tangential part (m/s) of x's velocity relative to the element's material point under x; and the gap acceleration's velocity term (m/s^2), d2 gap / dt2 - J a; in 2D also the slip rate along t = (-n_y, n_x) (m/s) and its acceleration's velocity term (m/s^2).
 
     Inputs: x (2, m), a (2, m), b (2, m), v (2, m), va (2, m), vb (2, m).
-    Returns: gap_rate (1, m), tangential_velocity (2, m), gap_bias (1, m).
-    Operations after CSE: 315.
+    Returns: gap_rate (1, m), tangential_velocity (2, m), gap_bias (1, m), slip_rate (1, m), slip_bias (1, m).
+    Operations after CSE: 465.
     """
     x_x, x_y = x
     a_x, a_y = a
@@ -770,10 +770,10 @@ def segment_2d_velocity(x, a, b, v, va, vb):
     va_x, va_y = va
     vb_x, vb_y = vb
     w0 = a_x - b_x
-    w1 = w0*w0
+    w1 = (w0*w0)
     w2 = a_y - b_y
     w3 = -w2
-    w4 = w3*w3
+    w4 = (w3*w3)
     w5 = w1 + w4
     w6 = 1/numpy.sqrt(w5)
     w7 = -a_y + x_y
@@ -794,64 +794,94 @@ def segment_2d_velocity(x, a, b, v, va, vb):
     w22 = w14*w16
     w23 = w12*w7
     w24 = w16*w2
-    w25 = (w15 + w20)/(w10*w10 + w4)
-    w26 = 1 - w25
-    w27 = -v_y + va_y*w26 + vb_y*w25
-    w28 = -v_x + va_x*w26 + vb_x*w25
-    w29 = -w17*w27 - w28*w9
-    w30 = -w6
-    w31 = w10*w16
-    w32 = w0*w16
-    w33 = w21 + w30
-    w34 = w12*w2
-    w35 = v_y*w6
-    w36 = w11*w7
-    w37 = w10*w36
-    w38 = w5**(-5/2)
-    w39 = 3*a_x - 3*b_x
-    w40 = -w38*w39
-    w41 = w0*w40
-    w42 = w41*w7
-    w43 = w3*w40
-    w44 = -w22 - w23
-    w45 = w14*w4
-    w46 = w11*w20
-    w47 = w11*w15
-    w48 = -w13 - w19 + w46 - w47
-    w49 = 2*a_x - 2*b_x
-    w50 = w1*w7
-    w51 = w14*w3
-    w52 = w22 - w32 - w37
-    w53 = w2*w36
-    w54 = -w24 + w30 + w47 + w53
-    w55 = 3*a_y - 3*b_y
-    w56 = -w38*w55
-    w57 = w0*w56
-    w58 = w57*w7
-    w59 = w15*w3
-    w60 = 2*a_y - 2*b_y
-    w61 = w11*w14
-    w62 = w12*w14
-    w63 = w2*w51
-    w64 = w2*w61
-    w65 = w23 - w34 - w64
-    w66 = v_x*w6
-    w67 = w38*w39
-    w68 = w0*w67
-    w69 = w68*w7
-    w70 = -w53 + w62
-    w71 = w38*w55
-    w72 = w0*w71
-    w73 = w7*w72
+    w25 = (w10*w10) + w4
+    w26 = w25**(-1.0)
+    w27 = w15 + w20
+    w28 = w26*w27
+    w29 = 1 - w28
+    w30 = -v_y + va_y*w29 + vb_y*w28
+    w31 = -w30
+    w32 = -v_x + va_x*w29 + vb_x*w28
+    w33 = -w32
+    w34 = w17*w31 + w33*w9
+    w35 = -w6
+    w36 = w10*w16
+    w37 = w0*w16
+    w38 = w21 + w35
+    w39 = w12*w2
+    w40 = v_y*w6
+    w41 = w11*w7
+    w42 = w10*w41
+    w43 = w5**(-5/2)
+    w44 = 3*a_x - 3*b_x
+    w45 = -w43*w44
+    w46 = w0*w45
+    w47 = w46*w7
+    w48 = w3*w45
+    w49 = -w22 - w23
+    w50 = w14*w4
+    w51 = w11*w20
+    w52 = w11*w15
+    w53 = -w13 - w19 + w51 - w52
+    w54 = 2*a_x
+    w55 = -2*b_x + w54
+    w56 = w1*w7
+    w57 = w14*w3
+    w58 = w22 - w37 - w42
+    w59 = w2*w41
+    w60 = -w24 + w35 + w52 + w59
+    w61 = 3*a_y - 3*b_y
+    w62 = -w43*w61
+    w63 = w0*w62
+    w64 = w63*w7
+    w65 = w15*w3
+    w66 = 2*a_y
+    w67 = -2*b_y + w66
+    w68 = w11*w14
+    w69 = w12*w14
+    w70 = w2*w57
+    w71 = w2*w68
+    w72 = w23 - w39 - w71
+    w73 = v_x*w6
+    w74 = w43*w44
+    w75 = w0*w74
+    w76 = w7*w75
+    w77 = -w55
+    w78 = -w59 + w69
+    w79 = w43*w61
+    w80 = w0*w79
+    w81 = w7*w80
+    w82 = -w67
+    w83 = w10*w26
+    w84 = w26*w3
+    w85 = w33*w6
+    w86 = w26*(-b_x + w54 - x_x)
+    w87 = w27/(w25*w25)
+    w88 = w77*w87
+    w89 = -w86 - w88
+    w90 = w31*w6
+    w91 = w26*(-b_y + w66 - x_y)
+    w92 = w82*w87
+    w93 = -w91 - w92
+    w94 = w14*w26
+    w95 = w55*w87
+    w96 = -w94 - w95
+    w97 = w26*w7
+    w98 = w67*w87
+    w99 = -w97 - w98
     batch = numpy.shape(x)[1:]
     gap_rate = numpy.zeros((1,) + batch)
     gap_rate[0] = v_x*w9 + v_y*w17 + va_x*(w13*w7 + w15*w16 + w8 - w9) + va_y*(w12*w20 + w14*w19 - w17 - w18) + vb_x*(w0*w22 + w21*w7 - w8) + vb_y*(w14*w24 + w18 + w2*w23)
     tangential_velocity = numpy.zeros((2,) + batch)
-    tangential_velocity[0] = -w28 - w29*w9
-    tangential_velocity[1] = -w17*w29 - w27
+    tangential_velocity[0] = -w32 - w34*w9
+    tangential_velocity[1] = -w17*w34 - w30
     gap_bias = numpy.zeros((1,) + batch)
-    gap_bias[0] = v_x*(va_x*w31 + va_y*(w19 + w30) + vb_x*w32 + vb_y*(w24 + w6)) + v_y*(va_x*(w13 + w6) + va_y*w32 + vb_x*w33 + vb_y*w34) + va_x*(v_x*w31 + v_y*w13 + va_x*(w10*w42 + w15*w43 - 2*w31 + 2*w37 + w44) + va_y*(w20*w41 + w40*w45 + w48) + vb_x*(w36*w49 + w40*w50 + w41*w51 + w52) + vb_y*(w14*w2*w43 + w2*w42 + w54) + w35) + va_y*(v_x*w19 + v_y*w32 + va_x*(w10*w58 + w48 + w56*w59) + va_y*(w20*w57 - 2*w32 + w44 + w45*w56 + w60*w61) + vb_x*(-w21 - w46 + w50*w56 + w51*w57 + w6 - w62) + vb_y*(w2*w58 + 2*w22 + w56*w63 + w65) - w66) + vb_x*(v_x*w32 + v_y*w21 + va_x*(w10*w69 + 2*w23 + w52 + w59*w67) + va_y*(w0*w3*w38*w39*w7 + w14*w38*w39*w4 - w33 - w46 - w62) + vb_x*(-w36*w49 + w44 + w50*w67 + w51*w68) + vb_y*(w2*w69 + w63*w67 + w70) - w35) + vb_y*(v_x*w24 + v_y*w34 + va_x*(w10*w73 + w54 + w59*w71) + va_y*(w20*w72 + w45*w71 - w60*w61 + w65) + vb_x*(w50*w71 + w51*w72 + w70) + vb_y*(w2*w73 + w44 + w63*w71 + 2*w64) + w66)
-    return gap_rate, tangential_velocity, gap_bias
+    gap_bias[0] = v_x*(va_x*w36 + va_y*(w19 + w35) + vb_x*w37 + vb_y*(w24 + w6)) + v_y*(va_x*(w13 + w6) + va_y*w37 + vb_x*w38 + vb_y*w39) + va_x*(v_x*w36 + v_y*w13 + va_x*(w10*w47 + w15*w48 - 2*w36 + 2*w42 + w49) + va_y*(w20*w46 + w45*w50 + w53) + vb_x*(w41*w55 + w45*w56 + w46*w57 + w58) + vb_y*(w14*w2*w48 + w2*w47 + w60) + w40) + va_y*(v_x*w19 + v_y*w37 + va_x*(w10*w64 + w53 + w62*w65) + va_y*(w20*w63 - 2*w37 + w49 + w50*w62 + w67*w68) + vb_x*(-w21 - w51 + w56*w62 + w57*w63 + w6 - w69) + vb_y*(w2*w64 + 2*w22 + w62*w70 + w72) - w73) + vb_x*(v_x*w37 + v_y*w21 + va_x*(w10*w76 + 2*w23 + w58 + w65*w74) + va_y*(w0*w3*w43*w44*w7 + w14*w4*w43*w44 - w38 - w51 - w69) + vb_x*(w41*w77 + w49 + w56*w74 + w57*w75) + vb_y*(w2*w76 + w70*w74 + w78) - w40) + vb_y*(v_x*w24 + v_y*w39 + va_x*(w10*w81 + w60 + w65*w79) + va_y*(w20*w80 + w50*w79 + w68*w82 + w72) + vb_x*(w56*w79 + w57*w80 + w78) + vb_y*(w2*w81 + w49 + w70*w79 + 2*w71) + w73)
+    slip_rate = numpy.zeros((1,) + batch)
+    slip_rate[0] = -w17*w33 + w3*w31*w6
+    slip_bias = numpy.zeros((1,) + batch)
+    slip_bias[0] = v_x*(-w17*(va_x*w83 - vb_x*w83) + w3*w6*(va_y*w83 - vb_y*w83)) + v_y*(-w17*(va_x*w84 - vb_x*w84) + w3*w6*(va_y*w84 - vb_y*w84)) + va_x*(w10*w11*w3*w31 - w13*w33 - w17*(-va_x*w89 - vb_x*w86 - vb_x*w88) + w3*w6*(-va_y*w89 - vb_y*w86 - vb_y*w88) - w85) + va_y*(w11*w31*w4 - w17*(-va_x*w93 - vb_x*w91 - vb_x*w92) + w3*w6*(-va_y*w93 - vb_y*w91 - vb_y*w92) - w33*w37 - w90) + vb_x*(-w17*(-va_x*w96 - vb_x*w94 - vb_x*w95) - w21*w33 + w31*w37 + w85 + w9*(-va_y*w96 - vb_y*w94 - vb_y*w95)) + vb_y*(-w17*(-va_x*w99 - vb_x*w97 - vb_x*w98) + w24*w31 - w33*w39 + w9*(-va_y*w99 - vb_y*w97 - vb_y*w98) + w90)
+    return gap_rate, tangential_velocity, gap_bias, slip_rate, slip_bias
 
 
 def triangle_3d(x, a, b, c):
@@ -886,7 +916,7 @@ def triangle_3d(x, a, b, c):
     w18 = -w17
     w19 = w16*w9 - w18*w7
     w20 = w12*w18 - w16*w4
-    w21 = w13*w13 + w19*w19 + w20*w20
+    w21 = (w13*w13) + (w19*w19) + (w20*w20)
     w22 = 1/numpy.sqrt(w21)
     w23 = w19*w22
     w24 = -x_y
@@ -1011,7 +1041,7 @@ def triangle_3d_velocity(x, a, b, c, v, va, vb, vc):
     w22 = w10*w18
     w23 = w21 - w22
     w24 = -w23
-    w25 = w12*w12 + w20*w20 + w24*w24
+    w25 = (w12*w12) + (w20*w20) + (w24*w24)
     w26 = 1/numpy.sqrt(w25)
     w27 = w20*w26
     w28 = -x_z

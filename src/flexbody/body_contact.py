@@ -41,11 +41,14 @@ from __future__ import annotations
 
 import ctypes
 import hashlib
+from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
 from .assembly import AssembledModel, _kernels_module
 from .broadphase import CandidateList
+from .constants import HELD, SLIDING
 from .dynamics import contact_solve
 from .model import GeneratedModel, Model
 from .scene import Scene
@@ -90,7 +93,7 @@ class BodyContactModel(Model):
         self.elements, self.element_body = scene.surfaces()
         counts = [b.n_particles for b in scene.bodies]
         self.particle_body = np.repeat(np.arange(len(counts)), counts)
-        particles, bodies, pairs = [], [], []
+        particles, bodies, pairs = [np.zeros(0, np.intp)], [np.zeros(0, np.intp)], [np.zeros(0, np.intp)]
         allowed = np.zeros((len(counts), len(counts)), bool)
         for k, pair in enumerate(scene.contacts):
             first, second = pair.bodies
@@ -117,10 +120,17 @@ class BodyContactModel(Model):
         lengths = np.linalg.norm(x0[self.elements[:, 1]] - x0[self.elements[:, 0]], axis=1)
         # Within `margin` of a surface the broad phase finds the closest element, so the
         # gap is exact; farther, a slot reads `margin` (positive: nothing can happen there).
-        self.margin = float(np.median(lengths))
+        self.margin = float(np.median(lengths)) if len(lengths) else 1.0
         self._candidates = CandidateList(self.elements, self.particle_body, self.margin, self.margin,
                                          element_body=self.element_body)
         self.element_of = np.full(self.n_slots, -1, np.intp)  # each slot's element while constrained
+        grounds = [[g.friction, g.restitution] for g in scene.grounds]
+        pairs = [[c.friction, c.restitution] for c in scene.contacts]
+        #: Contact laws (mu, e): the grounds', then the pairs'; ``mu`` (nc,) each contact's.
+        self.laws = np.array(grounds + pairs, float).reshape(-1, 2)
+        self.mu = np.concatenate([np.array(grounds, float).reshape(-1, 2)[inner.contacts[:, 1], 0],
+                                  np.array(pairs, float).reshape(-1, 2)[self.slot_pair, 0]])
+        self._slip = np.zeros((self.n_contacts, self.dim))
         self._element = ElementKernels(self.dim, self.backend)
         text = f"{inner.digest}|{self.slot_particle.tolist()}|{self.slot_body.tolist()}"
         self.digest = hashlib.sha256(f"bodies|{text}".encode()).hexdigest()[:16]
@@ -139,7 +149,10 @@ class BodyContactModel(Model):
         return self.inner.parameters(scene)
 
     def slip_directions(self, p) -> FloatArray:
-        return np.zeros((self.n_contacts, self.dim))
+        """Each sliding contact's slip direction at the start of the step, shape (nc, dim), a
+        writable array (the phase machine renews it): past the stop, friction continues along
+        it, as for a ground (:meth:`flexbody.assembly.AssembledModel.slip_directions`)."""
+        return self._slip
 
     def tangential_pushes(self, p) -> FloatArray:
         return np.zeros((self.n_contacts, self.dim))
@@ -154,33 +167,104 @@ class BodyContactModel(Model):
         return np.array([0.5 * float(np.sum(self.masses * np.sum(v * v, axis=1)))])
 
     def rhs(self, y, p, held, push):
+        solved = self._dynamics(y, p, held, push)
+        return solved.ydot, solved.lam
+
+    def friction(self, y, p, held, push) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Each contact's tangential velocity and friction force (nc, dim) and sticking slack
+        ``mu lam - |ft|`` (nc,; inf where nothing sticks with friction), as
+        :meth:`flexbody.assembly.AssembledModel.friction`: the inner model's for the ground
+        contacts it solves alone, the coupled solve's for the others."""
+        solved = self._dynamics(y, p, held, push)
+        ng, d = self.n_ground_contacts, self.dim
+        vt, ft, slack = np.zeros((self.n_contacts, d)), np.zeros((self.n_contacts, d)), np.full(self.n_contacts, np.inf)
+        if hasattr(self.inner, "friction") and (solved.fast != 0).any():
+            self._share_slips(p)
+            vt[:ng], ft[:ng], slack[:ng] = self.inner.friction(y, p, solved.fast, np.asarray(push, float)[:ng])
+        rows = solved.rows
+        if len(rows):
+            vt[rows] = solved.slip[:, None] * solved.tangents
+            ft[rows] = solved.lam_t[:, None] * solved.tangents
+            stick = solved.stick
+            slack[rows[stick]] = self.mu[rows[stick]] * solved.lam[rows[stick]] - np.abs(solved.lam_t[stick])
+        return vt, ft, slack
+
+    def _share_slips(self, p) -> None:
+        """The inner model's ground contacts slide along this model's slip directions."""
+        if isinstance(self._coordinates, _ParticleCoordinates) and self.n_grounds:
+            self.inner.slip_directions(p)[:] = self._slip[: self.n_ground_contacts]
+
+    def _dynamics(self, y, p, held, push) -> _Solved:
+        """The right-hand side and contact forces at ``y``: the inner model's alone where no
+        contact couples, else its free accelerations plus the coupled rows' forces."""
         y = np.asarray(y, float)
         held, push = np.asarray(held, np.intc), np.asarray(push, float)
         ng = self.n_ground_contacts
         held_slots = np.flatnonzero(held[ng:] != 0)
         lam = np.zeros(self.n_contacts)
-        if not len(held_slots):
-            ydot, lam[:ng] = self.inner.rhs(y, p, held[:ng], push[:ng])
-            return ydot, lam
         q, u = y[: self.nq], y[self.nq : self.nq + self.nu]
-        x, v = self._coordinates.particles(q, u, p)
-        self._constrain_elements(held_slots, x)
-        # Ground contacts of the particles these slots move couple with them: solved here.
+        # Ground contacts of the particles held slots move couple with them (on frames T, all
+        # held ones do; only those with friction need this solve there): solved here.
         moved = np.zeros(self.n_particles, bool)
-        moved[self.slot_particle[held_slots]] = True
-        moved[self.elements[self.element_of[held_slots]].ravel()] = True
+        if len(held_slots):
+            x = self._coordinates.particles(q, None, p)[0]
+            self._constrain_elements(held_slots, x)
+            moved[self.slot_particle[held_slots]] = True
+            moved[self.elements[self.element_of[held_slots]].ravel()] = True
         ground_rows = np.flatnonzero(self._coordinates.coupled_grounds(held[:ng] != 0, moved))
+        if not len(held_slots) and not (self.mu[ground_rows] > 0.0).any():
+            ground_rows = ground_rows[:0]
         fast = held[:ng].copy()
         fast[ground_rows] = 0
+        self._share_slips(p)
         ydot, lam[:ng] = self.inner.rhs(y, p, fast, push[:ng])
+        rows = np.concatenate([ground_rows, ng + held_slots]).astype(np.intp)
+        none = np.zeros(0)
+        if not len(rows):
+            return _Solved(ydot, lam, fast, rows, none, none, np.zeros((0, self.dim)), none.astype(bool))
         acc = ydot[self.nq : self.nq + self.nu]
-        columns, J, scaled, bias = self._rows(ground_rows, held_slots, q, u, p)
-        force = contact_solve(scaled @ J.T, -(J @ acc[columns] + bias))
-        acc[columns] += scaled.T @ force
-        rows = np.concatenate([ground_rows, ng + held_slots])
-        lam[rows] = force
-        return ydot, lam
+        k, mu, codes = len(rows), self.mu[rows], held[rows]
+        stick = (mu > 0.0) & (codes == HELD)
+        sliding = (mu > 0.0) & (codes == SLIDING)
+        r = self._rows(ground_rows, held_slots, q, u, p, tangents=bool((mu > 0.0).any()))
+        if not (stick | sliding).any():
+            force = contact_solve(r.scaled @ r.J.T, -(r.J @ acc[r.columns] + r.bias))
+            acc[r.columns] += r.scaled.T @ force
+            lam[rows] = force
+            return _Solved(ydot, lam, fast, rows, np.zeros(k), np.zeros(k), r.tangents, stick)
+        slip = r.J[k:] @ u[r.columns]
+        # a sliding contact's friction is -mu lam_n along its slip direction (the step start's,
+        # continued past a stop, as for a ground), or from rest against the pull that slips it
+        sign = np.sign(np.einsum("kd,kd->k", self._slip[rows], r.tangents))
+        sign = np.where(sign != 0.0, sign, np.sign(slip))
+        if (sliding & (sign == 0.0)).any():
+            held_t = self._coupled_forces(r, acc, k, stick | sliding, np.zeros(k))[1]
+            sign = np.where(sign != 0.0, sign, -np.sign(held_t))
+        drag = np.where(sliding, -mu * sign, 0.0)
+        lam_n, lam_t, delta = self._coupled_forces(r, acc, k, stick, drag)
+        acc[r.columns] += delta
+        lam[rows] = lam_n
+        # the power sliding friction dissipates (>= 0): the contact work entry of the state, as a ground's
+        ydot[self.nq + self.nu + 1] -= float(np.sum(np.where(sliding, lam_t * slip, 0.0)))
+        return _Solved(ydot, lam, fast, rows, slip, lam_t, r.tangents, stick)
 
+    def _coupled_forces(self, r: _Rows, acc, k: int, stick: np.ndarray, drag: np.ndarray):
+        """Normal forces (k,), tangential ones (k,) and the acceleration change on
+        ``r.columns`` of held rows: sticking contacts keep their slip rate's acceleration at 0
+        too, sliding ones are pushed back by ``drag * lam_n`` along their tangent.
+
+        With sliding friction the system is not symmetric: solved directly (a Painlevé
+        configuration makes it singular: least squares, and the LCP at the instants reports it).
+        """
+        Jn, Jt, Sn, St = r.J[:k], r.J[k:], r.scaled[:k], r.scaled[k:]
+        C = np.vstack([Jn, Jt[stick]])  # the constrained rates
+        G = np.vstack([Sn + drag[:, None] * St, St[stick]])  # G M^-1: the forces' directions, M^-1
+        b = -(C @ acc[r.columns] + np.concatenate([r.bias[:k], r.bias[k:][stick]]))
+        A = C @ G.T
+        x = contact_solve(A, b) if not drag.any() else np.linalg.lstsq(A, b, rcond=None)[0]
+        lam_t = drag * x[:k]
+        lam_t[stick] = x[k:]
+        return x[:k], lam_t, G.T @ x
     def contact_state(self, y, p, held, push):
         y = np.asarray(y, float)
         x, v = self._state(y, p)
@@ -192,11 +276,12 @@ class BodyContactModel(Model):
         rated = np.flatnonzero(near | (held[ng:] != 0))
         if len(rated):
             self._constrain_elements(rated, x)
-            vn_s[rated] = self._element_terms(rated, x, v)[3]
+            vn_s[rated] = self._element_terms(rated, x, v).rate
         return np.concatenate([gaps_g, gaps_s]), np.concatenate([vn_g, vn_s]), self.rhs(y, p, held, push)[1]
 
-    def contact_coupling(self, q, u, p, rows: IntArray):
-        """The contact rows ``rows`` (contact indices) as :mod:`flexbody.coupled` needs them.
+    def contact_coupling(self, q, u, p, rows: IntArray, tangents: bool = False):
+        """The contact rows ``rows`` (contact indices) as :mod:`flexbody.coupled` needs them;
+        with ``tangents``, each contact's normal rows then its tangent rows (2D), stacked.
 
         Returns
         -------
@@ -215,14 +300,14 @@ class BodyContactModel(Model):
         ng = self.n_ground_contacts
         slots = rows[rows >= ng] - ng
         self._constrain_elements(slots, x)
-        columns, J, scaled, bias = self._rows(rows[rows < ng], slots, q, u, p)
+        r = self._rows(rows[rows < ng], slots, q, u, p, tangents)
 
         def response(P):
             out = np.zeros(self.nu)
-            out[columns] = scaled.T @ np.asarray(P, float)
+            out[r.columns] = r.scaled.T @ np.asarray(P, float)
             return out
 
-        return J, columns, scaled @ J.T, response, bias
+        return r.J, r.columns, r.scaled @ r.J.T, response, r.bias
 
     def impact(self, y, p, stop):  # pragma: no cover - coupled models resolve with flexbody.coupled
         raise NotImplementedError("contacts between bodies couple: flexbody.coupled.coupled_impact resolves them")
@@ -273,7 +358,7 @@ class BodyContactModel(Model):
         if len(slots):
             x, v = self._state(np.asarray(y, float), p)
             self._constrain_elements(slots, x)
-            weights = self._element_terms(slots, x, v)[1]
+            weights = self._element_terms(slots, x, v).weights
             out[ng + slots] = weights.min(axis=1) * self._sizes(slots, x)
         return out
 
@@ -294,14 +379,14 @@ class BodyContactModel(Model):
         if not len(slots):
             return empty, empty, empty
         x, v = self._state(np.asarray(y, float), p)
-        weights = self._element_terms(slots, x, v)[1]
+        weights = self._element_terms(slots, x, v).weights
         passed = weights.min(axis=1) * self._sizes(slots, x) <= gap_tolerance
         out = slots[passed]
         if not len(out):
             return empty, empty, empty
         corner = np.argmin(weights[passed], axis=1)
         self.element_of[out] = self._neighbour[self.element_of[out], corner]
-        rate = self._element_terms(out, x, v)[3]
+        rate = self._element_terms(out, x, v).rate
         return ng + out[np.abs(rate) <= speed_tolerance], ng + out[rate < -speed_tolerance], \
             ng + out[rate > speed_tolerance]
 
@@ -319,7 +404,7 @@ class BodyContactModel(Model):
         than that), and whether it is within ``margin``, shape (ns,) each."""
         gaps = np.full(self.n_slots, self.margin)
         near = np.zeros(self.n_slots, bool)
-        contact = self._closest(x)
+        contact = self._closest(x) if self.n_slots else None
         if contact is not None:
             slots, found = self._slots_of(contact.particle, self.element_body[contact.element])
             # Farther than `margin` the nearest candidate need not be the nearest element, and
@@ -370,45 +455,70 @@ class BodyContactModel(Model):
         return np.vstack(rows)
 
     def _element_terms(self, slots, x, v):
-        """Gap (k,), weights (k, dim), normal (k, dim), gap rate (k,) and velocity term (k,) of
-        each slot's particle against its element."""
+        """Each slot's particle against its element (:class:`ElementTerms`)."""
         e = self.elements[self.element_of[slots]]
         points = [x[self.slot_particle[slots]]] + [x[e[:, k]] for k in range(self.dim)]
         rates = [v[self.slot_particle[slots]]] + [v[e[:, k]] for k in range(self.dim)]
         return self._element(points, rates)
 
-    def _rows(self, ground_rows, slots, q, u, p) -> tuple[IntArray, FloatArray, FloatArray, FloatArray]:
-        """Constraint rows (ground rows, then slots) on the coordinates they move.
-
-        Returns
-        -------
-        columns : ndarray of int, shape (c,)
-            The coordinates the rows touch (ascending).
-        J : ndarray, shape (k, c)
-            The rows' Jacobian with respect to those coordinates.
-        scaled : ndarray, shape (k, c)
-            ``J M^-1`` on them.
-        bias : ndarray, shape (k,)
-            Their gap accelerations' velocity terms.
-        """
+    def _rows(self, ground_rows, slots, q, u, p, tangents: bool = False) -> _Rows:
+        """Constraint rows (ground rows, then slots) on the coordinates they move: their
+        normal rows, and with ``tangents`` (2D) their tangent rows after them."""
         d = self.dim
         x, v = self._coordinates.particles(q, u, p)
-        k_g = len(ground_rows)
+        k_g, k = len(ground_rows), len(ground_rows) + len(slots)
         points = [self.inner.contacts[ground_rows, :1]]
-        coefficients = [self._coordinates.ground_normals(p)[self.inner.contacts[ground_rows, 1]][:, None, :]]
-        bias = np.zeros(k_g + len(slots))
+        normals = self._coordinates.ground_normals(p)[self.inner.contacts[ground_rows, 1]]
+        weights = [np.ones((k_g, 1))]
+        bias, slip_bias = np.zeros(k), np.zeros(k)
         if len(slots):
-            _, weights, normal, _, bias[k_g:] = self._element_terms(slots, x, v)
+            terms = self._element_terms(slots, x, v)
+            bias[k_g:], slip_bias[k_g:] = terms.bias, terms.slip_bias if tangents else 0.0
             points.append(np.column_stack([self.slot_particle[slots], self.elements[self.element_of[slots]]]))
-            coefficients.append(np.column_stack([np.ones(len(slots)), -weights])[:, :, None] * normal[:, None, :])
+            weights.append(np.column_stack([np.ones(len(slots)), -terms.weights]))
+            normals = np.vstack([normals, terms.normal])
+        directions = [normals] + ([np.column_stack([-normals[:, 1], normals[:, 0]])] if tangents else [])
         particles = np.unique(np.concatenate([z.ravel() for z in points]))
-        J = np.zeros((k_g + len(slots), len(particles), d))
-        start = 0
-        for z, c in zip(points, coefficients):
-            rows = np.repeat(np.arange(start, start + len(z)), z.shape[1])
-            np.add.at(J, (rows, np.searchsorted(particles, z.ravel())), c.reshape(-1, d))
-            start += len(z)
-        return self._coordinates.rows(particles, J.reshape(len(J), -1), bias, q, u, p)
+        J = np.zeros((len(directions) * k, len(particles), d))
+        for block, direction in enumerate(directions):
+            offset = 0
+            for z, w in zip(points, weights):
+                rows = block * k + np.repeat(np.arange(offset, offset + len(z)), z.shape[1])
+                coefficients = w[:, :, None] * direction[offset : offset + len(z), None, :]
+                np.add.at(J, (rows, np.searchsorted(particles, z.ravel())), coefficients.reshape(-1, d))
+                offset += len(z)
+        bias = np.concatenate([bias, slip_bias]) if tangents else bias
+        columns, J, scaled, bias = self._coordinates.rows(particles, J.reshape(len(J), -1), bias, q, u, p)
+        return _Rows(columns, J, scaled, bias, directions[-1] if tangents else np.zeros((k, d)))
+
+
+class _Rows(NamedTuple):
+    """Contact rows on the coordinates ``columns (c,)`` they move: ``J (m, c)``, ``J M^-1
+    (m, c)`` and the velocity terms ``bias (m,)`` of their accelerations (m = k normal rows,
+    then k tangent rows if asked), and each contact's unit tangent (k, dim) (zeros if not)."""
+
+    columns: IntArray
+    J: FloatArray
+    scaled: FloatArray
+    bias: FloatArray
+    tangents: FloatArray
+
+
+@dataclass
+class _Solved:
+    """One evaluation of :meth:`BodyContactModel._dynamics`: the right-hand side, every
+    contact's normal force, the ground contacts the inner model held alone (its codes), and
+    for the coupled contacts ``rows (k,)``: slip rates, tangential forces (k,), unit
+    tangents (k, dim) and which stick with friction."""
+
+    ydot: FloatArray
+    lam: FloatArray
+    fast: IntArray
+    rows: IntArray
+    slip: FloatArray
+    lam_t: FloatArray
+    tangents: FloatArray
+    stick: np.ndarray
 
 
 class _ParticleCoordinates:
@@ -478,14 +588,27 @@ class _FrameCoordinates:
         return np.arange(inner.nu), Jq, scaled, bias
 
 
+class ElementTerms(NamedTuple):
+    """A particle against an element, k contacts: gap (k,), weights (k, dim), outward normal
+    (k, dim), gap rate (k,), the gap acceleration's velocity term (k,), and in 2D the slip
+    rate along t = (-n_y, n_x) (k,) and its acceleration's velocity term (k,) (None in 3D)."""
+
+    gap: FloatArray
+    weights: FloatArray
+    normal: FloatArray
+    rate: FloatArray
+    bias: FloatArray
+    slip: FloatArray | None
+    slip_bias: FloatArray | None
+
+
 class ElementKernels:
     """The generated segment (2D) or triangle (3D) kernels on k contacts at once: the compiled
     ones with the C backend (the triangle's velocity kernel is 2565 operations: NumPy spends
     ~1 ms a call on that many small arrays), else their NumPy twins.
 
     Call with ``points`` (the particle, then the element's vertices; each (k, dim)) and their
-    velocities ``rates``; returns gap (k,), weights (k, dim), normal (k, dim), gap rate (k,)
-    and the gap acceleration's velocity term (k,).
+    velocities ``rates``; returns :class:`ElementTerms`.
     """
 
     def __init__(self, dim: int, backend: str) -> None:
@@ -493,30 +616,35 @@ class ElementKernels:
         self.name = "segment_2d" if dim == 2 else "triangle_3d"
         self.numpy = _kernels_module()
         self.c = None
+        self.velocity_outputs = 5 if dim == 2 else 3  # 2D adds the slip rate and its velocity term
         if backend == "c":
             from .runtime import library
 
             lib = library()
             self.c = [getattr(lib, f"fb_kb_{self.name}"), getattr(lib, f"fb_kb_{self.name}_velocity")]
             self.c[0].argtypes = [ctypes.c_long] + [ctypes.c_void_p] * (dim + 1 + 4)
-            self.c[1].argtypes = [ctypes.c_long] + [ctypes.c_void_p] * (2 * (dim + 1) + 3)
+            self.c[1].argtypes = [ctypes.c_long] + [ctypes.c_void_p] * (2 * (dim + 1) + self.velocity_outputs)
 
-    def __call__(self, points: list[FloatArray], rates: list[FloatArray]):
+    def __call__(self, points: list[FloatArray], rates: list[FloatArray]) -> ElementTerms:
         d, k = self.dim, len(points[0])
         if self.c is not None:
             inputs = [np.ascontiguousarray(z, float) for z in points + rates]
             # outputs as in the kernel manifest: s (2D) or the 3 barycentrics (3D)
             gap, weight, normal, jacobian = (np.empty((k, n)) for n in (1, 1 if d == 2 else 3, d, (d + 1) * d))
             rate, tangential, bias = np.empty((k, 1)), np.empty((k, d)), np.empty((k, 1))
+            slip = [np.empty((k, 1)) for _ in range(self.velocity_outputs - 3)]
             self.c[0](k, *(z.ctypes.data for z in inputs[: d + 1]), gap.ctypes.data, weight.ctypes.data,
                       normal.ctypes.data, jacobian.ctypes.data)
-            self.c[1](k, *(z.ctypes.data for z in inputs), rate.ctypes.data, tangential.ctypes.data, bias.ctypes.data)
+            self.c[1](k, *(z.ctypes.data for z in inputs), rate.ctypes.data, tangential.ctypes.data, bias.ctypes.data,
+                      *(z.ctypes.data for z in slip))
             weights = np.column_stack([1.0 - weight[:, 0], weight[:, 0]]) if d == 2 else weight
-            return gap[:, 0], weights, normal, rate[:, 0], bias[:, 0]
+            slip_terms = (slip[0][:, 0], slip[1][:, 0]) if d == 2 else (None, None)
+            return ElementTerms(gap[:, 0], weights, normal, rate[:, 0], bias[:, 0], *slip_terms)
         gap, weight, normal, _ = getattr(self.numpy, self.name)(*(z.T for z in points))
-        rate, _, bias = getattr(self.numpy, f"{self.name}_velocity")(*(z.T for z in points + rates))
+        rate, _, bias, *slip = getattr(self.numpy, f"{self.name}_velocity")(*(z.T for z in points + rates))
         weights = np.column_stack([1.0 - weight[0], weight[0]]) if d == 2 else weight.T
-        return gap[0], weights, normal.T, rate[0], bias[0]
+        slip_terms = (slip[0][0], slip[1][0]) if d == 2 else (None, None)
+        return ElementTerms(gap[0], weights, normal.T, rate[0], bias[0], *slip_terms)
 
 
 def _incidence(elements: IntArray, n: int) -> list[IntArray]:

@@ -34,7 +34,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .constants import FREE, HELD, KEEP, PUSHED, REBOUND, SETTLE, SLIDING, STOP
-from .coupled import coupled_impact, coupled_release
+from .coupled import coupled_friction_phases, coupled_impact, coupled_release
 from .model import Model
 
 __all__ = ["FREE", "HELD", "PUSHED", "SLIDING", "Event", "Phases", "Resolution", "UnsettledInstant", "friction_phases",
@@ -292,7 +292,7 @@ def resolve(
             continue  # the dampers saw the velocity jump: recompute the forces before holding anyone
         if model.coupled:  # Signorini's law over all held contacts at once
             pulling, implied = coupled_release(model, y, p, phases.on_ground, phases.push, leaving,
-                                               force_tolerance)
+                                               force_tolerance, phases.held)
             phases.phase[implied] = FREE  # redundant and unloaded: the others hold it at gap 0
             phases.floor[implied] = np.minimum(0.0, gaps[implied]) - gap_tolerance
             released = np.flatnonzero(pulling)
@@ -314,7 +314,9 @@ def resolve(
     else:
         raise UnsettledInstant(t, iterations)
     if hasattr(model, "friction") and getattr(model, "laws", np.zeros((0, 2)))[:, 0].any():
-        y, lost, found = friction_phases(model, t, y, p, phases, leaving, was_held, force_tolerance, speed_tolerance)
+        # coupled contacts (between bodies, a rigid body's): stick and slip decided jointly
+        phase_change = coupled_friction_phases if model.coupled else friction_phases
+        y, lost, found = phase_change(model, t, y, p, phases, leaving, was_held, force_tolerance, speed_tolerance)
         loss += lost
         events += found
     # A free contact too close to its floor to be armed (released on the ground, or left at

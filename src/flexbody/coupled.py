@@ -20,7 +20,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .contact_problems import delassus, solve_forces, solve_impact, velocity_change
+from .constants import HELD, SLIDING
+from .contact_problems import (delassus, solve_forces, solve_forces_friction, solve_impact, solve_impact_friction,
+                               velocity_change)
 from .dynamics import contact_solve
 
 
@@ -75,13 +77,20 @@ def _within_rounding(solution, rates: np.ndarray, slowest: np.ndarray | float = 
     return bool(np.all(z >= 0.0) and np.all(w >= -level) and np.all(np.abs(w) <= level, where=z > 0.0))
 
 
-def _coupling(model, q: np.ndarray, u: np.ndarray, p: np.ndarray, rows: np.ndarray):
+def _frictional(model, rows: np.ndarray) -> bool:
+    """Whether any of the contacts ``rows`` has Coulomb friction (models with ``mu`` (nc,))."""
+    mu = getattr(model, "mu", None)
+    return mu is not None and bool((mu[rows] > 0.0).any())
+
+
+def _coupling(model, q: np.ndarray, u: np.ndarray, p: np.ndarray, rows: np.ndarray, tangents: bool = False):
     """The contacts ``rows``: their Jacobian ``J`` (k, c) on the coordinates ``columns`` (an
     index array, or every one), ``W = J M^-1 J^T`` (k, k), ``P -> M^-1 J^T P`` (nu,) and the
     gap accelerations' velocity terms (k,).  The model's own where it has them (contacts
-    between bodies: the few particles they move, M diagonal), else from its dense matrices."""
+    between bodies: the few particles they move, M diagonal), else from its dense matrices.
+    With ``tangents`` (models with friction) the k tangent rows follow the k normal ones."""
     if hasattr(model, "contact_coupling"):
-        return model.contact_coupling(q, u, p, rows)
+        return model.contact_coupling(q, u, p, rows, tangents) if tangents else model.contact_coupling(q, u, p, rows)
     M, J = model.mass_matrix(q, p), model.gap_jacobian(q, p)[rows]
     return J, slice(None), delassus(J, M), lambda P: velocity_change(J, M, P), model.gap_bias(q, u, p)[rows]
 
@@ -119,22 +128,29 @@ def coupled_impact(model, y: np.ndarray, p: np.ndarray, touching: np.ndarray, re
     leaving = np.zeros(model.n_contacts, bool)
     if not len(rows):
         return CoupledImpact(np.array(y, float), 0.0, impulses, leaving)
-    J, cols, W, response, _ = _coupling(model, q, u, p, rows)
+    k = len(rows)
+    friction = _frictional(model, rows)
+    J, cols, W, response, _ = _coupling(model, q, u, p, rows, friction)
     v_minus = _rounded(J @ u[cols], J, u[cols])
-    solution = solve_impact(W, v_minus, restitution[rows])
+    if friction:  # Coulomb's law per contact too: normal and tangential impulses, one LCP
+        solution = solve_impact_friction(W, v_minus, restitution[rows], model.mu[rows])
+        P = np.concatenate([solution.normal, solution.tangent])
+    else:
+        solution = solve_impact(W, v_minus, restitution[rows])
+        P = solution.normal
     # left approaching slower than a Zeno rebound, a contact is stopped below anyway
-    if not (solution.solved or _within_rounding(solution, v_minus, slowest[rows])):
+    if not (solution.solved or _within_rounding(solution, v_minus[:k], slowest[rows])):
         raise CoupledImpactError(f"the impact of contacts {rows.tolist()} has no solution found: {solution.message}")
     out = np.array(y, float)
-    u_new = u + response(solution.normal)
+    u_new = u + response(P)
     impulses[rows] = solution.normal
     leaves = solution.normal_rate > np.maximum(slowest[rows], 1e-12)
     if (~leaves).any():  # what stays is stopped exactly (v+ = 0 up to round-off, or too slow to leave)
         stay = ~leaves
-        extra = np.zeros(len(rows))
-        extra[stay] = contact_solve(W[np.ix_(stay, stay)], -(J[stay] @ u_new[cols]))
+        extra = np.zeros(len(J))
+        extra[:k][stay] = contact_solve(W[:k, :k][np.ix_(stay, stay)], -(J[:k][stay] @ u_new[cols]))
         u_new = u_new + response(extra)
-        impulses[rows] += extra
+        impulses[rows] += extra[:k]
     out[nq : nq + nu] = u_new
     before = float(model.energies(q, u, p)[0])
     after = float(model.energies(q, u_new, p)[0])
@@ -143,7 +159,7 @@ def coupled_impact(model, y: np.ndarray, p: np.ndarray, touching: np.ndarray, re
 
 
 def coupled_release(model, y: np.ndarray, p: np.ndarray, held: np.ndarray, push: np.ndarray, leaving: np.ndarray,
-                    force_tolerance: np.ndarray) -> np.ndarray:
+                    force_tolerance: np.ndarray, codes: np.ndarray | None = None) -> np.ndarray:
     """Held contacts that lift off: Signorini's law over the ``held`` contacts as one LCP.
 
     Parameters
@@ -155,6 +171,9 @@ def coupled_release(model, y: np.ndarray, p: np.ndarray, held: np.ndarray, push:
         Held contacts whose force event fired: released where the LCP's force is at most
         ``force_tolerance`` (the crossing itself, where force and acceleration are both ~0).
     force_tolerance : ndarray, shape (nc,)
+    codes : ndarray of int, shape (nc,), optional
+        The held contacts' laws (``Phases.held``): with friction, a ``SLIDING`` contact's
+        friction is ``-mu lam`` against its slip, and the others stick (Coulomb's LCP).
 
     Returns
     -------
@@ -180,10 +199,17 @@ def coupled_release(model, y: np.ndarray, p: np.ndarray, held: np.ndarray, push:
         return release, implied
     q, u = y[:nq], y[nq : nq + nu]
     free, _ = model.rhs(y, p, np.zeros(model.n_contacts, np.intc), push)
-    J, cols, W, _, bias = _coupling(model, q, u, p, rows)
+    k = len(rows)
+    friction = _frictional(model, rows)
+    J, cols, W, _, bias = _coupling(model, q, u, p, rows, friction)
     acc = free[nq : nq + nu][cols]
     a_free = _rounded(J @ acc + bias, J, acc)
-    solution = solve_forces(W, a_free)
+    if friction:
+        codes = np.zeros(model.n_contacts, np.intc) if codes is None else np.asarray(codes)
+        solution = solve_forces_friction(W, a_free, model.mu[rows], _sliding_rates(J, u[cols], rows, codes))
+        J, a_free = J[:k], a_free[:k]  # the normal rows decide who lifts off
+    else:
+        solution = solve_forces(W, a_free)
     if not (solution.solved or _within_rounding(solution, a_free)):
         raise CoupledImpactError(f"the forces of held contacts {rows.tolist()} have no solution found: "
                                  f"{solution.message}")
@@ -194,3 +220,78 @@ def coupled_release(model, y: np.ndarray, p: np.ndarray, held: np.ndarray, push:
     if len(rows) > 1 and np.linalg.matrix_rank(J, tol=1e-9 * max(1.0, float(np.abs(J).max()))) < len(rows):
         implied[rows] = (solution.normal == 0.0) & ~release[rows]  # redundant: the others carry it
     return release, implied
+
+
+def _sliding_rates(J: np.ndarray, u: np.ndarray, rows: np.ndarray, codes: np.ndarray) -> np.ndarray:
+    """Slip rates (k,) of the held contacts ``rows`` that slide (code SLIDING), from the
+    tangent rows of ``J`` (2 k, c); 0 for those that stick, and for a sliding one exactly at
+    its stop, which the LCP then treats as sticking."""
+    slip = J[len(rows) :] @ u
+    return np.where(codes[rows] == SLIDING, slip, 0.0)
+
+
+def coupled_friction_phases(model, t: float, y: np.ndarray, p: np.ndarray, phases, leaving: np.ndarray,
+                            was_held: np.ndarray, force_tolerance: np.ndarray, speed_tolerance: float):
+    """Coulomb friction of coupled held contacts once their normal forces are settled: stick
+    or slip decided jointly (the twin of :func:`flexbody.contact.friction_phases` for
+    contacts that couple; ``phases`` is updated in place).
+
+    Frictional held contacts slower than ``speed_tolerance`` are stopped along their tangents
+    together (every held contact's normal velocity kept at 0); the others slide on.  The
+    stopped ones then stick unless Coulomb's LCP in accelerations
+    (:func:`flexbody.contact_problems.solve_forces_friction`, the sliding ones' friction at
+    ``-mu lam``) has them slip (a tangential acceleration beyond round-off, or at the limit
+    where their slack event fired).
+
+    Returns
+    -------
+    y : ndarray, shape (ny,)
+    loss : float
+        Kinetic energy removed by stopping the slow slips (J).
+    events : list of flexbody.contact.Event
+        "stick" for sliding contacts that now stick, "slip" for sticking ones that now slide.
+
+    Raises
+    ------
+    CoupledImpactError
+        When no consistent contact force exists (Painlevé's paradox), with the solver's message.
+    """
+    from .contact import Event  # here: flexbody.contact imports this module
+
+    nq, nu = model.nq, model.nu
+    rows = np.flatnonzero(phases.on_ground)
+    if not len(rows) or not _frictional(model, rows):
+        return y, 0.0, []
+    k, mu = len(rows), model.mu[rows]
+    q, u = y[:nq], y[nq : nq + nu]
+    J, cols, W, response, bias = _coupling(model, q, u, p, rows, True)
+    slip = J[k:] @ u[cols]
+    slow = (mu > 0.0) & (np.abs(slip) <= speed_tolerance)
+    loss = 0.0
+    if (slip[slow] != 0.0).any():  # stop the slow slips, holding every normal velocity at 0
+        chosen = np.concatenate([np.arange(k), k + np.flatnonzero(slow)])
+        P = np.zeros(2 * k)
+        P[chosen] = contact_solve(W[np.ix_(chosen, chosen)], -(J[chosen] @ u[cols]))
+        y = np.array(y, float)
+        y[nq : nq + nu] = u + response(P)
+        loss = float(model.energies(q, u, p)[0] - model.energies(q, y[nq : nq + nu], p)[0])
+        u = y[nq : nq + nu]
+        slip = J[k:] @ u[cols]
+    free, _ = model.rhs(y, p, np.zeros(model.n_contacts, np.intc), phases.push)
+    acc = free[nq : nq + nu][cols]
+    a_free = _rounded(J @ acc + bias, J, acc)
+    moving = (mu > 0.0) & ~slow
+    solution = solve_forces_friction(W, a_free, mu, np.where(moving, slip, 0.0))
+    if not (solution.solved or _within_rounding(solution, a_free[:k])):
+        raise CoupledImpactError(f"the friction of held contacts {rows.tolist()} has no solution found: "
+                                 f"{solution.message}")
+    floor = 1e-10 * max(1.0, float(np.abs(a_free).max()))
+    slack = mu * solution.normal - np.abs(solution.tangent)
+    slips = slow & ((np.abs(solution.tangent_rate) > floor) | (leaving[rows] & (slack <= force_tolerance[rows])))
+    before = phases.phase[rows].copy()
+    after = np.where(moving | slips, SLIDING, HELD)
+    after = np.where(mu > 0.0, after, before)
+    phases.phase[rows] = after
+    events = [Event(t, int(c), "stick") for c in rows[(before == SLIDING) & (after == HELD)]]
+    events += [Event(t, int(c), "slip") for c in rows[(before == HELD) & (after == SLIDING) & was_held[rows]]]
+    return y, loss, events

@@ -140,8 +140,9 @@ def _settings(scene: Scene, overrides: dict) -> SimulationSettings:
 
 
 # ----------------------------------------------------------------------------------------------
-# Contact between bodies (flexbody.body_contact) runs between flexible bodies, frictionless, with
-# instant impacts; what it cannot run with yet is refused here, naming the bodies, never ignored.
+# Contact between bodies (flexbody.body_contact) runs between flexible and rigid bodies, with
+# friction in 2D and instant impacts; what it cannot run with yet is refused here, naming the
+# bodies, never ignored.
 
 
 def _body_contact_problems(scene: Scene, values: dict) -> list[str]:
@@ -155,13 +156,14 @@ def _body_contact_problems(scene: Scene, values: dict) -> list[str]:
         who = f"bodies {first!r} and {second!r} may touch each other"
         if first == second:
             out.append(f"body {first!r} may touch itself (self_contact = true): self-contact is not simulated yet")
-        if c.friction > 0.0:
-            out.append(f"{who} with friction = {c.friction!r}: friction between bodies is not simulated yet (their "
-                       "contacts are frictionless); set friction = 0")
+        if c.friction > 0.0 and scene.dim == 3:
+            out.append(f"{who} with friction = {c.friction!r}: friction between bodies is simulated in 2D only (in "
+                       "3D a polygonal friction cone is not Coulomb's, so the coupled problem would not be exact); "
+                       "set friction = 0")
     rough = [j for j, g in enumerate(scene.grounds) if g.friction > 0.0]
-    if rough:
+    if rough and scene.dim == 3:
         out.append(f"grounds {rough} have friction and bodies may touch each other: their contacts couple, and "
-                   "coupled sticking and sliding are not simulated yet; make the grounds frictionless")
+                   "coupled sticking and sliding are simulated in 2D only; make the grounds frictionless")
     if values["impact"] == "thesis":
         out.append("`impact` = 'thesis' with bodies that may touch each other: the window force -m v_n / dT "
                    "(eq. 4.6) takes one particle's mass, not a contact between bodies' effective mass; use "
@@ -182,10 +184,10 @@ def _contact_law_problems(scene: Scene, values: dict) -> list[str]:
     restitution = [j for j, g in enumerate(scene.grounds) if g.restitution > 0.0]
     out = []
     rigid = scene.rigid_bodies
-    if friction and rigid:
+    if friction and rigid and scene.dim == 3:
         out.append(f"bodies {rigid} are rigid: grounds {friction} have friction, but a rigid body's contacts couple "
-                   "(J M^-1 J^T is not diagonal), and coupled sticking and sliding are not in the runtime yet "
-                   "(its impacts with restitution are); rigid bodies run on frictionless grounds for now")
+                   "(J M^-1 J^T is not diagonal), and coupled sticking and sliding are simulated in 2D only (in 3D "
+                   "a polygonal friction cone is not Coulomb's); rigid bodies run on frictionless grounds in 3D")
     if rigid and values["impact"] == "thesis":
         out.append(f"`impact` = 'thesis': bodies {rigid} are rigid, and the thesis's window force -m v_n / dT "
                    "(eq. 4.6) takes the particle's own mass, not the effective mass 1 / (J M^-1 J^T) of a rigid "
@@ -263,10 +265,12 @@ class _Run:
         self.restitution, self.min_rebound = _rebound_laws(scene, model, size)
         # A sliding contact slower than this has come to rest (a stop's root is ~1e-15 s wide).
         self.speed_tolerance = SPEED_TOLERANCE * np.sqrt(max(float(np.linalg.norm(scene.gravity)), 1.0) * max(size, 1.0))
-        ng = model.n_ground_contacts  # between bodies: frictionless (refused else)
+        ng = model.n_ground_contacts  # between bodies: the pair's
         self.mu = np.zeros(model.n_contacts)
         if ng:
             self.mu[:ng] = np.array([g.friction for g in scene.grounds], float)[model.contacts[:ng, 1]]
+        if hasattr(model, "slot_pair"):
+            self.mu[ng:] = np.array([c.friction for c in scene.contacts], float)[model.slot_pair]
         self.friction = bool(np.any(self.mu > 0.0))
         # The thesis mode's windows with friction: their constant forces (normal and tangential)
         # and the samples' tangential ones, to split the integrated contact work (see result).
@@ -596,7 +600,10 @@ class _Run:
 
     def check_corners(self, t: float) -> None:
         """Refuse a particle held on two grounds at once where one has friction (a frictional corner):
-        its tangential problem couples the grounds, which flexbody does not solve."""
+        its tangential problem couples the grounds, which the per-particle path does not solve
+        (coupled models solve it with the others, as one LCP)."""
+        if self.model.coupled:
+            return
         held = self.phases.on_ground.reshape(self.model.n_particles, -1)
         corner = np.flatnonzero(held.sum(axis=1) > 1)
         mu = np.array([g.friction for g in self.scene.grounds])
@@ -656,9 +663,17 @@ class _Run:
         friction_force = np.zeros_like(V)
         if self.friction:
             model.slip_directions(p)[:] = 0.0  # outputs: the physical law (the directions only continue a slip past its stop)
+            now = model.element_of.copy() if self.sample_elements is not None else None
             for j in np.flatnonzero(held.any(axis=1)):
+                if now is not None:  # each slot on the element it was held on then
+                    model.element_of[:] = self.sample_elements[j]
                 ft = model.friction(Y[j], p, held[j], push[j])[1]
-                friction_force[j] = ft.reshape(n, model.n_contacts // n, -1).sum(axis=1)
+                if hasattr(model, "particle_forces"):  # contacts between bodies too
+                    friction_force[j] = model.particle_forces(ft.T).T
+                else:
+                    friction_force[j] = ft.reshape(n, model.n_contacts // n, -1).sum(axis=1)
+            if now is not None:
+                model.element_of[:] = now
             if self.sample_tangential is not None:  # the windows' tangential forces
                 friction_force += self.sample_tangential[:k].reshape(len(T), n, model.n_contacts // n, -1).sum(axis=2)
         if window_work is not None:

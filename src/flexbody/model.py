@@ -462,7 +462,10 @@ def load_model(scene: Scene | str | Path, backend: str = "c", formulation: str |
             "formulation (the default), which runs any size at once"
         )
     model = load_derived_model(scene, backend, formulation)
-    if scene.contacts:  # bodies that may touch each other (rigid ones among them): their contacts are added
+    rough = scene.rigid_bodies and any(g.friction > 0.0 for g in scene.grounds)
+    # bodies that may touch each other (rigid ones among them): their contacts are added; a rigid
+    # body's coupled contacts with friction are solved there too (2D)
+    if scene.contacts or rough:
         from .body_contact import BodyContactModel
 
         return BodyContactModel(scene, model)

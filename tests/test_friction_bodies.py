@@ -1,0 +1,123 @@
+"""Coulomb friction between bodies and at a rigid body's ground contacts (2D; coupled stick
+and slip, flexbody.coupled and flexbody.body_contact).
+
+References: closed forms of rigid boxes sliding and resting under Coulomb's law: a box
+sliding on a block that slides on a frictionless ground (the relative speed falls at
+mu g (1 + m/M) until they stick, then they move together with the momentum's speed; the
+energy lost is the closed form's), a box resting on a wedge where mu > tan(slope) and
+sliding down it at g (sin - mu cos) where mu < tan(slope), the wedge held on a rough ground
+(statics of the wedge: its ground carries its weight and the box's).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import flexbody
+
+G = 9.81
+
+
+def _box(name: str, corner, angle: float, side: float, mass: float, velocity=(0.0, 0.0)) -> dict:
+    """A rigid square, counter-clockwise from its bottom-left ``corner``, turned by ``angle``."""
+    c, s = np.cos(angle), np.sin(angle)
+    along, up = np.array([c, s]), np.array([-s, c])
+    bottom = np.asarray(corner, float)
+    vertices = [bottom, bottom + side * along, bottom + side * (along + up), bottom + side * up]
+    return {"name": name, "shape": "polygon", "rigid": True, "mass": mass, "position": [0.0, 0.0],
+            "vertices": [v.tolist() for v in vertices], "velocity": list(velocity)}
+
+
+SLIDE = {
+    "name": "box_slides_on_block",
+    "grounds": [{"point": [0.0, 0.0], "normal": [0.0, 1.0]}],
+    "bodies": [
+        {"name": "block", "shape": "polygon", "rigid": True, "mass": 0.5, "position": [0.0, 0.0],
+         "vertices": [[-0.5, 0.0], [0.5, 0.0], [0.5, 0.1], [-0.5, 0.1]]},
+        _box("box", [-0.25, 0.1], 0.0, 0.1, 0.1, velocity=(1.0, 0.0)),
+    ],
+    "contacts": [{"bodies": ["block", "box"], "friction": 0.3}],
+    "simulation": {"t_end": 0.6, "output_dt": 0.005, "rtol": 1e-10, "atol": 1e-12},
+}
+
+
+def test_a_box_sliding_on_a_free_block_takes_the_closed_form_until_they_stick():
+    r = flexbody.simulate(flexbody.load_scene(SLIDE))
+    assert r.status == "success", r.message
+    mu, v0 = 0.3, 1.0
+    M, m = r.masses[:4].sum(), r.masses[4:].sum()  # 2.0 and 0.4 kg (the mass is per particle)
+    t_stick = v0 / (mu * G * (1 + m / M))
+    box, block = r.velocities[:, 4:, 0].mean(axis=1), r.velocities[:, :4, 0].mean(axis=1)
+    common = m * v0 / (m + M)
+    np.testing.assert_allclose(box, np.where(r.t < t_stick, v0 - mu * G * r.t, common), atol=1e-9)
+    np.testing.assert_allclose(block, np.where(r.t < t_stick, mu * G * m / M * r.t, common), atol=1e-9)
+    sticks = r.events_time[r.events_kind == "stick"]
+    assert len(sticks) == 2 and np.abs(sticks - t_stick).max() < 1e-9  # both corners, at once
+    # the energy friction took is the closed form's, and the ledger is closed
+    assert r.friction_work[-1] == pytest.approx(0.5 * m * v0**2 - 0.5 * (m + M) * common**2, rel=1e-9)
+    assert r.stats["energy_drift_relative"] < 1e-9
+    # while sliding: each corner's friction is -mu times its normal force, the normal forces
+    # carry the box's weight and balance the friction's moment about its centre
+    sliding = (r.t > 0.01) & (r.t < t_stick - 0.01)
+    normal, friction = r.contact_force[sliding][:, 4:6], r.friction_force[sliding][:, 4:6, 0]
+    np.testing.assert_allclose(friction, -mu * normal, rtol=1e-9)
+    np.testing.assert_allclose(normal.sum(axis=1), m * G, rtol=1e-9)
+    height = 0.05  # the friction acts 0.05 m below the box's centre; the corners are 0.1 m apart
+    np.testing.assert_allclose((normal[:, 1] - normal[:, 0]) * 0.05, mu * m * G * height, rtol=1e-9)
+    assert r.stats["max_penetration_m"] < 1e-9
+
+
+SLOPE = np.radians(20.0)
+
+
+def _wedge_scene(mu: float) -> dict:
+    width = 0.6
+    top = width * np.tan(SLOPE)
+    normal = np.array([-np.sin(SLOPE), np.cos(SLOPE)])
+    corner = np.array([-0.1, (0.2) * np.tan(SLOPE)]) + 1e-6 * normal  # 1 um above the slope
+    return {
+        "name": "box_on_wedge",
+        "grounds": [{"point": [0.0, 0.0], "normal": [0.0, 1.0], "friction": 1.0}],
+        "bodies": [
+            {"name": "wedge", "shape": "polygon", "rigid": True, "mass": 1.0, "position": [0.0, 0.0],
+             "vertices": [[-width / 2, 0.0], [width / 2, 0.0], [width / 2, top]]},
+            _box("box", corner, SLOPE, 0.05, 0.05),
+        ],
+        "contacts": [{"bodies": ["wedge", "box"], "friction": mu}],
+        "simulation": {"t_end": 0.3, "output_dt": 0.002, "rtol": 1e-10, "atol": 1e-12},
+    }
+
+
+def test_a_box_rests_on_a_wedge_where_friction_can_hold_it():
+    """mu = 0.5 > tan 20 deg: after landing the box sticks; at rest the slope carries its
+    weight, normal m g cos and friction m g sin; the rough ground carries both bodies."""
+    r = flexbody.simulate(flexbody.load_scene(_wedge_scene(0.5)))
+    assert r.status == "success", r.message
+    late = r.t > 0.1
+    assert np.abs(r.velocities[late]).max() < 1e-9
+    m = r.masses[3:].sum()
+    along = np.array([np.cos(SLOPE), np.sin(SLOPE)])
+    normal = r.contact_force[late][:, 3:].sum(axis=1)
+    friction = r.friction_force[late][:, 3:] @ along
+    np.testing.assert_allclose(normal, m * G * np.cos(SLOPE), rtol=1e-9)
+    np.testing.assert_allclose(friction.sum(axis=1), m * G * np.sin(SLOPE), rtol=1e-9)
+    np.testing.assert_allclose(r.contact_force[late][:, :3].sum(axis=1), r.masses.sum() * G, rtol=1e-9)
+    assert r.stats["max_penetration_m"] < 1e-9
+
+
+def test_a_box_slides_down_a_wedge_at_the_closed_form_acceleration():
+    """mu = 0.2 < tan 20 deg: the box slides down at g (sin - mu cos) along the slope while the
+    rough ground (mu = 1) holds the wedge still; the ledger closes with friction's work."""
+    mu = 0.2
+    r = flexbody.simulate(flexbody.load_scene(_wedge_scene(mu)))
+    assert r.status == "success", r.message
+    along = np.array([np.cos(SLOPE), np.sin(SLOPE)])
+    late = r.t > 0.05
+    speed = r.velocities[late][:, 3:].mean(axis=1) @ along
+    accel = np.diff(speed) / np.diff(r.t[late])
+    np.testing.assert_allclose(accel, -G * (np.sin(SLOPE) - mu * np.cos(SLOPE)), rtol=1e-7)
+    assert np.abs(r.velocities[:, :3]).max() < 1e-9  # the wedge stays put
+    assert r.stats["energy_drift_relative"] < 1e-8
+    assert r.friction_work[-1] > 0.0
+    assert r.stats["max_penetration_m"] < 1e-9
