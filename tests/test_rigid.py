@@ -391,10 +391,31 @@ def test_a_rigid_body_with_particle_velocities_that_are_not_a_rigid_motion_is_re
         simulate(flexbody.load_scene(table))
 
 
-def test_a_rigid_body_on_a_ground_with_friction_is_refused_until_coupled_friction_runs():
-    table = {"name": "r", "grounds": [{"point": [0.0, 0.0], "normal": [0.0, 1.0], "friction": 0.5}],
-             "bodies": [{"name": "bar", "rigid": True, "particles": [[-0.5, 0.0], [0.5, 0.0]], "masses": [0.5, 0.5],
-                         "links": [[0, 1]], "position": [0.0, 1.0]}],
+def test_a_rigid_bar_sliding_flat_on_a_rough_ground_stops_at_the_closed_form_time():
+    """Both ends sliding (coupled contacts with friction): the bar decelerates at mu g and
+    stops at v0 / (mu g), having slid v0^2 / (2 mu g); friction takes its kinetic energy."""
+    mu, v0 = 0.5, 1.0
+    table = {"name": "r", "grounds": [{"point": [0.0, 0.0], "normal": [0.0, 1.0], "friction": mu}],
+             "bodies": [{"name": "bar", "rigid": True, "particles": [[-0.5, 0.0], [0.5, 0.0]], "masses": [0.3, 0.7],
+                         "links": [[0, 1]], "position": [0.0, 0.0], "velocity": [v0, 0.0]}],
+             "simulation": {"t_end": 0.3, "output_dt": 0.001, "rtol": 1e-10, "atol": 1e-12}}
+    r = simulate(flexbody.load_scene(table))
+    assert r.status == "success", r.message
+    g, stop = 9.81, v0 / (mu * 9.81)
+    np.testing.assert_allclose(r.velocities[:, :, 0], np.maximum(v0 - mu * g * r.t, 0.0)[:, None] * [1, 1], atol=1e-9)
+    sticks = r.events_time[r.events_kind == "stick"]
+    assert len(sticks) == 2 and np.abs(sticks - stop).max() < 1e-9
+    np.testing.assert_allclose(r.positions[-1, :, 0] - r.positions[0, :, 0], v0**2 / (2 * mu * g), rtol=1e-9)
+    assert r.friction_work[-1] == pytest.approx(0.5 * 1.0 * v0**2, rel=1e-9)
+    np.testing.assert_allclose(r.contact_force[-1], [0.3 * g, 0.7 * g], rtol=1e-9)  # at rest: statics
+
+
+def test_a_rigid_body_on_a_ground_with_friction_is_refused_in_3d():
+    table = {"name": "r", "gravity": [0.0, 0.0, -9.81],
+             "grounds": [{"point": [0.0, 0.0, 0.0], "normal": [0.0, 0.0, 1.0], "friction": 0.5}],
+             "bodies": [{"name": "box", "rigid": True, "shape": "box", "size": [0.2, 0.2, 0.2], "count": [2, 2, 2],
+                         "mass": 0.1,
+                         "position": [0.0, 0.0, 0.5]}],
              "simulation": {"t_end": 0.1}}
-    with pytest.raises(InputError, match="coupled sticking and sliding are not in the runtime yet"):
+    with pytest.raises(InputError, match="coupled sticking and sliding are simulated in 2D only"):
         simulate(flexbody.load_scene(table))

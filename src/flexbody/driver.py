@@ -116,7 +116,7 @@ def _settings(scene: Scene, overrides: dict) -> SimulationSettings:
     elif rigid:
         values["formulation"] = "floating"  # a rigid body is its frame T (DESIGN §6)
     if values["method"] is None:
-        values["method"] = "dopri5" if values["backend"] == "c" and not scene.contacts else "RK45"
+        values["method"] = "dopri5" if values["backend"] == "c" and not _coupled_in_python(scene) else "RK45"
     if values["method"] in COMPILED_METHODS and values["backend"] != "c":
         problems.append(f"`method` = {values['method']!r}: is compiled C and needs backend 'c'; with backend "
                         f"{values['backend']!r} use a SciPy method ({', '.join(METHODS[len(COMPILED_METHODS):])})")
@@ -145,9 +145,21 @@ def _settings(scene: Scene, overrides: dict) -> SimulationSettings:
 # bodies, never ignored.
 
 
+def _coupled_in_python(scene: Scene) -> bool:
+    """Whether the scene runs on :class:`flexbody.body_contact.BodyContactModel`, whose coupled
+    contacts the compiled loop does not know: bodies that may touch each other, or a rigid
+    body on a ground with friction."""
+    return bool(scene.contacts) or bool(scene.rigid_bodies and any(g.friction > 0.0 for g in scene.grounds))
+
+
 def _body_contact_problems(scene: Scene, values: dict) -> list[str]:
     """What the scene's contacts between bodies cannot run with yet (one sentence each)."""
     if not scene.contacts:
+        if _coupled_in_python(scene) and values["method"] in COMPILED_METHODS:
+            return [f"`method` = {values['method']!r}: a rigid body on a ground with friction runs with SciPy's "
+                    "steppers (the compiled loop does not know coupled sticking and sliding); use RK45 (the same "
+                    f"Dormand-Prince pair, the default here) or "
+                    f"{', '.join(m for m in METHODS[len(COMPILED_METHODS):] if m != 'RK45')}"]
         return []
     names = [b.name for b in scene.bodies]
     out = []
