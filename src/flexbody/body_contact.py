@@ -131,6 +131,7 @@ class BodyContactModel(Model):
         self.mu = np.concatenate([np.array(grounds, float).reshape(-1, 2)[inner.contacts[:, 1], 0],
                                   np.array(pairs, float).reshape(-1, 2)[self.slot_pair, 0]])
         self._slip = np.zeros((self.n_contacts, self.dim))
+        self._last: tuple[bytes, _Solved] | None = None  # the last state's answer (see _dynamics)
         self._element = ElementKernels(self.dim, self.backend)
         text = f"{inner.digest}|{self.slot_particle.tolist()}|{self.slot_body.tolist()}"
         self.digest = hashlib.sha256(f"bodies|{text}".encode()).hexdigest()[:16]
@@ -168,7 +169,7 @@ class BodyContactModel(Model):
 
     def rhs(self, y, p, held, push):
         solved = self._dynamics(y, p, held, push)
-        return solved.ydot, solved.lam
+        return solved.ydot.copy(), solved.lam.copy()  # new arrays: SciPy keeps references
 
     def friction(self, y, p, held, push) -> tuple[FloatArray, FloatArray, FloatArray]:
         """Each contact's tangential velocity and friction force (nc, dim) and sticking slack
@@ -196,9 +197,20 @@ class BodyContactModel(Model):
 
     def _dynamics(self, y, p, held, push) -> _Solved:
         """The right-hand side and contact forces at ``y``: the inner model's alone where no
-        contact couples, else its free accelerations plus the coupled rows' forces."""
+        contact couples, else its free accelerations plus the coupled rows' forces.  The last
+        answer is kept: the event functions ask for the forces and then the friction of the
+        same state (a third of a stack's evaluations)."""
         y = np.asarray(y, float)
         held, push = np.asarray(held, np.intc), np.asarray(push, float)
+        key = b"|".join(np.ascontiguousarray(a).tobytes() for a in (y, p, held, push, self.element_of, self._slip))
+        if self._last is not None and self._last[0] == key:
+            return self._last[1]
+        solved = self._solve(y, p, held, push)
+        self._last = (key, solved)
+        return solved
+
+    def _solve(self, y, p, held, push) -> _Solved:
+        """:meth:`_dynamics` without the kept answer."""
         ng = self.n_ground_contacts
         held_slots = np.flatnonzero(held[ng:] != 0)
         lam = np.zeros(self.n_contacts)
