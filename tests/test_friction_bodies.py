@@ -103,6 +103,10 @@ def test_a_box_rests_on_a_wedge_where_friction_can_hold_it():
     np.testing.assert_allclose(normal, m * G * np.cos(SLOPE), rtol=1e-9)
     np.testing.assert_allclose(friction.sum(axis=1), m * G * np.sin(SLOPE), rtol=1e-9)
     np.testing.assert_allclose(r.contact_force[late][:, :3].sum(axis=1), r.masses.sum() * G, rtol=1e-9)
+    # the two corners' rows are dependent: each carries friction in proportion to its normal
+    # force, so both are equally near Coulomb's limit (and would slip together)
+    ratio = friction[:, :2] / r.contact_force[late][:, 3:5]  # the box's bottom corners
+    np.testing.assert_allclose(ratio, np.tan(SLOPE), rtol=1e-9)
     assert r.stats["max_penetration_m"] < 1e-9
 
 
@@ -146,3 +150,25 @@ def test_painleves_rod_is_reported_not_approximated():
         r = flexbody.simulate(flexbody.load_scene(_rod(mu, v)))
         assert r.status == "success", (mu, v, r.message)
         assert r.stats["energy_drift_relative"] < 1e-6
+
+
+def test_a_rigid_box_sliding_down_a_rough_incline_balances_force_and_moment_per_corner():
+    """A rigid square on a rough 30 deg ground slides down from rest (both corners sliding
+    from rest, no stored direction): acceleration g (sin - mu cos) from the first sample on;
+    each corner's friction is mu times its normal force; the normals carry m g cos and the
+    friction's moment about the centre (the downhill corner more: N_down - N_up = F)."""
+    slope, mu = np.radians(30.0), 0.2
+    normal, along = np.array([-np.sin(slope), np.cos(slope)]), np.array([np.cos(slope), np.sin(slope)])
+    box = _box("box", 1e-7 * normal, slope, 0.1, 0.1)
+    table = {"name": "rough_incline", "grounds": [{"point": [0.0, 0.0], "normal": normal.tolist(), "friction": mu}],
+             "bodies": [box], "simulation": {"t_end": 0.1, "output_dt": 0.01, "rtol": 1e-10, "atol": 1e-12}}
+    r = flexbody.simulate(flexbody.load_scene(table))
+    assert r.status == "success", r.message
+    m = r.masses.sum()
+    speed = r.velocities.mean(axis=1) @ along
+    accel = np.diff(speed[1:]) / np.diff(r.t[1:])
+    np.testing.assert_allclose(accel, -G * (np.sin(slope) - mu * np.cos(slope)), rtol=1e-8)
+    N, F = r.contact_force[1:, :2], r.friction_force[1:, :2] @ along  # corners 0 (downhill) and 1
+    np.testing.assert_allclose(F, mu * N, rtol=1e-9)  # up the slope, against the slide
+    np.testing.assert_allclose(N.sum(axis=1), m * G * np.cos(slope), rtol=1e-9)
+    np.testing.assert_allclose(N[:, 0] - N[:, 1], F.sum(axis=1), rtol=1e-9)

@@ -413,3 +413,21 @@ def test_the_refusal_is_exit_code_2_of_the_real_command(tmp_path):
     assert "body 'ball' may touch itself (self_contact = true): self-contact is not simulated yet" \
         in run.stderr
     assert not (tmp_path / "out").exists()
+
+
+def test_bodies_that_start_inside_each_other_are_refused(tmp_path, capsys):
+    """A ring whose lower half starts inside the block it may touch: one clear error naming
+    both bodies, the particles and the depth (a run would otherwise start 5 cm deep and
+    blow up); exit 2, nothing written."""
+    table = TWO_RINGS.format(ball="collide = true", contacts="").replace(
+        "position = [0.0, 0.5]", "position = [0.0, 0.25]").replace(
+        "position = [0.0, 0.1]", "position = [0.0, 0.1]\n    collide = true")
+    path = _toml(tmp_path, table)
+    with pytest.raises(InputError, match=r"body 'ball' starts inside body 'block': its particles \[[0-9, ]+\] "
+                                         r"\(scene numbering\) are up to 0.05 m inside its surface"):
+        flexbody.simulate(flexbody.load_scene(path))
+    out = tmp_path / "out"
+    assert main(["run", str(path), "--out", str(out), "--no-figures", "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert "starts inside body 'block'" in err and "Traceback" not in err
+    assert not out.exists()

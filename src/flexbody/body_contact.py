@@ -1,6 +1,6 @@
 """Contacts between bodies: a particle of one body against the surface of another.
 
-:class:`BodyContactModel` adds to the assembled particles formulation one contact *slot*
+:class:`BodyContactModel` adds to a scene's model one contact *slot*
 per (particle, other body) pair that may touch (the scene's ``[[contacts]]``, ``collide``):
 every vertex of the first body's surface against the second body's surface, and the other
 way round.  The slots come after the ground contacts, so the phase machine
@@ -24,14 +24,22 @@ way round.  The slots come after the ground contacts, so the phase machine
   the neighbour across that boundary: it stays held there if it meets it tangentially,
   hits it if it approaches (a concave corner) and is freed if it leaves (a convex one).
 
+**Coulomb friction** (2D; the pairs' ``friction``, and the grounds' where contacts couple):
+a held contact with friction sticks, its slip rate's acceleration kept at 0 too (the tangent
+row ``[t, -w_1 t, ...]``, ``t = (-n_y, n_x)``, and the kernels' ``slip_bias``), or slides,
+pushed back by ``-mu lam`` along its slip; impacts and the stick/slip decisions at an
+instant are Coulomb's LCPs (:mod:`flexbody.coupled`).
+
 The model inside is the assembled particles formulation (q: the particle positions, M
 diagonal) or a whole-scene derived one (the floating formulation: rigid bodies, frames T),
 whose particles move with q through ``v = P(q) u``: a contact row on particles is mapped
 to q by the derived ``particle_jacobian`` P and ``particle_bias`` (``P' u``), and solved
-with the dense mass matrix (such scenes are small).  Ground contacts that share no particle
-with a held slot keep the assembled model's per-particle closed form (its C or NumPy
-right-hand side); only the coupled ones are solved here, densely (the held slots of a
-scene are few).  Segments integrate with SciPy's
+with the dense mass matrix (such scenes are small).  A scene with a rigid body on a ground
+with friction runs here too, without slots.  On the assembled model, ground contacts that
+share no particle with a held slot (and are not a frictional corner) keep its per-particle
+closed form (its C or NumPy right-hand side); on a derived one, held ground contacts are
+solved here with the slots, or where they have friction.  The coupled rows are solved
+densely (the held slots of a scene are few).  Segments integrate with SciPy's
 explicit or implicit steppers (the compiled loop knows only ground contacts); an implicit
 stepper gets the assembled model's Jacobian without the body contacts' coupling, which
 slows its Newton iterations, not its answer.
@@ -57,9 +65,18 @@ from .surface_contact import FACE, closest_features, segment_normals, triangle_n
 FloatArray = np.ndarray
 IntArray = np.ndarray
 
+#: Held rows whose singular value is below this fraction of the largest depend on the others
+#: (the least-squares solves of friction's unsymmetric or redundant systems): as
+#: :data:`flexbody.dynamics.REDUNDANT` for the symmetric ones, their share is left to the others.
+DEPENDENT = 1e-12
+
+#: A slip rate below this (relative to the largest speed, at least 1 m/s) is round-off of
+#: the velocities (a joint stop leaves ~1e-17 m/s): it gives no sliding direction.
+SLIP_ROUNDOFF = 1e-13
+
 
 class BodyContactModel(Model):
-    """The assembled particles formulation with contacts between bodies.
+    """A scene's model (assembled or derived) with contacts between bodies and coupled friction.
 
     Parameters
     ----------
@@ -130,6 +147,8 @@ class BodyContactModel(Model):
         self.laws = np.array(grounds + pairs, float).reshape(-1, 2)
         self.mu = np.concatenate([np.array(grounds, float).reshape(-1, 2)[inner.contacts[:, 1], 0],
                                   np.array(pairs, float).reshape(-1, 2)[self.slot_pair, 0]])
+        if self.dim == 3 and (self.mu > 0.0).any():  # the driver refuses such scenes with the reason
+            raise ValueError("Coulomb friction on coupled contacts is simulated in 2D only")
         self._slip = np.zeros((self.n_contacts, self.dim))
         self._last: tuple[bytes, _Solved] | None = None  # the last state's answer (see _dynamics)
         self._element = ElementKernels(self.dim, self.backend)
@@ -218,6 +237,9 @@ class BodyContactModel(Model):
         # Ground contacts of the particles held slots move couple with them (on frames T, all
         # held ones do; only those with friction need this solve there): solved here.
         moved = np.zeros(self.n_particles, bool)
+        # a particle held on two grounds at once (a corner): its friction couples them
+        held_g = held[:ng] != 0
+        moved |= np.bincount(self.inner.contacts[held_g, 0], minlength=self.n_particles) > 1
         if len(held_slots):
             x = self._coordinates.particles(q, None, p)[0]
             self._constrain_elements(held_slots, x)
@@ -246,34 +268,48 @@ class BodyContactModel(Model):
             return _Solved(ydot, lam, fast, rows, np.zeros(k), np.zeros(k), r.tangents, stick)
         slip = r.J[k:] @ u[r.columns]
         # a sliding contact's friction is -mu lam_n along its slip direction (the step start's,
-        # continued past a stop, as for a ground), or from rest against the pull that slips it
+        # continued past a stop, as for a ground), or from rest (a slip at round-off of the
+        # velocities counts as none) against the pull that slips it
         sign = np.sign(np.einsum("kd,kd->k", self._slip[rows], r.tangents))
-        sign = np.where(sign != 0.0, sign, np.sign(slip))
+        moving = np.abs(slip) > SLIP_ROUNDOFF * max(1.0, float(np.abs(u[r.columns]).max(initial=0.0)))
+        sign = np.where(sign != 0.0, sign, np.where(moving, np.sign(slip), 0.0))
         if (sliding & (sign == 0.0)).any():
-            held_t = self._coupled_forces(r, acc, k, stick | sliding, np.zeros(k))[1]
+            held_t = self._coupled_forces(r, acc, k, mu, stick | sliding, np.zeros(k))[1]
             sign = np.where(sign != 0.0, sign, -np.sign(held_t))
         drag = np.where(sliding, -mu * sign, 0.0)
-        lam_n, lam_t, delta = self._coupled_forces(r, acc, k, stick, drag)
+        lam_n, lam_t, delta = self._coupled_forces(r, acc, k, mu, stick, drag)
         acc[r.columns] += delta
         lam[rows] = lam_n
         # the power sliding friction dissipates (>= 0): the contact work entry of the state, as a ground's
         ydot[self.nq + self.nu + 1] -= float(np.sum(np.where(sliding, lam_t * slip, 0.0)))
         return _Solved(ydot, lam, fast, rows, slip, lam_t, r.tangents, stick)
 
-    def _coupled_forces(self, r: _Rows, acc, k: int, stick: np.ndarray, drag: np.ndarray):
+    def _coupled_forces(self, r: _Rows, acc, k: int, mu: np.ndarray, stick: np.ndarray, drag: np.ndarray):
         """Normal forces (k,), tangential ones (k,) and the acceleration change on
-        ``r.columns`` of held rows: sticking contacts keep their slip rate's acceleration at 0
-        too, sliding ones are pushed back by ``drag * lam_n`` along their tangent.
+        ``r.columns`` of held rows (friction ``mu`` (k,)): sticking contacts keep their slip
+        rate's acceleration at 0 too, sliding ones are pushed back by ``drag * lam_n`` along
+        their tangent.
 
         With sliding friction the system is not symmetric: solved directly (a Painlevé
-        configuration makes it singular: least squares, and the LCP at the instants reports it).
+        configuration makes it singular: least squares, and the LCP at the instants reports
+        it).  Sticking rows can depend on each other (two corners of a box on a face): their
+        tangential forces are then not unique, and are split as ``mu lam_n``, so that every
+        such contact is equally near its limit and their slack events fire together (the
+        least-squares answer in tangential forces scaled by ``sqrt(mu lam_n)``).
         """
         Jn, Jt, Sn, St = r.J[:k], r.J[k:], r.scaled[:k], r.scaled[k:]
         C = np.vstack([Jn, Jt[stick]])  # the constrained rates
         G = np.vstack([Sn + drag[:, None] * St, St[stick]])  # G M^-1: the forces' directions, M^-1
         b = -(C @ acc[r.columns] + np.concatenate([r.bias[:k], r.bias[k:][stick]]))
         A = C @ G.T
-        x = contact_solve(A, b) if not drag.any() else np.linalg.lstsq(A, b, rcond=None)[0]
+        if not (np.all(np.isfinite(A)) and np.all(np.isfinite(b))):  # the driver reports a blow-up
+            raise FloatingPointError("the held contacts' forces are not finite (the state diverged)")
+        x = contact_solve(A, b) if not drag.any() else _least_squares(A, b)
+        if stick.any():
+            limit = mu[stick] * x[:k][stick]
+            weight = np.maximum(limit, 1e-12 * max(float(limit.max()), 1e-300))
+            scale = np.concatenate([np.ones(k), np.sqrt(weight)])
+            x = scale * _least_squares(A * scale, b)
         lam_t = drag * x[:k]
         lam_t[stick] = x[k:]
         return x[:k], lam_t, G.T @ x
@@ -297,15 +333,16 @@ class BodyContactModel(Model):
 
         Returns
         -------
-        J : ndarray, shape (k, c)
-            On the coordinates ``columns`` of the particles the rows move.
+        J : ndarray, shape (m, c)
+            On the coordinates ``columns`` of the particles the rows move; m = k rows, or
+            2 k with ``tangents`` (normal rows, then tangent rows).
         columns : ndarray of int, shape (c,)
-        W : ndarray, shape (k, k)
+        W : ndarray, shape (m, m)
             ``J M^-1 J^T``.
         response : callable
-            ``P (k,) -> M^-1 J^T P``, shape (nu,).
-        bias : ndarray, shape (k,)
-            The gap accelerations' velocity terms.
+            ``P (m,) -> M^-1 J^T P``, shape (nu,).
+        bias : ndarray, shape (m,)
+            The gap (and slip) accelerations' velocity terms.
         """
         x = self._coordinates.particles(q, None, p)[0]
         rows = np.asarray(rows)
@@ -333,8 +370,14 @@ class BodyContactModel(Model):
         lam = np.zeros((len(Y), self.n_contacts))
         lam[:, :ng] = lam_g
         now = self.element_of.copy()
+        held = np.asarray(held)
+        # where the coupled rows were solved here (held slots; friction at a rigid body's or a
+        # corner's ground contacts), the inner model's forces are not the answer
+        again = np.any(held[:, ng:] != 0, axis=1)
+        if (self.mu > 0.0).any():
+            again |= np.any(held != 0, axis=1)
         try:
-            for k in np.flatnonzero(np.any(np.asarray(held)[:, ng:], axis=1)):
+            for k in np.flatnonzero(again):
                 if elements is not None:
                     self.element_of[:] = elements[k]
                 lam[k] = self.rhs(Y[k], p, held[k], push[k])[1]
@@ -657,6 +700,14 @@ class ElementKernels:
         weights = np.column_stack([1.0 - weight[0], weight[0]]) if d == 2 else weight.T
         slip_terms = (slip[0][0], slip[1][0]) if d == 2 else (None, None)
         return ElementTerms(gap[0], weights, normal.T, rate[0], bias[0], *slip_terms)
+
+
+def _least_squares(A: FloatArray, b: FloatArray) -> FloatArray:
+    """The least-norm ``x`` with ``A x = b`` (k, k), rows below :data:`DEPENDENT` dropped."""
+    try:
+        return np.linalg.lstsq(A, b, rcond=DEPENDENT)[0]
+    except np.linalg.LinAlgError as exc:  # the driver reports a blow-up
+        raise FloatingPointError(f"the held contacts' forces: {exc}") from None
 
 
 def _incidence(elements: IntArray, n: int) -> list[IntArray]:

@@ -276,6 +276,7 @@ def coupled_friction_phases(model, t: float, y: np.ndarray, p: np.ndarray, phase
         y[nq : nq + nu] = u + response(P)
         loss = float(model.energies(q, u, p)[0] - model.energies(q, y[nq : nq + nu], p)[0])
         u = y[nq : nq + nu]
+        J, cols, W, response, bias = _coupling(model, q, u, p, rows, True)  # the velocity terms are u's
         slip = J[k:] @ u[cols]
     free, _ = model.rhs(y, p, np.zeros(model.n_contacts, np.intc), phases.push)
     acc = free[nq : nq + nu][cols]

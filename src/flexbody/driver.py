@@ -156,10 +156,8 @@ def _body_contact_problems(scene: Scene, values: dict) -> list[str]:
     """What the scene's contacts between bodies cannot run with yet (one sentence each)."""
     if not scene.contacts:
         if _coupled_in_python(scene) and values["method"] in COMPILED_METHODS:
-            return [f"`method` = {values['method']!r}: a rigid body on a ground with friction runs with SciPy's "
-                    "steppers (the compiled loop does not know coupled sticking and sliding); use RK45 (the same "
-                    f"Dormand-Prince pair, the default here) or "
-                    f"{', '.join(m for m in METHODS[len(COMPILED_METHODS):] if m != 'RK45')}"]
+            return [_scipy_only(values["method"], "a rigid body on a ground with friction runs with SciPy's steppers "
+                                "(the compiled loop does not know coupled sticking and sliding)")]
         return []
     names = [b.name for b in scene.bodies]
     out = []
@@ -181,10 +179,41 @@ def _body_contact_problems(scene: Scene, values: dict) -> list[str]:
                    "(eq. 4.6) takes one particle's mass, not a contact between bodies' effective mass; use "
                    "impact = 'instant' (the default)")
     if values["method"] in COMPILED_METHODS:
-        out.append(f"`method` = {values['method']!r}: bodies that may touch each other run with SciPy's steppers "
-                   "(the compiled loop knows the grounds only); use RK45 (the same Dormand-Prince pair, the default "
-                   f"here) or {', '.join(m for m in METHODS[len(COMPILED_METHODS):] if m != 'RK45')}")
+        out.append(_scipy_only(values["method"], "bodies that may touch each other run with SciPy's steppers (the "
+                               "compiled loop knows the grounds only)"))
     return out
+
+
+def _check_apart(scene: Scene, model: Model, q: np.ndarray, p: np.ndarray) -> None:
+    """Refuse bodies that may touch each other but start inside one another.
+
+    Raises
+    ------
+    flexbody.errors.InputError
+        Naming each pair, its particles inside the other body's surface and how deep.
+    """
+    from .errors import InputError  # here, as in _settings: the validation's only users
+
+    if not getattr(model, "n_slots", 0):
+        return
+    gaps = model.gaps(q, p)[model.n_ground_contacts :]
+    inside = gaps < -1e-9 * max(1.0, float(np.abs(scene.initial_positions()).max()))
+    if not inside.any():
+        return
+    names = [b.name for b in scene.bodies]
+    problems = []
+    for toucher in sorted(set(zip(model.particle_body[model.slot_particle[inside]], model.slot_body[inside]))):
+        rows = inside & (model.particle_body[model.slot_particle] == toucher[0]) & (model.slot_body == toucher[1])
+        problems.append(f"  - body {names[toucher[0]]!r} starts inside body {names[toucher[1]]!r}: its particles "
+                        f"{model.slot_particle[rows].tolist()} (scene numbering) are up to {-gaps[rows].min():.3g} m "
+                        "inside its surface; bodies that may touch must start apart (or touching)")
+    raise InputError("invalid scene:\n" + "\n".join(problems))
+
+
+def _scipy_only(method: str, why: str) -> str:
+    """The refusal of a compiled ``method`` for a scene that runs with SciPy's steppers."""
+    others = ", ".join(m for m in METHODS[len(COMPILED_METHODS):] if m != "RK45")
+    return f"`method` = {method!r}: {why}; use RK45 (the same Dormand-Prince pair, the default here) or {others}"
 
 
 # ----------------------------------------------------------------------------------------------
@@ -267,6 +296,7 @@ class _Run:
         self.deadline = time.perf_counter() + max_wall_time
         self.p = model.parameters(scene)
         q, u = initial_coordinates(scene, model)
+        _check_apart(scene, model, q, self.p)
         self.y = np.concatenate([q, u, [0.0, 0.0]])
         self.phases = Phases.all_free(model.n_contacts)
         size = float(np.abs(scene.initial_positions()).max()) if scene.n_particles else 1.0
@@ -277,12 +307,11 @@ class _Run:
         self.restitution, self.min_rebound = _rebound_laws(scene, model, size)
         # A sliding contact slower than this has come to rest (a stop's root is ~1e-15 s wide).
         self.speed_tolerance = SPEED_TOLERANCE * np.sqrt(max(float(np.linalg.norm(scene.gravity)), 1.0) * max(size, 1.0))
-        ng = model.n_ground_contacts  # between bodies: the pair's
-        self.mu = np.zeros(model.n_contacts)
-        if ng:
-            self.mu[:ng] = np.array([g.friction for g in scene.grounds], float)[model.contacts[:ng, 1]]
-        if hasattr(model, "slot_pair"):
-            self.mu[ng:] = np.array([c.friction for c in scene.contacts], float)[model.slot_pair]
+        if hasattr(model, "mu"):  # contacts between bodies: the grounds', then the pairs'
+            self.mu = model.mu.copy()
+        else:
+            self.mu = np.array([g.friction for g in scene.grounds], float)[model.contacts[:, 1]] \
+                if model.n_contacts else np.zeros(0)
         self.friction = bool(np.any(self.mu > 0.0))
         # The thesis mode's windows with friction: their constant forces (normal and tangential)
         # and the samples' tangential ones, to split the integrated contact work (see result).
@@ -654,6 +683,8 @@ class _Run:
         k = self.n_samples
         T, Y, held, push = self.grid[:k], self.Y[:k], self.sample_held[:k].astype(np.intc), self.sample_push[:k]
         n = model.n_particles
+        if self.friction:  # outputs: the physical law (the directions only continue a slip past its stop)
+            model.slip_directions(p)[:] = 0.0
         if self.sample_elements is not None:
             X, V, E, lam = model.trajectory(Y, p, held, push, elements=self.sample_elements[:k])
         else:
@@ -676,16 +707,18 @@ class _Run:
         if self.friction:
             model.slip_directions(p)[:] = 0.0  # outputs: the physical law (the directions only continue a slip past its stop)
             now = model.element_of.copy() if self.sample_elements is not None else None
-            for j in np.flatnonzero(held.any(axis=1)):
-                if now is not None:  # each slot on the element it was held on then
-                    model.element_of[:] = self.sample_elements[j]
-                ft = model.friction(Y[j], p, held[j], push[j])[1]
-                if hasattr(model, "particle_forces"):  # contacts between bodies too
-                    friction_force[j] = model.particle_forces(ft.T).T
-                else:
-                    friction_force[j] = ft.reshape(n, model.n_contacts // n, -1).sum(axis=1)
-            if now is not None:
-                model.element_of[:] = now
+            try:
+                for j in np.flatnonzero(held.any(axis=1)):
+                    if now is not None:  # each slot on the element it was held on then
+                        model.element_of[:] = self.sample_elements[j]
+                    ft = model.friction(Y[j], p, held[j], push[j])[1]
+                    if hasattr(model, "particle_forces"):  # contacts between bodies too
+                        friction_force[j] = model.particle_forces(ft.T).T
+                    else:
+                        friction_force[j] = ft.reshape(n, model.n_contacts // n, -1).sum(axis=1)
+            finally:
+                if now is not None:
+                    model.element_of[:] = now
             if self.sample_tangential is not None:  # the windows' tangential forces
                 friction_force += self.sample_tangential[:k].reshape(len(T), n, model.n_contacts // n, -1).sum(axis=2)
         if window_work is not None:
