@@ -172,3 +172,33 @@ def test_a_rigid_box_sliding_down_a_rough_incline_balances_force_and_moment_per_
     np.testing.assert_allclose(F, mu * N, rtol=1e-9)  # up the slope, against the slide
     np.testing.assert_allclose(N.sum(axis=1), m * G * np.cos(slope), rtol=1e-9)
     np.testing.assert_allclose(N[:, 0] - N[:, 1], F.sum(axis=1), rtol=1e-9)
+
+
+def test_a_rocking_box_landing_on_a_rough_ground_keeps_its_corners_stuck():
+    """A rigid box pivoting on one bottom corner (held, sticking, mu = 1) lands on the other
+    at 1e-5 m/s.  The impact LCP stops both (plastic, within the cone), and what it leaves
+    slower than the Zeno speed is stopped too, with the sticking rows kept: afterwards both
+    corners are at rest, normal and tangential (a stop along the normals alone would turn
+    the box and slide the corners at ~1e-6 m/s, and the rocking never ended)."""
+    from flexbody.coupled import coupled_impact
+    from flexbody.model import load_model
+    from flexbody.state import initial_coordinates
+
+    table = {"name": "rocking", "grounds": [{"point": [0.0, 0.0], "normal": [0.0, 1.0], "friction": 1.0}],
+             "bodies": [_box("box", [0.0, 0.0], 0.0, 0.05, 0.05)], "simulation": {"t_end": 0.1}}
+    scene = flexbody.load_scene(table)
+    model = load_model(scene)
+    p = model.parameters(scene)
+    q, u = initial_coordinates(scene, model)
+    # turning clockwise about corner 0 (T's anchor: q = its place and the angle): corner 1
+    # comes down at 1e-5 m/s
+    u = np.array([0.0, 0.0, -1e-5 / 0.05])
+    y = np.concatenate([q, u, [0.0, 0.0]])
+    v = model.inner.velocities(q, u, p)
+    assert np.abs(v[0]).max() < 1e-18 and v[1] == pytest.approx([0.0, -1e-5], abs=1e-18)
+    touching = np.zeros(model.n_contacts, bool)
+    touching[:2] = True  # the two bottom corners: 0 held, 1 hit
+    out = coupled_impact(model, y, p, touching, np.zeros(model.n_contacts), np.full(model.n_contacts, 1e-3))
+    v = model.inner.velocities(out.y[: model.nq], out.y[model.nq : model.nq + model.nu], p)
+    assert np.abs(v[:2]).max() < 1e-15, v[:2]
+    assert not out.leaving[:2].any()  # both stay held

@@ -146,9 +146,12 @@ def coupled_impact(model, y: np.ndarray, p: np.ndarray, touching: np.ndarray, re
     impulses[rows] = solution.normal
     leaves = solution.normal_rate > np.maximum(slowest[rows], 1e-12)
     if (~leaves).any():  # what stays is stopped exactly (v+ = 0 up to round-off, or too slow to leave)
-        stay = ~leaves
+        stopped = np.flatnonzero(~leaves)
+        if friction:  # and what sticks keeps sticking: else that stop's impulse would slide it
+            stuck = ~leaves & (model.mu[rows] > 0.0) & (np.abs(solution.tangent_rate) <= np.maximum(slowest[rows], 1e-12))
+            stopped = np.concatenate([stopped, k + np.flatnonzero(stuck)])
         extra = np.zeros(len(J))
-        extra[:k][stay] = contact_solve(W[:k, :k][np.ix_(stay, stay)], -(J[:k][stay] @ u_new[cols]))
+        extra[stopped] = contact_solve(W[np.ix_(stopped, stopped)], -(J[stopped] @ u_new[cols]))
         u_new = u_new + response(extra)
         impulses[rows] += extra[:k]
     out[nq : nq + nu] = u_new
