@@ -49,6 +49,8 @@ from __future__ import annotations
 
 import ctypes
 import hashlib
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -141,12 +143,12 @@ class BodyContactModel(Model):
         self._candidates = CandidateList(self.elements, self.particle_body, self.margin, self.margin,
                                          element_body=self.element_body)
         self.element_of = np.full(self.n_slots, -1, np.intp)  # each slot's element while constrained
-        grounds = [[g.friction, g.restitution] for g in scene.grounds]
-        pairs = [[c.friction, c.restitution] for c in scene.contacts]
+        ground_laws = [[g.friction, g.restitution] for g in scene.grounds]
+        pair_laws = [[c.friction, c.restitution] for c in scene.contacts]
         #: Contact laws (mu, e): the grounds', then the pairs'; ``mu`` (nc,) each contact's.
-        self.laws = np.array(grounds + pairs, float).reshape(-1, 2)
-        self.mu = np.concatenate([np.array(grounds, float).reshape(-1, 2)[inner.contacts[:, 1], 0],
-                                  np.array(pairs, float).reshape(-1, 2)[self.slot_pair, 0]])
+        self.laws = np.array(ground_laws + pair_laws, float).reshape(-1, 2)
+        self.mu = np.concatenate([np.array(ground_laws, float).reshape(-1, 2)[inner.contacts[:, 1], 0],
+                                  np.array(pair_laws, float).reshape(-1, 2)[self.slot_pair, 0]])
         if self.dim == 3 and (self.mu > 0.0).any():  # the driver refuses such scenes with the reason
             raise ValueError("Coulomb friction on coupled contacts is simulated in 2D only")
         self._slip = np.zeros((self.n_contacts, self.dim))
@@ -261,7 +263,7 @@ class BodyContactModel(Model):
         stick = (mu > 0.0) & (codes == HELD)
         sliding = (mu > 0.0) & (codes == SLIDING)
         r = self._rows(ground_rows, held_slots, q, u, p, tangents=bool((mu > 0.0).any()))
-        if not (stick | sliding).any():
+        if not (stick | sliding).any():  # frictionless: no tangent rows, a symmetric system
             force = contact_solve(r.scaled @ r.J.T, -(r.J @ acc[r.columns] + r.bias))
             acc[r.columns] += r.scaled.T @ force
             lam[rows] = force
@@ -369,21 +371,28 @@ class BodyContactModel(Model):
         X, V, E, lam_g = self.inner.trajectory(Y, p, np.asarray(held)[:, :ng], np.asarray(push)[:, :ng])
         lam = np.zeros((len(Y), self.n_contacts))
         lam[:, :ng] = lam_g
-        now = self.element_of.copy()
         held = np.asarray(held)
         # where the coupled rows were solved here (held slots; friction at a rigid body's or a
         # corner's ground contacts), the inner model's forces are not the answer
         again = np.any(held[:, ng:] != 0, axis=1)
         if (self.mu > 0.0).any():
             again |= np.any(held != 0, axis=1)
-        try:
-            for k in np.flatnonzero(again):
-                if elements is not None:
-                    self.element_of[:] = elements[k]
+        for k in np.flatnonzero(again):
+            with self.held_on(None if elements is None else elements[k]):
                 lam[k] = self.rhs(Y[k], p, held[k], push[k])[1]
+        return X, V, E, lam
+
+    @contextmanager
+    def held_on(self, elements: IntArray | None) -> Iterator[None]:
+        """Within the block, each slot is held on ``elements (ns,)`` (a sample's, as the driver
+        recorded them; None: the present ones); afterwards on its present element again."""
+        now = self.element_of.copy()
+        if elements is not None:
+            self.element_of[:] = elements
+        try:
+            yield
         finally:
             self.element_of[:] = now
-        return X, V, E, lam
 
     def jacobian_function(self, p, held):
         return self.inner.jacobian_function(p, np.asarray(held)[: self.n_ground_contacts])
@@ -394,9 +403,8 @@ class BodyContactModel(Model):
         ``lam (nt, nc)``: its grounds' and those of the slots it is the particle of (the
         reactions on the other body's element vertices are not counted there)."""
         lam = np.atleast_2d(lam)
-        ng, n = self.n_ground_contacts, self.n_particles
-        out = lam[:, :ng].reshape(len(lam), n, -1).sum(axis=2) if self.n_grounds else np.zeros((len(lam), n))
-        np.add.at(out.T, self.slot_particle, lam[:, ng:].T)
+        out = super().particle_forces(lam)
+        np.add.at(out.T, self.slot_particle, lam[:, self.n_ground_contacts :].T)
         return out
 
     def forget_free(self, free: np.ndarray) -> None:

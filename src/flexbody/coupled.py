@@ -90,7 +90,7 @@ def _coupling(model, q: np.ndarray, u: np.ndarray, p: np.ndarray, rows: np.ndarr
     between bodies: the few particles they move, M diagonal), else from its dense matrices.
     With ``tangents`` (models with friction) the k tangent rows follow the k normal ones."""
     if hasattr(model, "contact_coupling"):
-        return model.contact_coupling(q, u, p, rows, tangents) if tangents else model.contact_coupling(q, u, p, rows)
+        return model.contact_coupling(q, u, p, rows, tangents)
     M, J = model.mass_matrix(q, p), model.gap_jacobian(q, p)[rows]
     return J, slice(None), delassus(J, M), lambda P: velocity_change(J, M, P), model.gap_bias(q, u, p)[rows]
 

@@ -14,6 +14,7 @@ from __future__ import annotations
 import time
 from collections import defaultdict, deque
 from collections.abc import Callable
+from contextlib import nullcontext
 from dataclasses import dataclass
 
 import numpy as np
@@ -26,7 +27,7 @@ from .assembly import AssembledModel
 from .contact import FREE, HELD, PUSHED, Event, Phases, UnsettledInstant, resolve
 from .coupled import CoupledImpactError
 from .events import EventFunctions, locate
-from .model import Model, load_model
+from .model import Model, couples_contacts, load_model
 from .result import STATUSES, SimulationResult
 from .scene import (
     COMPILED_METHODS,
@@ -116,7 +117,7 @@ def _settings(scene: Scene, overrides: dict) -> SimulationSettings:
     elif rigid:
         values["formulation"] = "floating"  # a rigid body is its frame T (DESIGN §6)
     if values["method"] is None:
-        values["method"] = "dopri5" if values["backend"] == "c" and not _coupled_in_python(scene) else "RK45"
+        values["method"] = "dopri5" if values["backend"] == "c" and not couples_contacts(scene) else "RK45"
     if values["method"] in COMPILED_METHODS and values["backend"] != "c":
         problems.append(f"`method` = {values['method']!r}: is compiled C and needs backend 'c'; with backend "
                         f"{values['backend']!r} use a SciPy method ({', '.join(METHODS[len(COMPILED_METHODS):])})")
@@ -145,17 +146,10 @@ def _settings(scene: Scene, overrides: dict) -> SimulationSettings:
 # bodies, never ignored.
 
 
-def _coupled_in_python(scene: Scene) -> bool:
-    """Whether the scene runs on :class:`flexbody.body_contact.BodyContactModel`, whose coupled
-    contacts the compiled loop does not know: bodies that may touch each other, or a rigid
-    body on a ground with friction."""
-    return bool(scene.contacts) or bool(scene.rigid_bodies and any(g.friction > 0.0 for g in scene.grounds))
-
-
 def _body_contact_problems(scene: Scene, values: dict) -> list[str]:
     """What the scene's contacts between bodies cannot run with yet (one sentence each)."""
     if not scene.contacts:
-        if _coupled_in_python(scene) and values["method"] in COMPILED_METHODS:
+        if couples_contacts(scene) and values["method"] in COMPILED_METHODS:
             return [_scipy_only(values["method"], "a rigid body on a ground with friction runs with SciPy's steppers "
                                 "(the compiled loop does not know coupled sticking and sliding)")]
         return []
@@ -689,10 +683,7 @@ class _Run:
             X, V, E, lam = model.trajectory(Y, p, held, push, elements=self.sample_elements[:k])
         else:
             X, V, E, lam = model.trajectory(Y, p, held, push)
-        if hasattr(model, "particle_forces"):  # contacts between bodies too
-            force = model.particle_forces(lam + push)
-        else:  # contacts are every (particle, ground) pair, particle-major (the Model checks it)
-            force = (lam + push).reshape(len(T), n, model.n_contacts // n).sum(axis=2)
+        force = model.particle_forces(lam + push)
         self.min_gap = min(self.min_gap, float(np.min(model.gaps(Y[-1, :nq], p))) if len(Y) else np.inf)
         # Energy taken by instant impacts strictly before each sample time (losses come in time order).
         loss_t = np.array([x[0] for x in self.losses], dtype=float)
@@ -705,20 +696,12 @@ class _Run:
         window_work = self.window_work(T, X) if self.windows is not None else None
         friction_force = np.zeros_like(V)
         if self.friction:
-            model.slip_directions(p)[:] = 0.0  # outputs: the physical law (the directions only continue a slip past its stop)
-            now = model.element_of.copy() if self.sample_elements is not None else None
-            try:
-                for j in np.flatnonzero(held.any(axis=1)):
-                    if now is not None:  # each slot on the element it was held on then
-                        model.element_of[:] = self.sample_elements[j]
+            for j in np.flatnonzero(held.any(axis=1)):
+                # contacts between bodies: each slot on the element it was held on then
+                on = model.held_on(self.sample_elements[j]) if self.sample_elements is not None else nullcontext()
+                with on:
                     ft = model.friction(Y[j], p, held[j], push[j])[1]
-                    if hasattr(model, "particle_forces"):  # contacts between bodies too
-                        friction_force[j] = model.particle_forces(ft.T).T
-                    else:
-                        friction_force[j] = ft.reshape(n, model.n_contacts // n, -1).sum(axis=1)
-            finally:
-                if now is not None:
-                    model.element_of[:] = now
+                friction_force[j] = model.particle_forces(ft.T).T
             if self.sample_tangential is not None:  # the windows' tangential forces
                 friction_force += self.sample_tangential[:k].reshape(len(T), n, model.n_contacts // n, -1).sum(axis=2)
         if window_work is not None:

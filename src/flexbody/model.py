@@ -58,6 +58,14 @@ class Model:
         """The first contacts, with the grounds: all of them unless bodies touch each other."""
         return self.n_contacts
 
+    def particle_forces(self, lam: FloatArray) -> FloatArray:
+        """Contact force on each particle, shape (nt, n), from per-contact values ``lam (nt,
+        nc)``: the sum over its grounds (the ground contacts are every (particle, ground) pair,
+        particle-major)."""
+        lam = np.atleast_2d(lam)
+        ng, n = self.n_ground_contacts, self.n_particles
+        return lam[:, :ng].reshape(len(lam), n, ng // n).sum(axis=2)
+
     def parameters(self, scene: Scene) -> FloatArray:  # pragma: no cover - abstract
         raise NotImplementedError
 
@@ -441,7 +449,7 @@ def load_model(scene: Scene | str | Path, backend: str = "c", formulation: str |
     if formulation == "particles":
         from .assembly import assembled_model
 
-        if scene.contacts:  # bodies that may touch each other: their contacts are added
+        if couples_contacts(scene):  # bodies that may touch each other: their contacts are added
             from .body_contact import BodyContactModel
 
             return BodyContactModel(scene, assembled_model(scene, backend))
@@ -462,11 +470,15 @@ def load_model(scene: Scene | str | Path, backend: str = "c", formulation: str |
             "formulation (the default), which runs any size at once"
         )
     model = load_derived_model(scene, backend, formulation)
-    rough = scene.rigid_bodies and any(g.friction > 0.0 for g in scene.grounds)
-    # bodies that may touch each other (rigid ones among them): their contacts are added; a rigid
-    # body's coupled contacts with friction are solved there too (2D)
-    if scene.contacts or rough:
+    if couples_contacts(scene):  # bodies that may touch each other, or a rigid body's contacts with friction
         from .body_contact import BodyContactModel
 
         return BodyContactModel(scene, model)
     return model
+
+
+def couples_contacts(scene: Scene) -> bool:
+    """Whether :func:`load_model` adds :class:`flexbody.body_contact.BodyContactModel` to the
+    scene's model, whose coupled contacts the compiled loop does not know: bodies that may
+    touch each other, or a rigid body on a ground with friction (2D)."""
+    return bool(scene.contacts) or bool(scene.rigid_bodies and any(g.friction > 0.0 for g in scene.grounds))
