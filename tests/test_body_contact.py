@@ -313,3 +313,22 @@ def test_the_reported_contact_forces_obey_newtons_second_law_across_element_hand
     smooth = np.all(np.abs(t[:, None] - result.events_time[None, :]) > 2 * dt, axis=1)
     assert smooth.sum() > 0.9 * len(t)
     np.testing.assert_allclose(force[smooth], mass * (accel[smooth] + 9.81), rtol=0, atol=2e-3 * mass * 9.81)
+
+
+@pytest.mark.parametrize("backend", ["numpy", "c"])
+def test_one_contacts_gap_equals_its_entry_of_all_gaps(backend):
+    """Locating an impact evaluates one contact's gap (``model.gap``): it must be exactly the
+    entry of the whole vector, for ground contacts and for slots near, on and far from the
+    other body's surface, inside it too."""
+    scene = _scene(TRIANGLES)
+    model = load_model(scene, backend=backend)
+    p = model.parameters(scene)
+    rng = np.random.default_rng(7)
+    for shift in (0.0, 0.04, 0.1, 0.105):  # apart, near, touching, inside
+        x = scene.initial_positions().copy()
+        x[:3, 0] += shift
+        x += 1e-3 * rng.standard_normal(x.shape)
+        q = x.ravel()
+        gaps = model.gaps(q, p)
+        assert [model.gap(q, p, c) for c in range(model.n_contacts)] == gaps.tolist()
+    assert (gaps[model.n_ground_contacts:] < 0).any()  # the last shift put a particle inside

@@ -73,6 +73,10 @@ class Model:
         """Gap of each contact (particle * n_grounds + ground), shape (nc,)."""
         raise NotImplementedError
 
+    def gap(self, q, p, c: int) -> float:
+        """Gap of contact ``c`` alone, equal to ``gaps(q, p)[c]`` (locating an impact needs no other)."""
+        return float(self.gaps(q, p)[c])
+
     def rhs(self, y, p, held, push) -> tuple[FloatArray, FloatArray]:  # pragma: no cover - abstract
         """Contact-constrained right-hand side.
 

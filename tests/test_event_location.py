@@ -1,0 +1,70 @@
+"""Event location on a step's dense output (flexbody.events): the earliest root of every
+contact whose event function fired, and the contacts of the same instant.
+
+The event functions here are closed forms of time (the "state" is the time itself), so
+each root is known exactly and can be checked against the located instant.
+"""
+
+import numpy as np
+import pytest
+
+from flexbody.constants import GROUP_TIME
+from flexbody.events import _earliest
+
+
+class _Closed:
+    """Event functions g_c(t) given in closed form; counts whole-vector and single evaluations."""
+
+    def __init__(self, functions):
+        self.functions = functions
+        self.free = np.ones(len(functions), bool)
+        self.whole = self.single = 0
+
+    def __call__(self, y):
+        self.whole += 1
+        return np.array([f(y[0]) for f in self.functions])
+
+    def one(self, y, c):
+        self.single += 1
+        return float(self.functions[c](y[0]))
+
+
+def _locate(functions, ta=0.0, tb=1.0):
+    events = _Closed(functions)
+    ga, gb = events(np.array([ta])), events(np.array([tb]))
+    fired = np.flatnonzero((ga > 0) & (gb <= 0))
+    return _earliest(events, lambda t: np.array([t]), fired, ta, tb, ga, gb), events
+
+
+def test_earliest_root_and_its_instant():
+    roots = [0.3, 0.1, 0.1 + 0.5 * GROUP_TIME, 0.2, 0.1 + 3 * GROUP_TIME]
+    crossing, _ = _locate([lambda t, r=r: r - t for r in roots])
+    assert crossing.t == pytest.approx(0.1, abs=1e-14)
+    assert crossing.t >= 0.1 - 1e-15  # never before the root: the restart must not find it again
+    assert np.flatnonzero(crossing.contacts).tolist() == [1, 2]  # within GROUP_TIME of the earliest only
+
+
+def test_a_misleading_chord_does_not_hide_an_earlier_root():
+    # contact 0's chord crosses first (at 0.3) but its root is at 0.3 ** (1/3) = 0.669;
+    # contact 1's chord and root are at 0.5: the instant is 0.5, contact 1 alone
+    crossing, _ = _locate([lambda t: 0.3 - t**3, lambda t: 0.5 - t])
+    assert crossing.t == pytest.approx(0.5, abs=1e-14)
+    assert np.flatnonzero(crossing.contacts).tolist() == [1]
+
+
+def test_simultaneous_roots_form_one_instant_whatever_the_order():
+    # four contacts crossing at the same time (a body landing flat), listed in two orders
+    slopes = [1.0, 2.0, 0.5, 3.0]
+    for order in (slopes, slopes[::-1]):
+        crossing, _ = _locate([lambda t, s=s: s * (0.25 - t) for s in order])
+        assert crossing.t == pytest.approx(0.25, abs=1e-14)
+        assert crossing.contacts.all()
+
+
+def test_one_root_search_per_instant_when_the_chords_order_the_roots():
+    # 50 contacts fired in the bracket, roots spread over it: one is searched, not 50
+    roots = np.linspace(0.2, 0.9, 50)
+    crossing, events = _locate([lambda t, r=r: r - t for r in roots[::-1]])
+    assert crossing.t == pytest.approx(0.2, abs=1e-14)
+    assert np.flatnonzero(crossing.contacts).tolist() == [49]
+    assert events.single < 60 and events.whole <= 4  # ends, the root, its group time
