@@ -332,3 +332,27 @@ def test_one_contacts_gap_equals_its_entry_of_all_gaps(backend):
         gaps = model.gaps(q, p)
         assert [model.gap(q, p, c) for c in range(model.n_contacts)] == gaps.tolist()
     assert (gaps[model.n_ground_contacts:] < 0).any()  # the last shift put a particle inside
+
+
+def test_dependent_rows_are_found_block_by_block_as_by_one_rank_of_the_whole():
+    """coupled._dependent sums the rank over blocks of rows that share columns: it must say
+    what one SVD of the whole matrix says, for independent rows, for a row that is the sum of
+    two others in its block, and for two identical rows in different places."""
+    from flexbody.coupled import _dependent
+
+    rng = np.random.default_rng(3)
+    independent = 0
+    for trial in range(40):
+        k, c = 30, 60
+        J = np.zeros((k, c))
+        for r in range(k):  # each row touches a few columns, as a contact row touches its particles
+            J[r, rng.choice(c, size=rng.integers(1, 5), replace=False)] = rng.standard_normal()
+        if trial % 3 == 1:
+            J[5] = J[2] + J[9]  # dependent, and it links their blocks
+        elif trial % 3 == 2:
+            J[17] = J[4]
+        whole = np.linalg.matrix_rank(J, tol=1e-9 * max(1.0, float(np.abs(J).max()))) < k
+        assert _dependent(J) == whole, trial
+        assert whole or trial % 3 == 0  # the rows made dependent are
+        independent += not whole
+    assert independent >= 5  # both answers were checked

@@ -669,3 +669,32 @@ def test_entries_of_q_eight_orders_apart_are_all_solved():
     assert np.all(np.abs(z * w) <= 1e-12 * np.abs(z) * (np.abs(M) @ z + np.abs(q)).max())
     scaled = solve_lcp(M, q * 1e8)
     np.testing.assert_allclose(scaled.z * 1e-8, z, rtol=1e-9, atol=1e-20)
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_a_block_diagonal_problem_is_solved_block_by_block_as_a_whole(seed):
+    """Contacts that do not act on each other (W zero between them, rows in any order) are
+    solved as separate LCPs (a pile's held contacts): the forces must equal Lemke's on the
+    whole matrix, and the blocks found must be the ones built."""
+    from flexbody.contact_problems import independent_blocks
+
+    rng = np.random.default_rng(seed)
+    sizes = [1, 3, 2, 4, 1]
+    W = np.zeros((sum(sizes), sum(sizes)))
+    start = 0
+    for n in sizes:
+        A = rng.standard_normal((n, n + 2))
+        W[start : start + n, start : start + n] = A @ A.T  # positive definite: the answer is unique
+        start += n
+    order = rng.permutation(len(W))
+    W = W[np.ix_(order, order)]
+    a_free = rng.standard_normal(len(W))
+    blocks = independent_blocks(W)
+    assert sorted(len(b) for b in blocks) == sorted(sizes)
+    whole = solve_lcp(W, a_free)
+    assert whole.solved
+    split = solve_forces(W, a_free, fast=False)
+    assert split.solved and split.method == "lcp"
+    np.testing.assert_allclose(split.normal, whole.z, rtol=1e-12, atol=1e-12)
+    assert_solves(solve_lcp(W, a_free), W, a_free)
+    assert np.all(split.normal_rate >= -1e-12) and abs(split.normal @ split.normal_rate) < 1e-10

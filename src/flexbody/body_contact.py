@@ -75,6 +75,8 @@ DEPENDENT = 1e-12
 #: A slip rate below this (relative to the largest speed, at least 1 m/s) is round-off of
 #: the velocities (a joint stop leaves ~1e-17 m/s): it gives no sliding direction.
 SLIP_ROUNDOFF = 1e-13
+#: Contact rows on at most this many coordinates are multiplied densely (:func:`_gram`).
+DENSE_WIDTH = 64
 
 
 class BodyContactModel(Model):
@@ -273,7 +275,7 @@ class BodyContactModel(Model):
         sliding = (mu > 0.0) & (codes == SLIDING)
         r = self._rows(ground_rows, held_slots, q, u, p, tangents=bool((mu > 0.0).any()))
         if not (stick | sliding).any():  # frictionless: no tangent rows, a symmetric system
-            force = contact_solve(r.scaled @ r.J.T, -(r.J @ acc[r.columns] + r.bias))
+            force = contact_solve(_gram(r.scaled, r.J), -(r.J @ acc[r.columns] + r.bias))
             acc[r.columns] += r.scaled.T @ force
             lam[rows] = force
             return _Solved(ydot, lam, fast, rows, np.zeros(k), np.zeros(k), r.tangents, stick)
@@ -312,7 +314,7 @@ class BodyContactModel(Model):
         C = np.vstack([Jn, Jt[stick]])  # the constrained rates
         G = np.vstack([Sn + drag[:, None] * St, St[stick]])  # G M^-1: the forces' directions, M^-1
         b = -(C @ acc[r.columns] + np.concatenate([r.bias[:k], r.bias[k:][stick]]))
-        A = C @ G.T
+        A = _gram(C, G)
         if not (np.all(np.isfinite(A)) and np.all(np.isfinite(b))):  # the driver reports a blow-up
             raise FloatingPointError("the held contacts' forces are not finite (the state diverged)")
         x = contact_solve(A, b) if not drag.any() else _least_squares(A, b)
@@ -368,7 +370,7 @@ class BodyContactModel(Model):
             out[r.columns] = r.scaled.T @ np.asarray(P, float)
             return out
 
-        return r.J, r.columns, r.scaled @ r.J.T, response, r.bias
+        return r.J, r.columns, _gram(r.scaled, r.J), response, r.bias
 
     def impact(self, y, p, stop):  # pragma: no cover - coupled models resolve with flexbody.coupled
         raise NotImplementedError("contacts between bodies couple: flexbody.coupled.coupled_impact resolves them")
@@ -489,10 +491,10 @@ class BodyContactModel(Model):
         return gaps, near
 
     def _closest(self, x, slot: int | None = None):
-        pairs = self._candidates.pairs(x)
+        pairs = self._candidates.pairs(x, None if slot is None else self.slot_particle[slot])
         keep = self.allowed[self.particle_body[pairs[:, 0]], self.element_body[pairs[:, 1]]]
         if slot is not None:
-            keep &= (pairs[:, 0] == self.slot_particle[slot]) & (self.element_body[pairs[:, 1]] == self.slot_body[slot])
+            keep &= self.element_body[pairs[:, 1]] == self.slot_body[slot]
         pairs = pairs[keep]
         if not len(pairs):
             return None
@@ -721,6 +723,17 @@ class ElementKernels:
         weights = np.column_stack([1.0 - weight[0], weight[0]]) if d == 2 else weight.T
         slip_terms = (slip[0][0], slip[1][0]) if d == 2 else (None, None)
         return ElementTerms(gap[0], weights, normal.T, rate[0], bias[0], *slip_terms)
+
+
+def _gram(A: FloatArray, B: FloatArray) -> FloatArray:
+    """``A @ B.T``, shape (m, m), of contact rows ``A, B`` (m, c): through sparse matrices when
+    they are wide, since each row moves a few particles (a pile's held rows: O(m c) work to
+    convert, not O(m^2 c) to multiply densely)."""
+    if A.shape[1] <= DENSE_WIDTH:
+        return A @ B.T
+    from scipy.sparse import csr_matrix
+
+    return (csr_matrix(A) @ csr_matrix(B).T).toarray()
 
 
 def _least_squares(A: FloatArray, b: FloatArray) -> FloatArray:

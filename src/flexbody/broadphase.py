@@ -276,8 +276,9 @@ class CandidateList:
         self._built_at: FloatArray | None = None
         self._pairs = np.zeros((0, 2), dtype=np.int64)
 
-    def pairs(self, x: FloatArray) -> IntArray:
-        """The candidate pairs at positions x (n, d): equal to ``candidate_pairs(x, ..., margin)``."""
+    def pairs(self, x: FloatArray, particle: int | None = None) -> IntArray:
+        """The candidate pairs at positions x (n, d): equal to ``candidate_pairs(x, ..., margin)``;
+        with ``particle``, that particle's only."""
         x = np.asarray(x, float)
         moved = np.inf if self._built_at is None else np.max(np.abs(x - self._built_at), initial=0.0)
         if moved > self.skin / 2:
@@ -285,7 +286,12 @@ class CandidateList:
                                           self.element_body, self.self_contact, self.method)
             self._built_at = x.copy()
             self.rebuilds += 1
-        p, e = self._pairs[:, 0], self._pairs[:, 1]
+        kept = self._pairs if particle is None else self._pairs[self._pairs[:, 0] == particle]
+        return kept[self._inside(x, kept)]
+
+    def _inside(self, x: FloatArray, pairs: IntArray) -> np.ndarray:
+        """Which ``pairs`` have the particle inside the element's box grown by ``margin``."""
+        p, e = pairs[:, 0], pairs[:, 1]
         vertices = self.elements[e].T  # only the boxes of kept pairs, one axis at a time (fast)
         inside = np.ones(len(p), bool)
         for k in range(x.shape[1]):
@@ -294,7 +300,7 @@ class CandidateList:
             here = coordinate[p]
             inside &= (here >= functools.reduce(np.minimum, corner) - self.margin)
             inside &= here <= functools.reduce(np.maximum, corner) + self.margin
-        return self._pairs[inside]
+        return inside
 
 
 # --- the measurement behind the choice (python -m flexbody.broadphase) -------------------------

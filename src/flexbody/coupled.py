@@ -220,9 +220,33 @@ def coupled_release(model, y: np.ndarray, p: np.ndarray, held: np.ndarray, push:
     floor = 1e-10 * max(1.0, float(np.abs(a_free).max()))
     lifted = (solution.normal == 0.0) & (solution.normal_rate > floor)
     release[rows] = lifted | (leaving[rows] & (solution.normal <= force_tolerance[rows]))
-    if len(rows) > 1 and np.linalg.matrix_rank(J, tol=1e-9 * max(1.0, float(np.abs(J).max()))) < len(rows):
-        implied[rows] = (solution.normal == 0.0) & ~release[rows]  # redundant: the others carry it
+    unloaded = (solution.normal == 0.0) & ~release[rows]
+    if unloaded.any() and _dependent(J):
+        implied[rows] = unloaded  # redundant: the others carry it
     return release, implied
+
+
+def _dependent(J: np.ndarray) -> bool:
+    """Whether the rows of ``J`` (k, c) are linearly dependent: rank below k, singular values
+    counted above 1e-9 of its largest entry.  Rows that share no coordinate are independent
+    of each other, so the rank is summed over the blocks of rows linked through shared
+    columns (a pile's held contacts fall into many small blocks: one SVD of the whole took
+    a third of a second)."""
+    k = len(J)
+    if k < 2:
+        return False
+    from scipy.sparse import csr_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    tol = 1e-9 * max(1.0, float(np.abs(J).max()))
+    links = csr_matrix(J != 0.0)
+    n_blocks, block = connected_components(links @ links.T, directed=False)
+    for b in range(n_blocks):
+        rows = J[block == b]
+        used = rows[:, (rows != 0.0).any(axis=0)]
+        if len(rows) > used.shape[1] or np.linalg.matrix_rank(used, tol=tol) < len(rows):
+            return True
+    return False
 
 
 def _sliding_rates(J: np.ndarray, u: np.ndarray, rows: np.ndarray, codes: np.ndarray) -> np.ndarray:

@@ -279,7 +279,9 @@ def closest_features(x: FloatArray, vertices: FloatArray, elements: IntArray,
     face_normal = (segment_normals if d == 2 else triangle_normals)(vertices, elements[element])
     pseudo = face_normal.copy()
     vertex_rows = kind == VERTEX
-    pseudo[vertex_rows] = vertex_pseudonormals(vertices, elements)[feature[vertex_rows, 0]]
+    if vertex_rows.any():  # from the elements at those vertices only: O(answers), not O(surface)
+        at = feature[vertex_rows, 0]
+        pseudo[vertex_rows] = vertex_pseudonormals(vertices, elements[np.isin(elements, at).any(axis=1)])[at]
     edge_rows = np.flatnonzero(kind == EDGE)
     if len(edge_rows):
         edges, edge_pseudo = edge_pseudonormals(vertices, elements)
