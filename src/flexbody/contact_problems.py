@@ -327,7 +327,10 @@ def _normal_lcp(W: np.ndarray, q: np.ndarray, on: np.ndarray, fast: bool
         return x, "solved", "decoupled contacts: closed form.", "decoupled", 0
     idx = np.flatnonzero(on)
     status, message, pivots = "solved", "", 0
-    for block in independent_blocks(W[np.ix_(idx, idx)]):
+    blocks = independent_blocks(W[np.ix_(idx, idx)])
+    alone = idx[[b[0] for b in blocks if len(b) == 1]]
+    x[alone] = np.maximum(-q[alone], 0.0) / np.diag(W)[alone]  # a contact on its own: closed form
+    for block in (b for b in blocks if len(b) > 1):
         rows = idx[block]
         sol = solve_lcp(W[np.ix_(rows, rows)], q[rows])
         x[rows] = sol.z
