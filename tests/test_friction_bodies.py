@@ -152,6 +152,40 @@ def test_painleves_rod_is_reported_not_approximated():
         assert r.stats["energy_drift_relative"] < 1e-6
 
 
+@pytest.mark.parametrize("v", [1.0, -1.0])
+def test_painleves_indeterminate_case_is_reported_with_the_forces_found(v):
+    """The rod's end on the ground, sliding, spinning at 8 rad/s: its free normal acceleration
+    is ω² L/2 sin 45° - g = 12.8 m/s² (away from the ground), so no force is needed.  Sliding
+    with the end leading (towards -x, the rod leaning back over it; mu = 4: W_nn + W_nt D =
+    (1.5 - 0.5 mu) / m < 0) a push along with its friction, which would pull the end down,
+    is consistent too: the release says both (it lifts off, and the note names the case).
+    Sliding the other way the answer is unique: lift-off, no note."""
+    from flexbody.constants import SLIDING
+    from flexbody.contact_problems import INDETERMINATE
+    from flexbody.coupled import coupled_release
+    from flexbody.model import load_model
+    from flexbody.state import initial_coordinates
+
+    table = _rod(4.0, v)
+    table["bodies"][0]["particles"] = [[0.0, 0.0], [np.cos(np.pi / 4), np.sin(np.pi / 4)]]  # on the ground
+    table["bodies"][0]["angular_velocity"] = 8.0
+    scene = flexbody.load_scene(table)
+    model = load_model(scene)
+    assert model.coupled and model.n_contacts == 2  # each end on the one ground
+    p = model.parameters(scene)
+    q, u = initial_coordinates(scene, model)
+    y = np.concatenate([q, u, [0.0, 0.0]])
+    assert model.gaps(q, p)[0] == pytest.approx(0.0, abs=1e-15)
+    held, codes = np.array([True, False]), np.array([SLIDING, 0], np.intc)
+    notes: list[str] = []
+    release, _ = coupled_release(model, y, p, held, np.zeros(2), np.zeros(2, bool), np.full(2, 1e-10), codes, notes)
+    assert release.tolist() == [True, False]
+    if v < 0:
+        assert len(notes) == 1 and INDETERMINATE in notes[0] and "held contacts [0]" in notes[0]
+    else:
+        assert notes == []
+
+
 def test_a_rigid_box_sliding_down_a_rough_incline_balances_force_and_moment_per_corner():
     """A rigid square on a rough 30 deg ground slides down from rest (both corners sliding
     from rest, no stored direction): acceleration g (sin - mu cos) from the first sample on;
@@ -202,3 +236,18 @@ def test_a_rocking_box_landing_on_a_rough_ground_keeps_its_corners_stuck():
     v = model.inner.velocities(out.y[: model.nq], out.y[model.nq : model.nq + model.nu], p)
     assert np.abs(v[:2]).max() < 1e-15, v[:2]
     assert not out.leaving[:2].any()  # both stay held
+
+
+def test_a_run_whose_forces_were_indeterminate_says_when_in_its_warnings():
+    """The instants' notes reach the run's warnings: the first instant, how many later."""
+    from flexbody.driver import _Run, _settings
+    from flexbody.model import load_model
+
+    scene = flexbody.load_scene(_rod(4.0, -1.0))
+    run = _Run(scene, load_model(scene), _settings(scene, {}), None, 100)
+    assert run.untrustworthy(0.0, 0.0, 0.0) == []
+    run.indeterminate = [(0.125, "held contacts [0]: Painlevé: ..."), (0.125, "held contacts [0]: Painlevé: ..."),
+                         (0.25, "held contacts [1]: Painlevé: ...")]
+    (warning,) = run.untrustworthy(0.0, 0.0, 0.0)
+    assert warning.startswith("at t = 0.125 s (and at 1 later instant) the contact forces were not the only")
+    assert "held contacts [0]" in warning and "Painlevé's indeterminate case" in warning

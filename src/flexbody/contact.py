@@ -103,6 +103,7 @@ class Resolution:
     not_held: np.ndarray | None = None  # bool (nc,): stopped at this instant, then released at once (or rebounded)
     impact_loss: float = 0.0  # kinetic energy removed by instant impacts (J)
     iterations: int = 0
+    notes: list[str] = field(default_factory=list)  # ill-posed but solved problems (Painlevé's indeterminate case)
 
 
 def friction_phases(model: Model, t: float, y: np.ndarray, p: np.ndarray, phases: Phases, leaving: np.ndarray,
@@ -227,6 +228,7 @@ def resolve(
     e = np.zeros(nc) if restitution is None else np.asarray(restitution, float)
     slowest = np.zeros(nc) if min_rebound is None else np.asarray(min_rebound, float)
     events: list[Event] = []
+    notes: list[str] = []
     loss = 0.0
     impacted, settled, not_held = np.zeros(nc, bool), np.zeros(nc, bool), np.zeros(nc, bool)
     was_held = phases.on_ground.copy()  # on the ground before this instant, so v_n = 0
@@ -292,7 +294,7 @@ def resolve(
             continue  # the dampers saw the velocity jump: recompute the forces before holding anyone
         if model.coupled:  # Signorini's law over all held contacts at once
             pulling, implied = coupled_release(model, y, p, phases.on_ground, phases.push, leaving,
-                                               force_tolerance, phases.held)
+                                               force_tolerance, phases.held, notes)
             phases.phase[implied] = FREE  # redundant and unloaded: the others hold it at gap 0
             phases.floor[implied] = np.minimum(0.0, gaps[implied]) - gap_tolerance
             released = np.flatnonzero(pulling)
@@ -315,8 +317,12 @@ def resolve(
         raise UnsettledInstant(t, iterations)
     if hasattr(model, "friction") and getattr(model, "laws", np.zeros((0, 2)))[:, 0].any():
         # coupled contacts (between bodies, a rigid body's): stick and slip decided jointly
-        phase_change = coupled_friction_phases if model.coupled else friction_phases
-        y, lost, found = phase_change(model, t, y, p, phases, leaving, was_held, force_tolerance, speed_tolerance)
+        if model.coupled:
+            y, lost, found = coupled_friction_phases(model, t, y, p, phases, leaving, was_held, force_tolerance,
+                                                     speed_tolerance, notes)
+        else:
+            y, lost, found = friction_phases(model, t, y, p, phases, leaving, was_held, force_tolerance,
+                                             speed_tolerance)
         loss += lost
         events += found
     # A free contact too close to its floor to be armed (released on the ground, or left at
@@ -328,4 +334,5 @@ def resolve(
         model.tangential_pushes(p)[phases.phase != PUSHED] = 0.0
     phases.push[phases.phase != PUSHED] = 0.0
     phases.push_until[phases.phase != PUSHED] = np.inf
-    return Resolution(y=y, phases=phases, events=events, not_held=not_held, impact_loss=loss, iterations=iterations)
+    return Resolution(y=y, phases=phases, events=events, not_held=not_held, impact_loss=loss, iterations=iterations,
+                      notes=notes)

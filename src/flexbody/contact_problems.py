@@ -63,6 +63,8 @@ from .lcp import solve_lcp
 __all__ = ["ContactSolution", "delassus", "is_decoupled", "solve_forces", "solve_forces_friction",
            "solve_impact", "solve_impact_friction", "velocity_change"]
 
+#: How the message of a frictional force problem with possibly several answers starts.
+INDETERMINATE = "Painlevé: the contact force may not be unique"
 #: Relative size below which an off-diagonal entry of W counts as zero (decoupled contacts).
 DECOUPLED_TOL = 1e-12
 
@@ -288,7 +290,7 @@ def solve_forces_friction(W: np.ndarray, a_free: np.ndarray, mu: np.ndarray | fl
         message = ("Painlevé: no consistent contact force (friction of a sliding contact would "
                    f"need the contact to pull; {message})")
     elif status == "solved" and sliding.any() and not _is_p0_matrix(W[:nc, :nc] + W[:nc, nc:] @ drag):
-        message = ("Painlevé: the contact force may not be unique (with the sliding friction the "
+        message = (f"{INDETERMINATE} (with the sliding friction the "
                    f"normal matrix W_nn + W_nt D has a negative principal minor); one solution returned, "
                    f"{message}")
     return _friction_solution(W, a, lam, status, message, "lcp", pivots)

@@ -21,8 +21,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from .constants import HELD, SLIDING
-from .contact_problems import (delassus, solve_forces, solve_forces_friction, solve_impact, solve_impact_friction,
-                               velocity_change)
+from .contact_problems import (INDETERMINATE, delassus, solve_forces, solve_forces_friction, solve_impact,
+                               solve_impact_friction, velocity_change)
 from .dynamics import contact_solve
 
 
@@ -162,7 +162,8 @@ def coupled_impact(model, y: np.ndarray, p: np.ndarray, touching: np.ndarray, re
 
 
 def coupled_release(model, y: np.ndarray, p: np.ndarray, held: np.ndarray, push: np.ndarray, leaving: np.ndarray,
-                    force_tolerance: np.ndarray, codes: np.ndarray | None = None) -> np.ndarray:
+                    force_tolerance: np.ndarray, codes: np.ndarray | None = None,
+                    notes: list[str] | None = None) -> np.ndarray:
     """Held contacts that lift off: Signorini's law over the ``held`` contacts as one LCP.
 
     Parameters
@@ -177,6 +178,9 @@ def coupled_release(model, y: np.ndarray, p: np.ndarray, held: np.ndarray, push:
     codes : ndarray of int, shape (nc,), optional
         The held contacts' laws (``Phases.held``): with friction, a ``SLIDING`` contact's
         friction is ``-mu lam`` against its slip, and the others stick (Coulomb's LCP).
+    notes : list of str, optional
+        Receives the solver's message when the forces found may not be the only consistent
+        ones (Painlevé's indeterminate case, :func:`_note_indeterminate`).
 
     Returns
     -------
@@ -210,6 +214,7 @@ def coupled_release(model, y: np.ndarray, p: np.ndarray, held: np.ndarray, push:
     if friction:
         codes = np.zeros(model.n_contacts, np.intc) if codes is None else np.asarray(codes)
         solution = solve_forces_friction(W, a_free, model.mu[rows], _sliding_rates(J, u[cols], rows, codes))
+        _note_indeterminate(solution, rows, notes)
         J, a_free = J[:k], a_free[:k]  # the normal rows decide who lifts off
     else:
         solution = solve_forces(W, a_free)
@@ -257,8 +262,17 @@ def _sliding_rates(J: np.ndarray, u: np.ndarray, rows: np.ndarray, codes: np.nda
     return np.where(codes[rows] == SLIDING, slip, 0.0)
 
 
+def _note_indeterminate(solution, rows: np.ndarray, notes: list[str] | None) -> None:
+    """Keep the message of a frictional force problem solved where other forces may be
+    consistent too (Painlevé's indeterminate case: the run goes on with Lemke's answer, and
+    its warnings say so)."""
+    if notes is not None and solution.solved and solution.message.startswith(INDETERMINATE):
+        notes.append(f"held contacts {rows.tolist()}: {solution.message}")
+
+
 def coupled_friction_phases(model, t: float, y: np.ndarray, p: np.ndarray, phases, leaving: np.ndarray,
-                            was_held: np.ndarray, force_tolerance: np.ndarray, speed_tolerance: float):
+                            was_held: np.ndarray, force_tolerance: np.ndarray, speed_tolerance: float,
+                            notes: list[str] | None = None):
     """Coulomb friction of coupled held contacts once their normal forces are settled: stick
     or slip decided jointly (the twin of :func:`flexbody.contact.friction_phases` for
     contacts that couple; ``phases`` is updated in place).
@@ -310,6 +324,7 @@ def coupled_friction_phases(model, t: float, y: np.ndarray, p: np.ndarray, phase
     a_free = _rounded(J @ acc + bias, J, acc)
     moving = (mu > 0.0) & ~slow
     solution = solve_forces_friction(W, a_free, mu, np.where(moving, slip, 0.0))
+    _note_indeterminate(solution, rows, notes)
     if not (solution.solved or _within_rounding(solution, a_free[:k])):
         raise CoupledImpactError(f"the friction of held contacts {rows.tolist()} has no solution found: "
                                  f"{solution.message}")

@@ -324,6 +324,7 @@ class _Run:
         self.impact_times: dict[int, deque[tuple[float, float]]] = defaultdict(deque)  # for the chatter guard
         self.friction_times: dict[int, deque[float]] = defaultdict(deque)  # stick and slip events, likewise
         self.losses: list[tuple[float, float]] = []
+        self.indeterminate: list[tuple[float, str]] = []  # instants whose contact forces may not be unique
         self.nfev = self.njev = self.steps = self.segments = 0
         self.h_next = 0.0  # the step an explicit stepper proposed where the last segment ended (s)
         self.segment_log: list | None = None  # set to [] to log (RHS evaluations, y0, held, push) per segment
@@ -487,6 +488,7 @@ class _Run:
             self.y[:] = res.y
             self.phases.assign(res.phases)
             new, not_held, loss = res.events, res.not_held, res.impact_loss
+            self.indeterminate += [(t, note) for note in res.notes]
         self.events += new
         if self.windows is not None:
             self.track_windows(t, was_pushed)
@@ -666,6 +668,11 @@ class _Run:
         if min_force < -float(self.force_tolerance.max(initial=0.0)):
             out.append(f"a held contact's force turned negative ({min_force:.2g} N) between event checks (a lift-off "
                        "was missed at this tolerance): tighten --rtol/--atol")
+        if self.indeterminate:
+            (t, note), more = self.indeterminate[0], len({t for t, _ in self.indeterminate}) - 1
+            also = f" (and at {more} later instant{'s' if more > 1 else ''})" if more else ""
+            out.append(f"at t = {t:.9g} s{also} the contact forces were not the only consistent ones, {note}: the "
+                       "run went on with that one, another would be as consistent (Painlevé's indeterminate case)")
         if s.rtol > LOOSE_RTOL:
             out.append(f"rtol = {s.rtol:g} is loose: impacts and lift-offs can differ from a tight run's; check the "
                        "event count against a run with a tighter --rtol")
