@@ -294,7 +294,7 @@ def resolve(
             continue  # the dampers saw the velocity jump: recompute the forces before holding anyone
         if model.coupled:  # Signorini's law over all held contacts at once
             pulling, implied = coupled_release(model, y, p, phases.on_ground, phases.push, leaving,
-                                               force_tolerance, phases.held, notes)
+                                               force_tolerance, phases.held, notes, speed_tolerance)
             phases.phase[implied] = FREE  # redundant and unloaded: the others hold it at gap 0
             phases.floor[implied] = np.minimum(0.0, gaps[implied]) - gap_tolerance
             released = np.flatnonzero(pulling)

@@ -163,7 +163,7 @@ def coupled_impact(model, y: np.ndarray, p: np.ndarray, touching: np.ndarray, re
 
 def coupled_release(model, y: np.ndarray, p: np.ndarray, held: np.ndarray, push: np.ndarray, leaving: np.ndarray,
                     force_tolerance: np.ndarray, codes: np.ndarray | None = None,
-                    notes: list[str] | None = None) -> np.ndarray:
+                    notes: list[str] | None = None, speed_tolerance: float = np.inf) -> np.ndarray:
     """Held contacts that lift off: Signorini's law over the ``held`` contacts as one LCP.
 
     Parameters
@@ -178,6 +178,8 @@ def coupled_release(model, y: np.ndarray, p: np.ndarray, held: np.ndarray, push:
     codes : ndarray of int, shape (nc,), optional
         The held contacts' laws (``Phases.held``): with friction, a ``SLIDING`` contact's
         friction is ``-mu lam`` against its slip, and the others stick (Coulomb's LCP).
+        A contact slipping faster than ``speed_tolerance`` slides whatever its code (one
+        that starts on the ground, or was just hit, while moving along it).
     notes : list of str, optional
         Receives the solver's message when the forces found may not be the only consistent
         ones (Painlevé's indeterminate case, :func:`_note_indeterminate`).
@@ -213,7 +215,8 @@ def coupled_release(model, y: np.ndarray, p: np.ndarray, held: np.ndarray, push:
     a_free = _rounded(J @ acc + bias, J, acc)
     if friction:
         codes = np.zeros(model.n_contacts, np.intc) if codes is None else np.asarray(codes)
-        solution = solve_forces_friction(W, a_free, model.mu[rows], _sliding_rates(J, u[cols], rows, codes))
+        solution = solve_forces_friction(W, a_free, model.mu[rows],
+                                         _sliding_rates(J, u[cols], rows, codes, speed_tolerance))
         _note_indeterminate(solution, rows, notes)
         J, a_free = J[:k], a_free[:k]  # the normal rows decide who lifts off
     else:
@@ -254,12 +257,13 @@ def _dependent(J: np.ndarray) -> bool:
     return False
 
 
-def _sliding_rates(J: np.ndarray, u: np.ndarray, rows: np.ndarray, codes: np.ndarray) -> np.ndarray:
-    """Slip rates (k,) of the held contacts ``rows`` that slide (code SLIDING), from the
-    tangent rows of ``J`` (2 k, c); 0 for those that stick, and for a sliding one exactly at
-    its stop, which the LCP then treats as sticking."""
+def _sliding_rates(J: np.ndarray, u: np.ndarray, rows: np.ndarray, codes: np.ndarray,
+                   speed_tolerance: float = np.inf) -> np.ndarray:
+    """Slip rates (k,) of the held contacts ``rows`` that slide (code SLIDING, or faster than
+    ``speed_tolerance``), from the tangent rows of ``J`` (2 k, c); 0 for those that stick,
+    and for a sliding one exactly at its stop, which the LCP then treats as sticking."""
     slip = J[len(rows) :] @ u
-    return np.where(codes[rows] == SLIDING, slip, 0.0)
+    return np.where((codes[rows] == SLIDING) | (np.abs(slip) > speed_tolerance), slip, 0.0)
 
 
 def _note_indeterminate(solution, rows: np.ndarray, notes: list[str] | None) -> None:

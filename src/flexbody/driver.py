@@ -671,8 +671,8 @@ class _Run:
         if self.indeterminate:
             (t, note), more = self.indeterminate[0], len({t for t, _ in self.indeterminate}) - 1
             also = f" (and at {more} later instant{'s' if more > 1 else ''})" if more else ""
-            out.append(f"at t = {t:.9g} s{also} the contact forces were not the only consistent ones, {note}: the "
-                       "run went on with that one, another would be as consistent (Painlevé's indeterminate case)")
+            out.append(f"at t = {t:.9g} s{also}, {note.rstrip('.')}: the run went on with the answer found, and "
+                       "another would be as consistent (Painlevé's indeterminate case)")
         if s.rtol > LOOSE_RTOL:
             out.append(f"rtol = {s.rtol:g} is loose: impacts and lift-offs can differ from a tight run's; check the "
                        "event count against a run with a tighter --rtol")
