@@ -77,11 +77,15 @@ def _scipy_version() -> str:
     return version("scipy")
 
 
-def _lowest_gap(positions: np.ndarray, grounds) -> float:
-    """The lowest gap of any particle to any ground over samples ``positions (nt, n, dim)``."""
-    if not positions.size:
-        return np.inf
-    return min(float(((positions - np.asarray(g.point)) @ np.asarray(g.normal)).min()) for g in grounds)
+def _lowest_gaps(positions: np.ndarray, grounds, held: np.ndarray) -> tuple[float, float]:
+    """The lowest gap of any particle to any ground over samples ``positions (nt, n, dim)``,
+    of the contacts free there and of those held there (``held (nt, n * n_grounds)``, the
+    ground contacts' codes, particle-major)."""
+    if not (positions.size and grounds):
+        return np.inf, np.inf
+    gaps = np.stack([(positions - np.asarray(g.point)) @ np.asarray(g.normal) for g in grounds], axis=2)
+    on = held.reshape(gaps.shape) != 0
+    return float(gaps[~on].min(initial=np.inf)), float(gaps[on].min(initial=np.inf))
 
 
 def _too_slow(t: float) -> tuple[str, str]:
@@ -328,7 +332,8 @@ class _Run:
         self.nfev = self.njev = self.steps = self.segments = 0
         self.h_next = 0.0  # the step an explicit stepper proposed where the last segment ended (s)
         self.segment_log: list | None = None  # set to [] to log (RHS evaluations, y0, held, push) per segment
-        self.min_gap = np.inf
+        self.min_gap = np.inf  # lowest gap of a free contact (an impact missed between event checks)
+        self.min_held_gap = np.inf  # ... and of a held one (its constraint drifted)
         self.stalled = 0
         self.compiled = None
         if model.backend == "c" and model.compiled_segments:
@@ -467,7 +472,13 @@ class _Run:
         for k in range(start, stop):
             self.Y[k] = dense(self.grid[k])
         self.keep_samples(start, stop)
-        self.min_gap = min(self.min_gap, float(self.model.gaps(self.y[: self.model.nq], self.p).min()))
+        self.track_gaps(self.y)
+
+    def track_gaps(self, y: np.ndarray) -> None:
+        """Lower the lowest gaps of free and held contacts to those at state ``y``."""
+        gaps, held = self.model.gaps(y[: self.model.nq], self.p), self.phases.on_ground
+        self.min_gap = min(self.min_gap, float(gaps[~held].min(initial=np.inf)))
+        self.min_held_gap = min(self.min_held_gap, float(gaps[held].min(initial=np.inf)))
 
     # ------------------------------------------------------------------ the phase machine
     def resolve_at(self, t: float, touching: np.ndarray, leaving: np.ndarray) -> list[Event]:
@@ -655,8 +666,10 @@ class _Run:
                 )
 
     # ------------------------------------------------------------------ results
-    def untrustworthy(self, relative_drift: float, penetration: float, min_force: float) -> list[str]:
-        """What makes this run's numbers untrustworthy, one sentence each (empty when nothing)."""
+    def untrustworthy(self, relative_drift: float, penetration: float, min_force: float, sink: float = 0.0
+                      ) -> list[str]:
+        """What makes this run's numbers untrustworthy, one sentence each (empty when nothing):
+        ``penetration`` (m) of free contacts, ``sink`` (m) of held ones."""
         s, out = self.settings, []
         if relative_drift > DRIFT_WARNING:
             out.append(f"the energy ledger drifted by {relative_drift:.2g} of the energy (more than {DRIFT_WARNING:g}): "
@@ -665,6 +678,10 @@ class _Run:
             into = " or into another body" if self.scene.contacts else ""
             out.append(f"a particle went {penetration:.2g} m below a ground{into} between event checks (an impact was "
                        "missed at this tolerance): tighten --rtol/--atol")
+        if sink > 10 * self.gap_tolerance:
+            out.append(f"a held contact sank {sink:.2g} m into what holds it: its constraint is kept on accelerations, "
+                       "and where its gap is not linear in the coordinates (a rigid body's or a floating frame's) the "
+                       "integrator's error drifts it: tighten --rtol/--atol")
         if min_force < -float(self.force_tolerance.max(initial=0.0)):
             out.append(f"a held contact's force turned negative ({min_force:.2g} N) between event checks (a lift-off "
                        "was missed at this tolerance): tighten --rtol/--atol")
@@ -691,7 +708,8 @@ class _Run:
         else:
             X, V, E, lam = model.trajectory(Y, p, held, push)
         force = model.particle_forces(lam + push)
-        self.min_gap = min(self.min_gap, float(np.min(model.gaps(Y[-1, :nq], p))) if len(Y) else np.inf)
+        if len(Y):
+            self.track_gaps(Y[-1])
         # Energy taken by instant impacts strictly before each sample time (losses come in time order).
         loss_t = np.array([x[0] for x in self.losses], dtype=float)
         lost = np.concatenate([[0.0], np.cumsum([x[1] for x in self.losses])])
@@ -733,11 +751,12 @@ class _Run:
         relative_drift = drift / max(abs(float(total[0])), float(result.kinetic.max()), 1e-300) if len(total) else 0.0
         # Penetration is also measured on the samples: between event checks a loose
         # tolerance can let a particle dip below a ground with no event.
-        self.min_gap = min(self.min_gap, _lowest_gap(X, self.scene.grounds))
+        lowest_free, lowest_held = _lowest_gaps(X, self.scene.grounds, held[:, : model.n_ground_contacts])
+        self.min_gap, self.min_held_gap = min(self.min_gap, lowest_free), min(self.min_held_gap, lowest_held)
         held_force = lam[held.astype(bool)]
         min_force = float(held_force.min()) if held_force.size else 0.0
         impacts = [e for e in ev if e.kind == "impact"]
-        warnings = self.untrustworthy(relative_drift, max(0.0, -self.min_gap), min_force)
+        warnings = self.untrustworthy(relative_drift, max(0.0, -self.min_gap), min_force, max(0.0, -self.min_held_gap))
         result.stats = {
             "scene": self.scene.name, "source": self.scene.source,
             "method": s.method, "rtol": s.rtol, "atol": s.atol, "backend": model.backend,
@@ -752,7 +771,7 @@ class _Run:
             "liftoffs": sum(e.kind == "liftoff" for e in ev),
             "sticks": sum(e.kind == "stick" for e in ev), "slips": sum(e.kind == "slip" for e in ev),
             "friction_work_J": float(result.friction_work[-1]) if len(T) else 0.0,
-            "max_penetration_m": max(0.0, -self.min_gap),
+            "max_penetration_m": max(0.0, -self.min_gap, -self.min_held_gap),
             "energy_initial_J": float(total[0]) if len(total) else 0.0,
             "energy_drift_J": drift,
             "energy_drift_relative": relative_drift,
