@@ -194,6 +194,18 @@ class BodyContactModel(Model):
         x = self._coordinates.particles(q, None, p)[0]
         return float(self._surface_gaps(x, slot=c - ng)[0][c - ng])
 
+    def held_gaps(self, q, p, rows) -> FloatArray:
+        """Gaps of the held contacts ``rows (k,)``: a slot's to the element it is held on."""
+        rows, ng = np.asarray(rows), self.n_ground_contacts
+        out = np.empty(len(rows))
+        out[rows < ng] = self.inner.gaps(q, p)[rows[rows < ng]]
+        slots = rows[rows >= ng] - ng
+        if len(slots):
+            x = self._coordinates.particles(q, None, p)[0]
+            self._constrain_elements(slots, x)
+            out[rows >= ng] = self._element_terms(slots, x, np.zeros_like(x)).gap
+        return out
+
     def energies(self, q, u, p) -> FloatArray:
         """Kinetic energy (J), shape (1,): what :func:`flexbody.coupled.coupled_impact` needs."""
         v = self._coordinates.particles(q, u, p)[1]

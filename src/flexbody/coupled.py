@@ -95,6 +95,25 @@ def _coupling(model, q: np.ndarray, u: np.ndarray, p: np.ndarray, rows: np.ndarr
     return J, slice(None), delassus(J, M), lambda P: velocity_change(J, M, P), model.gap_bias(q, u, p)[rows]
 
 
+def project_held(model, y: np.ndarray, p: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """The state ``y`` with the held contacts ``rows`` put back on what holds them: gap and
+    normal velocity 0, each by the smallest change in the kinetic metric (one Gauss-Newton
+    step ``dq = -M^-1 J^T W^-1 g``, with ``q' = u``; then ``du = -M^-1 J^T W^-1 J u``).
+
+    Held contacts are kept on accelerations, and where a gap is not linear in the
+    coordinates (a rigid body's, a contact between bodies) the integrator's error drifts it;
+    the driver calls this when the drift exceeds a few gap tolerances.  The velocity step
+    removes kinetic energy ``(J u)^T W^-1 (J u) / 2`` (second order in the drift)."""
+    nq, nu = model.nq, model.nu
+    out = np.array(y, float)
+    q, u = out[:nq], out[nq : nq + nu]
+    _, _, W, response, _ = _coupling(model, q, u, p, rows)
+    q += response(-contact_solve(W, model.held_gaps(q, p, rows)))
+    J, cols, W, response, _ = _coupling(model, q, u, p, rows)
+    u += response(-contact_solve(W, J @ u[cols]))
+    return out
+
+
 def coupled_impact(model, y: np.ndarray, p: np.ndarray, touching: np.ndarray, restitution: np.ndarray,
                    slowest: np.ndarray) -> CoupledImpact:
     """Impulses on the ``touching`` contacts (bool, shape (nc,)) by Newton's law per contact.
@@ -163,7 +182,8 @@ def coupled_impact(model, y: np.ndarray, p: np.ndarray, touching: np.ndarray, re
 
 def coupled_release(model, y: np.ndarray, p: np.ndarray, held: np.ndarray, push: np.ndarray, leaving: np.ndarray,
                     force_tolerance: np.ndarray, codes: np.ndarray | None = None,
-                    notes: list[str] | None = None, speed_tolerance: float = np.inf) -> np.ndarray:
+                    notes: list[str] | None = None, speed_tolerance: float = np.inf
+                    ) -> tuple[np.ndarray, np.ndarray]:
     """Held contacts that lift off: Signorini's law over the ``held`` contacts as one LCP.
 
     Parameters

@@ -25,7 +25,7 @@ from .constants import (EVENT, IMPACT, LIFTOFF, NON_FINITE, SINGULAR, SLIP, STEP
                         ZENO_RISE)
 from .assembly import AssembledModel
 from .contact import FREE, HELD, PUSHED, Event, Phases, UnsettledInstant, resolve
-from .coupled import CoupledImpactError
+from .coupled import CoupledImpactError, project_held
 from .events import EventFunctions, locate
 from .model import Model, couples_contacts, load_model
 from .result import STATUSES, SimulationResult
@@ -53,6 +53,9 @@ CHATTER_IMPACTS, CHATTER_WINDOW = 25, 1e-3
 CHATTER_FRICTION = 25
 #: A sliding contact slower than this times sqrt(|g| size) has come to rest (m/s).
 SPEED_TOLERANCE = 1e-7
+#: A held contact of a coupled model this many gap tolerances off its surface is put back on
+#: it (its gap is not linear in the coordinates: the integrator's error drifts it).
+PROJECT_GAPS = 2.0
 #: Names of the compiled fixed point's event kinds.
 EVENT_KINDS = {IMPACT: "impact", LIFTOFF: "liftoff", STICK: "stick", SLIP: "slip"}
 #: Event instants closer than this (s) count as no progress; this many in a row is a failure.
@@ -329,6 +332,7 @@ class _Run:
         self.friction_times: dict[int, deque[float]] = defaultdict(deque)  # stick and slip events, likewise
         self.losses: list[tuple[float, float]] = []
         self.indeterminate: list[tuple[float, str]] = []  # instants whose contact forces may not be unique
+        self.projections = 0  # held contacts put back on their surfaces (coupled models, SciPy's steppers)
         self.nfev = self.njev = self.steps = self.segments = 0
         self.h_next = 0.0  # the step an explicit stepper proposed where the last segment ended (s)
         self.segment_log: list | None = None  # set to [] to log (RHS evaluations, y0, held, push) per segment
@@ -417,8 +421,8 @@ class _Run:
 
         if hasattr(model, "forget_free"):  # a free contact between bodies picks its element at its next instant
             model.forget_free(phases.phase == FREE)
-        solver = getattr(scipy.integrate, s.method)(model.rhs_function(self.p, phases.held, phases.push), t0, self.y.copy(),
-                                   t_bound, **options)
+        stepper, rhs = getattr(scipy.integrate, s.method), model.rhs_function(self.p, phases.held, phases.push)
+        solver = stepper(rhs, t0, self.y.copy(), t_bound, **options)
         events = EventFunctions(model, self.p, phases, self.force_tolerance, self.gap_tolerance)
         events.renew(self.y)
         g_old = events(self.y)
@@ -453,6 +457,15 @@ class _Run:
                     if above.any():
                         phases.floor[above] = 0.0
                         g_new = events(solver.y)
+                if self.drifted():  # held contacts put back on their surfaces: the stepper restarts there
+                    self.y[:] = project_held(model, self.y, self.p, np.flatnonzero(phases.on_ground))
+                    self.projections += 1
+                    self.nfev += solver.nfev
+                    if s.method not in IMPLICIT:
+                        options["first_step"] = min(solver.h_abs, t_bound - solver.t)
+                    solver = stepper(rhs, solver.t, self.y.copy(), t_bound, **options)
+                    events.renew(self.y)
+                    g_new = events(self.y)
                 g_old = g_new
                 if self.progress:
                     self.progress(solver.t, s.t_end, len(self.events))
@@ -464,6 +477,17 @@ class _Run:
             self.njev += getattr(solver, "njev", 0)
             if s.method not in IMPLICIT:
                 self.h_next = solver.h_abs
+
+    def drifted(self) -> bool:
+        """Whether a held contact of a coupled model has drifted off its surface by more than
+        :data:`PROJECT_GAPS` gap tolerances (see :func:`flexbody.coupled.project_held`)."""
+        if not self.model.coupled:
+            return False
+        rows = np.flatnonzero(self.phases.on_ground)
+        if not len(rows):
+            return False
+        gaps = self.model.held_gaps(self.y[: self.model.nq], self.p, rows)
+        return bool(np.abs(gaps).max() > PROJECT_GAPS * self.gap_tolerance)
 
     def record(self, dense, t_stop: float) -> None:
         """Keep the output-grid samples up to ``t_stop`` and track penetration."""
@@ -766,7 +790,7 @@ class _Run:
             "wall_time_s": wall, "rhs_evaluations": self.nfev + int(self.counters[0]),
             "jacobian_evaluations": self.njev, "steps": self.steps + int(self.counters[1]),
             "rejected_steps": int(self.counters[2]), "event_rhs_evaluations": int(self.counters[3]),
-            "segments": self.segments,
+            "segments": self.segments, "projections": self.projections,
             "events": len(ev), "impacts": len(impacts), "not_held": sum(not e.held for e in impacts),
             "liftoffs": sum(e.kind == "liftoff" for e in ev),
             "sticks": sum(e.kind == "stick" for e in ev), "slips": sum(e.kind == "slip" for e in ev),

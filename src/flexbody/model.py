@@ -73,6 +73,10 @@ class Model:
         """Gap of each contact (particle * n_grounds + ground), shape (nc,)."""
         raise NotImplementedError
 
+    def held_gaps(self, q, p, rows) -> FloatArray:
+        """Gaps of the held contacts ``rows (k,)`` to what holds them, shape (k,)."""
+        return self.gaps(q, p)[rows]
+
     def gap(self, q, p, c: int) -> float:
         """Gap of contact ``c`` alone, equal to ``gaps(q, p)[c]`` (locating an impact needs no other)."""
         return float(self.gaps(q, p)[c])
