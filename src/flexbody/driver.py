@@ -195,7 +195,7 @@ def _check_apart(scene: Scene, model: Model, q: np.ndarray, p: np.ndarray) -> No
     """
     from .errors import InputError  # here, as in _settings: the validation's only users
 
-    if not getattr(model, "n_slots", 0):
+    if not model.n_slots:
         return
     gaps = model.gaps(q, p)[model.n_ground_contacts :]
     inside = gaps < -1e-9 * max(1.0, float(np.abs(scene.initial_positions()).max()))
@@ -253,7 +253,7 @@ def _rebound_laws(scene: Scene, model: Model, size: float) -> tuple[np.ndarray, 
     ground = model.contacts[: model.n_ground_contacts, 1]
     e = np.array([g.restitution for g in grounds])[ground]
     pull = np.array([max(0.0, -float(np.dot(scene.gravity, g.normal))) for g in grounds])[ground]
-    pairs = getattr(model, "slot_pair", np.zeros(0, int))
+    pairs = model.slot_pair
     e = np.concatenate([e, np.array([c.restitution for c in scene.contacts])[pairs]])
     # between bodies: no gravity direction to rise against; |g|, at least 1 m/s^2 (as the speed
     # tolerance), so two bodies in free space end a rocking accumulation of impacts too
@@ -325,7 +325,7 @@ class _Run:
         self.sample_push = np.zeros((n, model.n_contacts))
         self.sample_tangential = np.zeros((n, model.n_contacts, model.dim)) if thesis_friction else None
         # contacts between bodies: the element each slot was held on at each sample (its force's row)
-        self.sample_elements = np.full((n, model.n_slots), -1, np.intp) if hasattr(model, "element_of") else None
+        self.sample_elements = np.full((n, model.n_slots), -1, np.intp) if model.n_slots else None
         self.n_samples = 0
         self.events: list[Event] = []
         self.impact_times: dict[int, deque[tuple[float, float]]] = defaultdict(deque)  # for the chatter guard
@@ -419,8 +419,7 @@ class _Run:
             options["first_step"] = min(self.h_next, t_bound - t0)
         import scipy.integrate
 
-        if hasattr(model, "forget_free"):  # a free contact between bodies picks its element at its next instant
-            model.forget_free(phases.phase == FREE)
+        model.forget_free(phases.phase == FREE)  # a free contact between bodies picks its element at its next instant
         stepper, rhs = getattr(scipy.integrate, s.method), model.rhs_function(self.p, phases.held, phases.push)
         solver = stepper(rhs, t0, self.y.copy(), t_bound, **options)
         events = EventFunctions(model, self.p, phases, self.force_tolerance, self.gap_tolerance)
@@ -513,7 +512,7 @@ class _Run:
             found, not_held, loss = self.compiled.resolve(t, touching, leaving, s.impact == "thesis", s.impact_dt)
             new = [Event(t, c, EVENT_KINDS[kind], speed) for c, kind, speed in found]
         else:
-            if hasattr(self.model, "switch_elements"):
+            if self.model.n_slots:
                 touching, leaving = self.switch_elements(t, touching, leaving)
             res = resolve(self.model, t, self.y, self.p, self.phases, touching, leaving,
                           gap_tolerance=self.gap_tolerance, force_tolerance=self.force_tolerance,

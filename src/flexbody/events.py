@@ -43,7 +43,7 @@ class EventFunctions:
         self.free = phases.phase == FREE
         self.held_mask = phases.on_ground
         self.held = phases.held
-        self.margins = getattr(model, "element_margins", None)
+        self.margins = model.element_margins if model.n_slots else None
         # Contacts between bodies (past the grounds'): a just released one is checked more densely.
         self.between_bodies = np.arange(model.n_contacts) >= model.n_ground_contacts
         laws = getattr(model, "laws", np.zeros((0, 2)))

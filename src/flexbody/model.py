@@ -52,6 +52,10 @@ class Model:
     dim = 2
     nq = nu = ny = n_particles = n_contacts = 0
     contacts: np.ndarray
+    #: Contacts between bodies, past the ground ones (flexbody.body_contact), and each one's
+    #: index in ``scene.contacts``: none unless bodies may touch each other.
+    n_slots = 0
+    slot_pair = np.zeros(0, np.intp)
 
     @property
     def n_ground_contacts(self) -> int:
@@ -76,6 +80,10 @@ class Model:
     def held_gaps(self, q, p, rows) -> FloatArray:
         """Gaps of the held contacts ``rows (k,)`` to what holds them, shape (k,)."""
         return self.gaps(q, p)[rows]
+
+    def forget_free(self, free: np.ndarray) -> None:
+        """Let free contacts between bodies pick their element afresh (``free`` (nc,) bool);
+        nothing to forget without them."""
 
     def gap(self, q, p, c: int) -> float:
         """Gap of contact ``c`` alone, equal to ``gaps(q, p)[c]`` (locating an impact needs no other)."""
