@@ -78,12 +78,19 @@ class EventFunctions:
         g_new[lifted] += floor[lifted]
         floor[lifted] = 0.0
 
-    def __call__(self, y: np.ndarray) -> np.ndarray:
+    def free_gaps(self, y: np.ndarray) -> np.ndarray:
+        """The free contacts' event functions at ``y`` (their gaps above their floors), ``inf``
+        for the others, shape (nc,): all that locating impacts needs (no right-hand side)."""
         m = self.model
         g = np.full(m.n_contacts, np.inf)
         if self.free.any():
             gaps = m.gaps(y[: m.nq], self.p)
             g[self.free] = gaps[self.free] - self.phases.floor[self.free]
+        return g
+
+    def __call__(self, y: np.ndarray) -> np.ndarray:
+        m = self.model
+        g = self.free_gaps(y)
         if self.held_mask.any():
             _, lam = m.rhs(y, self.p, self.held, self.phases.push)
             g[self.held_mask] = lam[self.held_mask] + self.force_tolerance[self.held_mask]
@@ -167,7 +174,7 @@ def _first_dip(events: EventFunctions, dense: Callable[[float], np.ndarray], t_o
     t_prev, g_prev = t_old, g_old
     for k in range(1, DIP_SAMPLES):
         t = t_old + (t_new - t_old) * k / DIP_SAMPLES
-        g = events(dense(t))
+        g = events.free_gaps(dense(t))  # only free contacts are watched here
         fired = np.flatnonzero(fresh & (g_prev > 0.0) & (g <= 0.0))
         if fired.size:
             return _earliest(events, dense, fired, t_prev, t, g_prev, g)
@@ -202,6 +209,7 @@ def _earliest(events: EventFunctions, dense: Callable[[float], np.ndarray], fire
     instant costs one root search, not one per fired contact.  A contact belongs to the
     instant if its function has fired ``GROUP_TIME`` after the earliest root.
     """
+    evaluate = events.free_gaps if events.free[fired].all() else events  # impacts alone need no forces
     hi, g_hi = tb, gb
     rooted = np.zeros(len(ga), bool)
     candidates = fired
@@ -210,11 +218,11 @@ def _earliest(events: EventFunctions, dense: Callable[[float], np.ndarray], fire
         earliest = int(candidates[np.argmin(chord)])
         hi = _root(events, dense, earliest, ta, hi)
         rooted[earliest] = True
-        g_hi = events(dense(hi))
+        g_hi = evaluate(dense(hi))
         candidates = fired[(g_hi[fired] <= 0.0) & ~rooted[fired]]  # fired by then: their roots are not later
     group = np.zeros(len(ga), bool)
     t_group = min(hi + GROUP_TIME, tb)
-    g_group = gb if t_group == tb else events(dense(t_group))
+    g_group = gb if t_group == tb else evaluate(dense(t_group))
     group[fired[g_group[fired] <= 0.0]] = True
     group[earliest] = True
     return Crossing(hi, group)
