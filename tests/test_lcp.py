@@ -603,13 +603,14 @@ def test_painleve_rod_indeterminate_case_is_flagged():
     sol = solve_forces_friction(delassus(J, M), [a_n, a_t], 2.0, [-1.0])
     assert a_n > 0 and sol.solved
     np.testing.assert_allclose(sol.normal, [0.0], atol=1e-15)
-    assert sol.message.startswith("Painlevé: the contact force may not be unique")
+    assert sol.message.startswith("Painlevé: the contact force may not be unique") and not sol.unique
     c, s = np.cos(theta), np.sin(theta)
     A = (1 + 3 * c**2 - 3 * 2.0 * s * c) / m
     other = -a_n / A
     assert other > 0  # the second solution, lam_n = -a_n_free / A, is a push too
     # below the critical mu the same spinning rod is flagged by nothing
-    assert "Painlevé" not in solve_forces_friction(delassus(J, M), [a_n, a_t], 0.5, [-1.0]).message
+    below = solve_forces_friction(delassus(J, M), [a_n, a_t], 0.5, [-1.0])
+    assert "Painlevé" not in below.message and below.unique
 
 
 def test_redundant_sliding_supports_are_not_called_painleve():

@@ -90,6 +90,9 @@ class ContactSolution:
         ``"decoupled"`` (closed form per contact) or ``"lcp"``.
     pivots : int
         Lemke pivots (0 on the decoupled path).
+    unique : bool
+        False where other impulses or forces would be as consistent (Painlevé's
+        indeterminate case; the message says so).
     """
 
     normal: np.ndarray
@@ -100,6 +103,7 @@ class ContactSolution:
     message: str
     method: str
     pivots: int = 0
+    unique: bool = True
 
     @property
     def solved(self) -> bool:
@@ -286,14 +290,16 @@ def solve_forces_friction(W: np.ndarray, a_free: np.ndarray, mu: np.ndarray | fl
         lam = np.concatenate([lam_n, np.where(sliding, np.diag(drag) * lam_n, stick)])
         return _friction_solution(W, a, lam, "solved", "decoupled contacts: closed form.", "decoupled", 0)
     lam, status, message, pivots = _friction_lcp(W, an, at, mu, on, (mu > 0.0) & ~sliding, drag)
+    unique = True
     if status == "ray":
         message = ("Painlevé: no consistent contact force (friction of a sliding contact would "
                    f"need the contact to pull; {message})")
     elif status == "solved" and sliding.any() and not _is_p0_matrix(W[:nc, :nc] + W[:nc, nc:] @ drag):
+        unique = False
         message = (f"{INDETERMINATE} (with the sliding friction the "
                    f"normal matrix W_nn + W_nt D has a negative principal minor); one solution returned, "
                    f"{message}")
-    return _friction_solution(W, a, lam, status, message, "lcp", pivots)
+    return _friction_solution(W, a, lam, status, message, "lcp", pivots, unique)
 
 
 def _is_p0_matrix(A: np.ndarray, largest: int = 12) -> bool:
@@ -342,12 +348,12 @@ def _normal_lcp(W: np.ndarray, q: np.ndarray, on: np.ndarray, fast: bool
     return x, status, message, "lcp", pivots
 
 
-def independent_blocks(A: np.ndarray) -> list[np.ndarray]:
-    """The rows of ``A`` (n, n) in blocks that do not act on each other (``A[i, j] = 0`` and
-    ``A[j, i] = 0`` between blocks), each ascending: a block-diagonal LCP is one LCP per
-    block, exactly (a pile's held contacts: many small blocks, not one problem of all of
-    them, whose pivots grow with its size)."""
-    n = len(A)
+def independent_blocks(A) -> list[np.ndarray]:
+    """The rows of ``A`` (n, n; dense or scipy.sparse) in blocks that do not act on each other
+    (``A[i, j] = 0`` and ``A[j, i] = 0`` between blocks), each ascending: a block-diagonal LCP
+    is one LCP per block, exactly (a pile's held contacts: many small blocks, not one problem
+    of all of them, whose pivots grow with its size)."""
+    n = A.shape[0]
     if n < 2:
         return [np.arange(n)]
     from scipy.sparse import csr_matrix
@@ -395,11 +401,11 @@ def _friction_lcp(W: np.ndarray, qn: np.ndarray, qt: np.ndarray, mu: np.ndarray,
 
 
 def _friction_solution(W: np.ndarray, v: np.ndarray, x: np.ndarray, status: str, message: str,
-                       method: str, pivots: int) -> ContactSolution:
+                       method: str, pivots: int, unique: bool = True) -> ContactSolution:
     """Wrap stacked impulses/forces ``x`` (2 nc,) and the rates ``v + W x`` they produce."""
     nc = x.size // 2
     rate = v + W @ x
-    return ContactSolution(x[:nc], x[nc:], rate[:nc], rate[nc:], status, message, method, pivots)
+    return ContactSolution(x[:nc], x[nc:], rate[:nc], rate[nc:], status, message, method, pivots, unique)
 
 
 def _impact_args(W, v, restitution, touching, rows_per_contact: int

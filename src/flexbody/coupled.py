@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .constants import HELD, SLIDING
-from .contact_problems import (INDETERMINATE, delassus, solve_forces, solve_forces_friction, solve_impact,
+from .contact_problems import (delassus, independent_blocks, solve_forces, solve_forces_friction, solve_impact,
                                solve_impact_friction, velocity_change)
 from .dynamics import contact_solve
 
@@ -260,17 +260,14 @@ def _dependent(J: np.ndarray) -> bool:
     of each other, so the rank is summed over the blocks of rows linked through shared
     columns (a pile's held contacts fall into many small blocks: one SVD of the whole took
     a third of a second)."""
-    k = len(J)
-    if k < 2:
+    if len(J) < 2:
         return False
     from scipy.sparse import csr_matrix
-    from scipy.sparse.csgraph import connected_components
 
     tol = 1e-9 * max(1.0, float(np.abs(J).max()))
     links = csr_matrix(J != 0.0)
-    n_blocks, block = connected_components(links @ links.T, directed=False)
-    for b in range(n_blocks):
-        rows = J[block == b]
+    for block in independent_blocks(links @ links.T):  # rows sharing a column, directly or not
+        rows = J[block]
         used = rows[:, (rows != 0.0).any(axis=0)]
         if len(rows) > used.shape[1] or np.linalg.matrix_rank(used, tol=tol) < len(rows):
             return True
@@ -290,7 +287,7 @@ def _note_indeterminate(solution, rows: np.ndarray, notes: list[str] | None) -> 
     """Keep the message of a frictional force problem solved where other forces may be
     consistent too (Painlevé's indeterminate case: the run goes on with Lemke's answer, and
     its warnings say so)."""
-    if notes is not None and solution.solved and solution.message.startswith(INDETERMINATE):
+    if notes is not None and solution.solved and not solution.unique:
         notes.append(f"held contacts {rows.tolist()}: {solution.message}")
 
 
