@@ -23,6 +23,7 @@ FILES = {
     "integrator.c.jinja": "integrator.c",
     "phases.c.jinja": "phases.c",
     "assembly.c.jinja": "assembly.c",
+    "narrowphase.c.jinja": "narrowphase.c",
 }
 COMMAND = "flexbody derive --runtime"
 

@@ -502,3 +502,54 @@ def test_a_particle_wedged_between_two_bodies_gets_one_contact_on_each():
     np.testing.assert_array_equal(one.particle, [0, 1])
     np.testing.assert_allclose(one.gap, [0.001, 0.0005], rtol=1e-9)
     assert len(closest_features(x, both, elements, pairs=np.zeros((0, 2), int)).gap) == 0
+
+
+def _sphere_hull(rng, count=40):
+    """A random convex polyhedron: its vertices (count, 3) and outward triangles."""
+    from scipy.spatial import ConvexHull
+
+    vertices = rng.normal(size=(count, 3))
+    vertices /= np.linalg.norm(vertices, axis=1, keepdims=True)
+    triangles = ConvexHull(vertices).simplices.copy()
+    inward = np.einsum("ij,ij->i", triangle_normals(vertices, triangles), vertices[triangles].mean(1)) < 0
+    triangles[inward] = triangles[inward][:, ::-1]
+    return vertices, triangles
+
+
+@pytest.mark.skipif(not HAS_CC, reason="no C compiler")
+@pytest.mark.parametrize("surface", ["star", "cube", "hull", "two squares"])
+def test_compiled_closest_features_equal_the_numpy_twin(rng, surface):
+    """fb_closest_features (C) gives closest_features' answer: the same particles, feature
+    kinds and features (faces, edges and vertices all occur), the same element where the
+    feature is a face (an edge or vertex is shared: either element is right), and gaps,
+    weights and normals to rounding; over all pairs, a random subset of them, and none."""
+    from flexbody.surface_contact import CompiledClosestFeatures
+
+    body = None
+    if surface == "star":
+        vertices, elements = star()
+    elif surface == "cube":
+        vertices, elements = cube()
+    elif surface == "hull":
+        vertices, elements = _sphere_hull(rng)
+    else:
+        square_vertices, segments = square()
+        vertices = np.vstack([square_vertices, square_vertices + [1.002, 0.0]])
+        elements, body = np.vstack([segments, segments + 4]), np.repeat([0, 1], 4)
+    dim = vertices.shape[1]
+    points = vertices.mean(axis=0) + rng.uniform(-1.3, 1.3, size=(300, dim))
+    compiled = CompiledClosestFeatures(elements, len(vertices), body)
+    every = np.indices((len(points), len(elements))).reshape(2, -1).T
+    some = every[rng.random(len(every)) < 0.3]
+    for pairs in (every, some, every[:0]):
+        reference = closest_features(points, vertices, elements, pairs, body)
+        found = compiled(points, vertices, pairs)
+        for field in ("particle", "kind", "feature"):
+            np.testing.assert_array_equal(getattr(found, field), getattr(reference, field), err_msg=field)
+        face = reference.kind == FACE
+        np.testing.assert_array_equal(found.element[face], reference.element[face])
+        for field in ("gap", "weights", "normal"):
+            np.testing.assert_allclose(getattr(found, field), getattr(reference, field), rtol=0, atol=1e-14,
+                                       err_msg=field)
+    kinds = set(closest_features(points, vertices, elements, every, body).kind.tolist())
+    assert kinds == ({FACE, VERTEX} if dim == 2 else {FACE, EDGE, VERTEX})

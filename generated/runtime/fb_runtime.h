@@ -31,6 +31,9 @@
 #define FB_NON_FINITE -2
 #define FB_SINGULAR -3
 #define FB_TOO_SLOW -4
+#define FB_FACE 0
+#define FB_EDGE 1
+#define FB_VERTEX 2
 
 typedef struct FbSystem FbSystem;
 

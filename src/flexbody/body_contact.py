@@ -62,7 +62,8 @@ from .constants import HELD, SLIDING
 from .dynamics import contact_solve
 from .model import GeneratedModel, Model
 from .scene import Scene
-from .surface_contact import FACE, closest_features, segment_normals, triangle_normals
+from .surface_contact import (FACE, CompiledClosestFeatures, SurfaceContact, closest_features, segment_normals,
+                              triangle_normals)
 
 FloatArray = np.ndarray
 IntArray = np.ndarray
@@ -136,6 +137,7 @@ class BodyContactModel(Model):
         self._order = np.argsort(self._key)
         self._body_count = len(counts)
         self._incident = _incidence(self.elements, self.n_particles)
+        self._body_elements = [np.flatnonzero(self.element_body == b) for b in range(len(counts))]
         self._neighbour = _neighbours(self.elements)
         x0 = scene.initial_positions()
         lengths = np.linalg.norm(x0[self.elements[:, 1]] - x0[self.elements[:, 0]], axis=1)
@@ -144,6 +146,9 @@ class BodyContactModel(Model):
         self.margin = float(np.median(lengths)) if len(lengths) else 1.0
         self._candidates = CandidateList(self.elements, self.particle_body, self.margin, self.margin,
                                          element_body=self.element_body)
+        # The narrow phase runs at every gap evaluation: in C with a C model, its NumPy twin otherwise.
+        self._narrow = (CompiledClosestFeatures(self.elements, self.n_particles, self.element_body)
+                        if self.backend == "c" else None)
         self.element_of = np.full(self.n_slots, -1, np.intp)  # each slot's element while constrained
         ground_laws = [[g.friction, g.restitution] for g in scene.grounds]
         pair_laws = [[c.friction, c.restitution] for c in scene.contacts]
@@ -510,6 +515,11 @@ class BodyContactModel(Model):
         pairs = pairs[keep]
         if not len(pairs):
             return None
+        return self._closest_features(x, pairs)
+
+    def _closest_features(self, x, pairs) -> SurfaceContact:
+        if self._narrow is not None:
+            return self._narrow(x, x, pairs)
         return closest_features(x, x, self.elements, pairs, self.element_body)
 
     def _slots_of(self, particle, body) -> tuple[IntArray, np.ndarray]:
@@ -522,7 +532,7 @@ class BodyContactModel(Model):
         missing = np.asarray(slots)[self.element_of[slots] < 0]
         if not len(missing):
             return
-        contact = closest_features(x, x, self.elements, self._pairs_with_body(missing), self.element_body)
+        contact = self._closest_features(x, self._pairs_with_body(missing))
         slot_rows, found = self._slots_of(contact.particle, self.element_body[contact.element])
         row_of = dict(zip(slot_rows[found].tolist(), np.flatnonzero(found).tolist()))
         normals = (segment_normals if self.dim == 2 else triangle_normals)(x, self.elements)
@@ -541,7 +551,7 @@ class BodyContactModel(Model):
     def _pairs_with_body(self, slots) -> IntArray:
         """Every (particle, element) pair of these slots with their bodies' whole surfaces."""
         rows = [np.column_stack([np.full(k.size, self.slot_particle[s]), k])
-                for s in slots for k in [np.flatnonzero(self.element_body == self.slot_body[s])]]
+                for s in slots for k in [self._body_elements[self.slot_body[s]]]]
         return np.vstack(rows)
 
     def _element_terms(self, slots, x, v):

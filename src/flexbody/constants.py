@@ -23,6 +23,10 @@ GROUP_TIME = 1e-12
 #: Status codes of the compiled integrator (``fb_integrate``).
 REACHED, EVENT, STEP_COLLAPSE, NON_FINITE, SINGULAR, TOO_SLOW = 0, 1, -1, -2, -3, -4
 
+#: The feature of a surface a particle is closest to: the element itself (a segment in 2D, a
+#: triangle in 3D), an edge of it (3D) or a vertex (see :mod:`flexbody.surface_contact`).
+FACE, EDGE, VERTEX = 0, 1, 2
+
 #: Rendered into C as ``#define FB_<NAME> <value>``.
 C_DEFINES = {
     "FREE": FREE, "HELD": HELD, "PUSHED": PUSHED, "SLIDING": SLIDING,
@@ -30,4 +34,5 @@ C_DEFINES = {
     "KEEP": KEEP, "STOP": STOP, "REBOUND": REBOUND, "SETTLE": SETTLE,
     "GROUP_TIME": repr(GROUP_TIME), "REACHED": REACHED, "EVENT": EVENT, "STEP_COLLAPSE": STEP_COLLAPSE,
     "NON_FINITE": NON_FINITE, "SINGULAR": SINGULAR, "TOO_SLOW": TOO_SLOW,
+    "FACE": FACE, "EDGE": EDGE, "VERTEX": VERTEX,
 }  # fmt: skip

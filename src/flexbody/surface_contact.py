@@ -33,11 +33,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .constants import EDGE, FACE, VERTEX  # the feature kinds, shared with the C twin
+
 FloatArray = np.ndarray
 IntArray = np.ndarray
 
-#: Feature kinds of :class:`SurfaceContact`.
-FACE, EDGE, VERTEX = 0, 1, 2
 KIND_NAMES = {FACE: "face", EDGE: "edge", VERTEX: "vertex"}
 
 
@@ -326,3 +326,53 @@ def jacobian_entries(contact: SurfaceContact, dim: int) -> tuple[IntArray, IntAr
     values = (scale[:, :, None] * contact.normal[:, None, :]).reshape(-1)
     used = np.repeat(points.reshape(-1) >= 0, dim)
     return rows[used], columns[used], values[used]
+
+
+class CompiledClosestFeatures:
+    """:func:`closest_features` in C (``fb_closest_features`` of the runtime library) for
+    one surface: its elements, their bodies and each vertex's elements are converted once.
+
+    Parameters
+    ----------
+    elements : ndarray of int, shape (m, d)
+        The surface's segments (d = 2) or triangles (d = 3), oriented as for
+        :func:`closest_features`; vertex indices below ``n_vertices``.
+    n_vertices : int
+    element_body : ndarray of int, shape (m,), optional
+        As for :func:`closest_features`.
+    """
+
+    def __init__(self, elements: IntArray, n_vertices: int, element_body: IntArray | None = None) -> None:
+        from . import runtime
+
+        self.lib = runtime.library()
+        self.elements = np.ascontiguousarray(elements, dtype=np.intc)
+        self.dim = self.elements.shape[1]
+        self.element_body = None if element_body is None else np.ascontiguousarray(element_body, dtype=np.intc)
+        corners = self.elements.ravel()
+        # Each vertex's elements, ascending (CSR): the pseudo-normals of vertices and edges.
+        self.incident = np.ascontiguousarray(np.argsort(corners, kind="stable") // self.dim, dtype=np.intc)
+        self.incident_start = np.zeros(n_vertices + 1, np.intc)
+        np.cumsum(np.bincount(corners, minlength=n_vertices), out=self.incident_start[1:])
+
+    def __call__(self, x: FloatArray, vertices: FloatArray, pairs: IntArray) -> SurfaceContact:
+        """Each particle's closest feature over its candidate ``pairs`` (k, 2): as
+        :func:`closest_features` with this surface."""
+        d = self.dim
+        x = np.ascontiguousarray(x, dtype=float)
+        vertices = x if vertices is x else np.ascontiguousarray(vertices, dtype=float)
+        pairs = np.ascontiguousarray(pairs, dtype=np.intc).reshape(-1, 2)
+        k = len(pairs)
+        particle, kind, element = (np.empty(k, np.intc) for _ in range(3))
+        feature, weights, normal = np.empty((k, d), np.intc), np.empty((k, d)), np.empty((k, d))
+        gap = np.empty(k)
+        body = None if self.element_body is None else self.element_body.ctypes.data
+        rows = self.lib.fb_closest_features(
+            d, k, x.ctypes.data, vertices.ctypes.data, self.elements.ctypes.data, body, pairs.ctypes.data,
+            self.incident_start.ctypes.data, self.incident.ctypes.data, particle.ctypes.data, kind.ctypes.data,
+            element.ctypes.data, feature.ctypes.data, weights.ctypes.data, gap.ctypes.data, normal.ctypes.data)
+        if rows < 0:
+            raise MemoryError(f"cannot allocate the narrow phase's {k} candidates")
+        return SurfaceContact(particle=particle[:rows].astype(np.intp), kind=kind[:rows].astype(np.intp),
+                              element=element[:rows].astype(np.intp), feature=feature[:rows].astype(np.intp),
+                              weights=weights[:rows], gap=gap[:rows], normal=normal[:rows])
