@@ -135,6 +135,7 @@ class BodyContactModel(Model):
                                                                     self.n_grounds + self.slot_body])])
         self._key = self.slot_particle * len(counts) + self.slot_body
         self._order = np.argsort(self._key)
+        self._sorted_key = self._key[self._order]
         self._body_count = len(counts)
         self._incident = _incidence(self.elements, self.n_particles)
         self._body_elements = [np.flatnonzero(self.element_body == b) for b in range(len(counts))]
@@ -524,8 +525,8 @@ class BodyContactModel(Model):
 
     def _slots_of(self, particle, body) -> tuple[IntArray, np.ndarray]:
         key = np.asarray(particle) * self._body_count + np.asarray(body)
-        at = np.minimum(np.searchsorted(self._key[self._order], key), self.n_slots - 1)
-        return self._order[at], self._key[self._order][at] == key
+        at = np.minimum(np.searchsorted(self._sorted_key, key), self.n_slots - 1)
+        return self._order[at], self._sorted_key[at] == key
 
     def _constrain_elements(self, slots, x) -> None:
         """Pick an element for each of ``slots`` that has none (see the module docstring)."""

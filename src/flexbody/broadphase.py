@@ -275,6 +275,7 @@ class CandidateList:
         self.rebuilds = 0
         self._built_at: FloatArray | None = None
         self._pairs = np.zeros((0, 2), dtype=np.int64)
+        self._first = np.zeros(1, dtype=np.intp)  # particle i's pairs: _pairs[_first[i] : _first[i + 1]]
 
     def pairs(self, x: FloatArray, particle: int | None = None) -> IntArray:
         """The candidate pairs at positions x (n, d): equal to ``candidate_pairs(x, ..., margin)``;
@@ -282,11 +283,14 @@ class CandidateList:
         x = np.asarray(x, float)
         moved = np.inf if self._built_at is None else np.max(np.abs(x - self._built_at), initial=0.0)
         if moved > self.skin / 2:
-            self._pairs = candidate_pairs(x, self.elements, self.particle_body, self.margin + self.skin,
-                                          self.element_body, self.self_contact, self.method)
+            found = candidate_pairs(x, self.elements, self.particle_body, self.margin + self.skin,
+                                    self.element_body, self.self_contact, self.method)
+            # by particle, so that one particle's pairs are a slice (event location asks for one)
+            self._pairs = found[np.argsort(found[:, 0], kind="stable")]
+            self._first = np.searchsorted(self._pairs[:, 0], np.arange(len(x) + 1))
             self._built_at = x.copy()
             self.rebuilds += 1
-        kept = self._pairs if particle is None else self._pairs[self._pairs[:, 0] == particle]
+        kept = self._pairs if particle is None else self._pairs[self._first[particle] : self._first[particle + 1]]
         return kept[self._inside(x, kept)]
 
     def _inside(self, x: FloatArray, pairs: IntArray) -> np.ndarray:

@@ -354,25 +354,35 @@ class CompiledClosestFeatures:
         self.incident = np.ascontiguousarray(np.argsort(corners, kind="stable") // self.dim, dtype=np.intc)
         self.incident_start = np.zeros(n_vertices + 1, np.intc)
         np.cumsum(np.bincount(corners, minlength=n_vertices), out=self.incident_start[1:])
+        # Addresses taken once (each costs microseconds, and event location calls this with
+        # a pair or two thousands of times); the answers land in buffers kept between calls.
+        self._surface = (self.elements.ctypes.data,
+                         None if self.element_body is None else self.element_body.ctypes.data,
+                         self.incident_start.ctypes.data, self.incident.ctypes.data)
+        self._grow(64)
+
+    def _grow(self, k: int) -> None:
+        d = self.dim
+        self._out = (np.empty(k, np.intc), np.empty(k, np.intc), np.empty(k, np.intc), np.empty((k, d), np.intc),
+                     np.empty((k, d)), np.empty(k), np.empty((k, d)))
+        self._out_addresses = tuple(a.ctypes.data for a in self._out)
 
     def __call__(self, x: FloatArray, vertices: FloatArray, pairs: IntArray) -> SurfaceContact:
         """Each particle's closest feature over its candidate ``pairs`` (k, 2): as
         :func:`closest_features` with this surface."""
-        d = self.dim
         x = np.ascontiguousarray(x, dtype=float)
         vertices = x if vertices is x else np.ascontiguousarray(vertices, dtype=float)
         pairs = np.ascontiguousarray(pairs, dtype=np.intc).reshape(-1, 2)
         k = len(pairs)
-        particle, kind, element = (np.empty(k, np.intc) for _ in range(3))
-        feature, weights, normal = np.empty((k, d), np.intc), np.empty((k, d)), np.empty((k, d))
-        gap = np.empty(k)
-        body = None if self.element_body is None else self.element_body.ctypes.data
-        rows = self.lib.fb_closest_features(
-            d, k, x.ctypes.data, vertices.ctypes.data, self.elements.ctypes.data, body, pairs.ctypes.data,
-            self.incident_start.ctypes.data, self.incident.ctypes.data, particle.ctypes.data, kind.ctypes.data,
-            element.ctypes.data, feature.ctypes.data, weights.ctypes.data, gap.ctypes.data, normal.ctypes.data)
+        if k > len(self._out[0]):
+            self._grow(2 * k)
+        elements, body, start, incident = self._surface
+        x_at = x.ctypes.data
+        rows = self.lib.fb_closest_features(self.dim, k, x_at, x_at if vertices is x else vertices.ctypes.data,
+                                            elements, body, pairs.ctypes.data, start, incident, *self._out_addresses)
         if rows < 0:
             raise MemoryError(f"cannot allocate the narrow phase's {k} candidates")
-        return SurfaceContact(particle=particle[:rows].astype(np.intp), kind=kind[:rows].astype(np.intp),
-                              element=element[:rows].astype(np.intp), feature=feature[:rows].astype(np.intp),
-                              weights=weights[:rows], gap=gap[:rows], normal=normal[:rows])
+        particle, kind, element, feature, weights, gap, normal = (a[:rows] for a in self._out)
+        return SurfaceContact(particle=particle.astype(np.intp), kind=kind.astype(np.intp),
+                              element=element.astype(np.intp), feature=feature.astype(np.intp),
+                              weights=weights.copy(), gap=gap.copy(), normal=normal.copy())
