@@ -23,6 +23,17 @@ way round.  The slots come after the ground contacts, so the phase machine
   element (a weight reaches 0).  Then :meth:`BodyContactModel.switch_elements` moves it to
   the neighbour across that boundary: it stays held there if it meets it tangentially,
   hits it if it approaches (a concave corner) and is freed if it leaves (a convex one).
+* **In a concave corner** a particle can rest on both elements at once.  Each slot has a
+  *corner twin*, a second contact of the same particle and body (slot ``s + n_primary``),
+  which only ever holds: where a slot hits the next element at a concave vertex, its twin
+  takes over the element it came from, held, and the impact is one LCP over both.  If the
+  impact leaves the particle moving away from that element faster than a rebound too slow
+  to count (the Zeno threshold, ``min_rebound``), the twin lifts off and the particle slides
+  on; slower, both stay held and the particle rests in the corner.  Without the twin it
+  would be handed from one flank to the other ever faster, each hand-over a plastic impact
+  keeping ``cos`` of the corner's angle of its speed (Zeno).  Held corner rows have no
+  element-boundary event (the particle sits on the boundary); each leaves by its force.  A
+  free twin has no gap (it reads ``margin``), and a held twin always has its slot held too.
 
 **Coulomb friction** (2D; the pairs' ``friction``, and the grounds' where contacts couple):
 a held contact with friction sticks, its slip rate's acceleration kept at 0 too (the tangent
@@ -125,15 +136,17 @@ class BodyContactModel(Model):
                 particles.append(touching)
                 bodies.append(np.full(len(touching), surface))
                 pairs.append(np.full(len(touching), k))
-        self.slot_particle = np.concatenate(particles).astype(np.intp)
-        self.slot_body = np.concatenate(bodies).astype(np.intp)
-        self.slot_pair = np.concatenate(pairs).astype(np.intp)
+        #: Slots (each touching particle against each body it may touch), then their corner twins.
+        self.n_primary = sum(len(a) for a in particles)
+        self.slot_particle = np.tile(np.concatenate(particles), 2).astype(np.intp)
+        self.slot_body = np.tile(np.concatenate(bodies), 2).astype(np.intp)
+        self.slot_pair = np.tile(np.concatenate(pairs), 2).astype(np.intp)
         self.allowed = allowed
         self.n_slots = len(self.slot_particle)
         self.n_contacts = self.n_ground_contacts + self.n_slots
         self.contacts = np.vstack([inner.contacts, np.column_stack([self.slot_particle,
                                                                     self.n_grounds + self.slot_body])])
-        self._key = self.slot_particle * len(counts) + self.slot_body
+        self._key = (self.slot_particle * len(counts) + self.slot_body)[: self.n_primary]  # slots, not twins
         self._order = np.argsort(self._key)
         self._sorted_key = self._key[self._order]
         self._body_count = len(counts)
@@ -151,6 +164,10 @@ class BodyContactModel(Model):
         self._narrow = (CompiledClosestFeatures(self.elements, self.n_particles, self.element_body)
                         if self.backend == "c" else None)
         self.element_of = np.full(self.n_slots, -1, np.intp)  # each slot's element while constrained
+        # A held slot's element-boundary event fires where its margin falls below this floor
+        # (m, <= 0): below 0 where a hand-over left it already past the boundary (a particle
+        # a hair inside a concave corner), so that passing back over it is still found.
+        self.margin_floor = np.zeros(self.n_slots)
         ground_laws = [[g.friction, g.restitution] for g in scene.grounds]
         pair_laws = [[c.friction, c.restitution] for c in scene.contacts]
         #: Contact laws (mu, e): the grounds', then the pairs'; ``mu`` (nc,) each contact's.
@@ -197,6 +214,8 @@ class BodyContactModel(Model):
         ng = self.n_ground_contacts
         if c < ng:
             return self.inner.gap(q, p, c)
+        if c - ng >= self.n_primary:
+            return self.margin  # a corner twin has no gap of its own
         x = self._coordinates.particles(q, None, p)[0]
         return float(self._surface_gaps(x, slot=c - ng)[0][c - ng])
 
@@ -439,49 +458,84 @@ class BodyContactModel(Model):
 
     def forget_free(self, free: np.ndarray) -> None:
         """Let free slots pick their element afresh at their next instant (``free`` (nc,) bool)."""
-        self.element_of[np.asarray(free)[self.n_ground_contacts :]] = -1
+        free = np.asarray(free)[self.n_ground_contacts :]
+        self.element_of[free] = -1
+        self.margin_floor[free] = 0.0
+
+    def twin(self, c: IntArray) -> IntArray:
+        """The corner twin's contact index of slot contacts ``c`` (and the slot's of twins)."""
+        c = np.asarray(c)
+        ng, k = self.n_ground_contacts, self.n_primary
+        return np.where(c - ng < k, c + k, c - k)
+
+    def _free_margins(self, held, slots) -> np.ndarray:
+        """Which held ``slots`` have an element-boundary event: not the two rows of a corner."""
+        held = np.asarray(held)[self.n_ground_contacts :] != 0
+        k = self.n_primary
+        return ~(held[slots] & held[np.where(slots < k, slots + k, slots - k)])
+
+    def _margins(self, slots, x, v) -> tuple[FloatArray, FloatArray]:
+        """Held ``slots``' projection weights on their elements (k, dim) and how far inside
+        them their particles are, above their floors (m, (k,))."""
+        weights = self._element_terms(slots, x, v).weights
+        return weights, weights.min(axis=1) * self._sizes(slots, x) - self.margin_floor[slots]
 
     def element_margins(self, y, p, held) -> FloatArray:
         """How far each held slot's particle projects inside its element (m), shape (nc,):
-        its smallest weight times the element's size; ``inf`` for the other contacts.  It
-        reaches 0 where the particle passes onto a neighbour (an event)."""
+        its smallest weight times the element's size, above the slot's ``margin_floor``;
+        ``inf`` for the other contacts and the rows of a corner.  It reaches 0 where the
+        particle passes onto a neighbour (an event)."""
         out = np.full(self.n_contacts, np.inf)
         ng = self.n_ground_contacts
         slots = np.flatnonzero(np.asarray(held)[ng:] != 0)
+        slots = slots[self._free_margins(held, slots)]
         if len(slots):
             x, v = self._state(np.asarray(y, float), p)
             self._constrain_elements(slots, x)
-            weights = self._element_terms(slots, x, v).weights
-            out[ng + slots] = weights.min(axis=1) * self._sizes(slots, x)
+            out[ng + slots] = self._margins(slots, x, v)[1]
         return out
 
     def switch_elements(self, y, p, held: np.ndarray, gap_tolerance: float, speed_tolerance: float
-                        ) -> tuple[IntArray, IntArray, IntArray]:
+                        ) -> tuple[IntArray, IntArray, IntArray, IntArray]:
         """Move each held slot whose projection left its element onto the neighbour across
-        that boundary.
+        that boundary (the rows of a corner stay).
 
         Returns
         -------
         stay, approach, leave : ndarray of int
             Contact indices of those slots that meet their new element tangentially (normal
             speed within ``speed_tolerance``: still held), approach it (an impact) and leave it.
+        corners : ndarray of int
+            The corner twins of ``approach``, now on the elements those came from: the
+            caller holds them as their slots were (the impact decides whether they stay).
         """
         ng = self.n_ground_contacts
         slots = np.flatnonzero(np.asarray(held)[ng:] != 0)
+        slots = slots[self._free_margins(held, slots)]
         empty = np.zeros(0, np.intp)
         if not len(slots):
-            return empty, empty, empty
+            return empty, empty, empty, empty
         x, v = self._state(np.asarray(y, float), p)
-        weights = self._element_terms(slots, x, v).weights
-        passed = weights.min(axis=1) * self._sizes(slots, x) <= gap_tolerance
+        weights, margins = self._margins(slots, x, v)
+        passed = margins <= gap_tolerance
         out = slots[passed]
         if not len(out):
-            return empty, empty, empty
+            return empty, empty, empty, empty
+        came_from = self.element_of[out].copy()
         corner = np.argmin(weights[passed], axis=1)
-        self.element_of[out] = self._neighbour[self.element_of[out], corner]
-        rate = self._element_terms(out, x, v).rate
-        return ng + out[np.abs(rate) <= speed_tolerance], ng + out[rate < -speed_tolerance], \
-            ng + out[rate > speed_tolerance]
+        self.element_of[out] = self._neighbour[came_from, corner]
+        terms = self._element_terms(out, x, v)
+        # a hand-over a hair past the boundary (a particle a hair inside a corner) starts
+        # below 0 on the new element too: its floor keeps its next pass findable
+        margin = terms.weights.min(axis=1) * self._sizes(out, x)
+        self.margin_floor[out] = np.where(margin < gap_tolerance, margin - gap_tolerance, 0.0)
+        rate = terms.rate
+        approach = out[rate < -speed_tolerance]
+        twins = approach + self.n_primary
+        self.element_of[twins] = came_from[rate < -speed_tolerance]
+        self.margin_floor[twins] = 0.0
+        return ng + out[np.abs(rate) <= speed_tolerance], ng + approach, ng + out[rate > speed_tolerance], \
+            ng + twins
 
     # ------------------------------------------------------------------ geometry
     def _state(self, y, p) -> tuple[FloatArray, FloatArray]:
@@ -525,7 +579,7 @@ class BodyContactModel(Model):
 
     def _slots_of(self, particle, body) -> tuple[IntArray, np.ndarray]:
         key = np.asarray(particle) * self._body_count + np.asarray(body)
-        at = np.minimum(np.searchsorted(self._sorted_key, key), self.n_slots - 1)
+        at = np.minimum(np.searchsorted(self._sorted_key, key), self.n_primary - 1)
         return self._order[at], self._sorted_key[at] == key
 
     def _constrain_elements(self, slots, x) -> None:
@@ -538,7 +592,7 @@ class BodyContactModel(Model):
         row_of = dict(zip(slot_rows[found].tolist(), np.flatnonzero(found).tolist()))
         normals = (segment_normals if self.dim == 2 else triangle_normals)(x, self.elements)
         for slot in missing.tolist():
-            r = row_of[slot]
+            r = row_of[slot if slot < self.n_primary else slot - self.n_primary]  # a twin: its slot's answer
             if contact.kind[r] == FACE:
                 self.element_of[slot] = contact.element[r]
                 continue

@@ -522,6 +522,8 @@ class _Run:
             self.y[:] = res.y
             self.phases.assign(res.phases)
             new, not_held, loss = res.events, res.not_held, res.impact_loss
+            if self.model.n_slots:
+                self.settle_corners(new)
             self.indeterminate += [(t, note) for note in res.notes]
         self.events += new
         if self.windows is not None:
@@ -547,17 +549,40 @@ class _Run:
         meet it tangentially, else freed at the instant (an approach is then an impact, a
         separation a lift-off)."""
         phases = self.phases
-        stay, approach, leave = self.model.switch_elements(self.y, self.p, phases.held, self.gap_tolerance,
-                                                           self.speed_tolerance)
+        stay, approach, leave, corners = self.model.switch_elements(self.y, self.p, phases.held, self.gap_tolerance,
+                                                                    self.speed_tolerance)
         touching, leaving = np.array(touching, bool), np.array(leaving, bool)
         moved = np.concatenate([stay, approach, leave])
         leaving[moved] = False
+        # At a concave corner the contact on the element left behind goes on as the slot's
+        # twin, held as the slot was: the impact on the new element decides if it stays.
+        phases.phase[corners] = phases.phase[approach]
+        self.model.slip_directions(self.p)[corners] = self.model.slip_directions(self.p)[approach]
         for c in np.concatenate([approach, leave]).tolist():
             phases.phase[c] = FREE
             phases.floor[c] = -self.gap_tolerance
         touching[approach] = True
         self.events += [Event(t, int(c), "liftoff") for c in leave]
         return touching, leaving
+
+    def settle_corners(self, new: list[Event]) -> None:
+        """Keep a held corner twin's slot held: where the slot was released and its twin
+        holds on, the slot takes the twin's element and phase, and the lift-off just
+        recorded is the twin's (the particle left the slot's element, not the body)."""
+        model, phases = self.model, self.phases
+        ng = model.n_ground_contacts
+        twins = ng + model.n_primary + np.flatnonzero(phases.on_ground[ng + model.n_primary :])
+        orphans = twins[~phases.on_ground[model.twin(twins)]]
+        for twin in orphans.tolist():
+            slot = int(model.twin(twin))
+            phases.phase[slot], phases.phase[twin] = phases.phase[twin], FREE
+            phases.floor[twin] = -self.gap_tolerance
+            model.element_of[[slot - ng, twin - ng]] = model.element_of[twin - ng], -1
+            model.margin_floor[[slot - ng, twin - ng]] = model.margin_floor[twin - ng], 0.0
+            model.slip_directions(self.p)[slot] = model.slip_directions(self.p)[twin]
+            for e in new:
+                if e.contact == slot and e.kind == "liftoff":
+                    e.contact = twin
 
     def track_windows(self, t: float, was_pushed: np.ndarray) -> None:
         """Record the thesis-mode windows that start or end at ``t`` (positions, constant force)."""
