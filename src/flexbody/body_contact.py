@@ -312,7 +312,7 @@ class BodyContactModel(Model):
         sliding = (mu > 0.0) & (codes == SLIDING)
         r = self._rows(ground_rows, held_slots, q, u, p, tangents=bool((mu > 0.0).any()))
         if not (stick | sliding).any():  # frictionless: no tangent rows, a symmetric system
-            force = contact_solve(_gram(r.scaled, r.J), -(r.J @ acc[r.columns] + r.bias))
+            force = contact_solve(r.W, -(r.J @ acc[r.columns] + r.bias))
             acc[r.columns] += r.scaled.T @ force
             lam[rows] = force
             return _Solved(ydot, lam, fast, rows, np.zeros(k), np.zeros(k), r.tangents, stick)
@@ -407,7 +407,7 @@ class BodyContactModel(Model):
             out[r.columns] = r.scaled.T @ np.asarray(P, float)
             return out
 
-        return r.J, r.columns, _gram(r.scaled, r.J), response, r.bias
+        return r.J, r.columns, r.W, response, r.bias
 
     def impact(self, y, p, stop):  # pragma: no cover - coupled models resolve with flexbody.coupled
         raise NotImplementedError("contacts between bodies couple: flexbody.coupled.coupled_impact resolves them")
@@ -635,28 +635,53 @@ class BodyContactModel(Model):
         directions = [normals] + ([np.column_stack([-normals[:, 1], normals[:, 0]])] if tangents else [])
         particles = np.unique(np.concatenate([z.ravel() for z in points]))
         J = np.zeros((len(directions) * k, len(particles), d))
+        entries = []  # (row, particle position in `particles`, coefficient (d,)) of every term
         for block, direction in enumerate(directions):
             offset = 0
             for z, w in zip(points, weights):
                 rows = block * k + np.repeat(np.arange(offset, offset + len(z)), z.shape[1])
-                coefficients = w[:, :, None] * direction[offset : offset + len(z), None, :]
-                np.add.at(J, (rows, np.searchsorted(particles, z.ravel())), coefficients.reshape(-1, d))
+                coefficients = (w[:, :, None] * direction[offset : offset + len(z), None, :]).reshape(-1, d)
+                at = np.searchsorted(particles, z.ravel())
+                np.add.at(J, (rows, at), coefficients)
+                entries.append((rows, at, coefficients))
                 offset += len(z)
         bias = np.concatenate([bias, slip_bias]) if tangents else bias
         columns, J, scaled, bias = self._coordinates.rows(particles, J.reshape(len(J), -1), bias, q, u, p)
-        return _Rows(columns, J, scaled, bias, directions[-1] if tangents else np.zeros((k, d)))
+        if isinstance(self._coordinates, _ParticleCoordinates) and J.shape[1] > DENSE_WIDTH:
+            W = self._sparse_gram(entries, particles, J.shape)
+        else:
+            W = _gram(scaled, J)
+        return _Rows(columns, J, scaled, bias, directions[-1] if tangents else np.zeros((k, d)), W)
+
+    def _sparse_gram(self, entries, particles: IntArray, shape: tuple[int, int]) -> FloatArray:
+        """``J M^-1 J^T`` (m, m) of particle rows given as their terms (a pile's held rows:
+        each moves a few particles), through sparse matrices built from the terms directly
+        (not by scanning the dense rows, which costs more than the product)."""
+        from scipy.sparse import csr_matrix
+
+        d = self.dim
+        rows = np.concatenate([r for r, _, _ in entries])
+        at = np.concatenate([a for _, a, _ in entries])
+        coefficients = np.concatenate([c for _, _, c in entries])
+        columns = (at[:, None] * d + np.arange(d)).ravel()
+        rows = np.repeat(rows, d)
+        J = csr_matrix((coefficients.ravel(), (rows, columns)), shape=shape)
+        scaled = csr_matrix(((coefficients / self.masses[particles[at]][:, None]).ravel(), (rows, columns)), shape=shape)
+        return (scaled @ J.T).toarray()
 
 
 class _Rows(NamedTuple):
     """Contact rows on the coordinates ``columns (c,)`` they move: ``J (m, c)``, ``J M^-1
     (m, c)`` and the velocity terms ``bias (m,)`` of their accelerations (m = k normal rows,
-    then k tangent rows if asked), and each contact's unit tangent (k, dim) (zeros if not)."""
+    then k tangent rows if asked), each contact's unit tangent (k, dim) (zeros if not), and
+    ``W = J M^-1 J^T``."""
 
     columns: IntArray
     J: FloatArray
     scaled: FloatArray
     bias: FloatArray
     tangents: FloatArray
+    W: FloatArray  # J M^-1 J^T, (m, m)
 
 
 @dataclass
