@@ -699,3 +699,26 @@ def test_a_block_diagonal_problem_is_solved_block_by_block_as_a_whole(seed):
     np.testing.assert_allclose(split.normal, whole.z, rtol=1e-12, atol=1e-12)
     assert_solves(solve_lcp(W, a_free), W, a_free)
     assert np.all(split.normal_rate >= -1e-12) and abs(split.normal @ split.normal_rate) < 1e-10
+
+
+def test_contact_solve_takes_lapack_only_where_no_contact_is_near_redundant(rng, monkeypatch):
+    """contact_solve factorises a well-conditioned W with LAPACK and equals its column loop
+    (forced) to rounding; with a dependent row (a contact the others imply) it drops that
+    column as model.c does: its force is 0 and every row still holds."""
+    import flexbody.dynamics as dynamics
+
+    for _ in range(5):
+        J = rng.normal(size=(6, 9))
+        W, b = J @ J.T, rng.normal(size=6)
+        fast = dynamics.contact_solve(W, b)
+        with monkeypatch.context() as m:
+            m.setattr(dynamics, "CLEAR_PIVOTS", np.inf)
+            loop = dynamics.contact_solve(W, b)
+        np.testing.assert_allclose(fast, loop, rtol=1e-10, atol=1e-12)
+        np.testing.assert_allclose(W @ fast, b, rtol=1e-10, atol=1e-10)
+        dependent = np.vstack([J, J[0] + 2.0 * J[3]])  # row 6 = row 0 + 2 row 3
+        W = dependent @ dependent.T
+        b = W @ rng.normal(size=7)  # consistent: in W's range
+        x = dynamics.contact_solve(W, b)
+        assert x[6] == 0.0
+        np.testing.assert_allclose(W @ x, b, rtol=1e-8, atol=1e-8)
