@@ -296,7 +296,10 @@ def resolve(
             pulling, implied = coupled_release(model, y, p, phases.on_ground, phases.push, leaving,
                                                force_tolerance, phases.held, notes, speed_tolerance)
             phases.phase[implied] = FREE  # redundant and unloaded: the others hold it at gap 0
-            phases.floor[implied] = np.minimum(0.0, gaps[implied]) - gap_tolerance
+            # armed a band lower than a lift-off: it stays at its gap (the others imply it),
+            # and one tolerance down it would count as touching at every later instant, its
+            # round-off approach (1e-13 m/s) an impact each time (Zeno-like, "chattering")
+            phases.floor[implied] = np.minimum(0.0, gaps[implied]) - 2.0 * gap_tolerance
             released = np.flatnonzero(pulling)
             if implied.any() and not len(released):
                 continue  # recompute the forces of the independent held contacts
