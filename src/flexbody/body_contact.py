@@ -464,21 +464,35 @@ class BodyContactModel(Model):
 
     def twin(self, c: IntArray) -> IntArray:
         """The corner twin's contact index of slot contacts ``c`` (and the slot's of twins)."""
-        c = np.asarray(c)
-        ng, k = self.n_ground_contacts, self.n_primary
-        return np.where(c - ng < k, c + k, c - k)
+        ng = self.n_ground_contacts
+        return ng + self._twin_slots(np.asarray(c) - ng)
+
+    def _twin_slots(self, slots: IntArray) -> IntArray:
+        """:meth:`twin` in slot numbering."""
+        k = self.n_primary
+        return np.where(slots < k, slots + k, slots - k)
+
+    def hand_to_slots(self, twins: IntArray) -> None:
+        """The held corner twins ``twins`` (contact indices) whose slots were released: each
+        slot takes over its twin's element, margin floor and slip direction; the twin is
+        left without an element (the caller swaps their phases)."""
+        ng = self.n_ground_contacts
+        twin_slots = np.asarray(twins, np.intp) - ng
+        slots = self._twin_slots(twin_slots)
+        self.element_of[slots], self.element_of[twin_slots] = self.element_of[twin_slots], -1
+        self.margin_floor[slots], self.margin_floor[twin_slots] = self.margin_floor[twin_slots], 0.0
+        self._slip[ng + slots] = self._slip[ng + twin_slots]
 
     def _free_margins(self, held, slots) -> np.ndarray:
         """Which held ``slots`` have an element-boundary event: not the two rows of a corner."""
         held = np.asarray(held)[self.n_ground_contacts :] != 0
-        k = self.n_primary
-        return ~(held[slots] & held[np.where(slots < k, slots + k, slots - k)])
+        return ~(held[slots] & held[self._twin_slots(slots)])
 
-    def _margins(self, slots, x, v) -> tuple[FloatArray, FloatArray]:
-        """Held ``slots``' projection weights on their elements (k, dim) and how far inside
-        them their particles are, above their floors (m, (k,))."""
-        weights = self._element_terms(slots, x, v).weights
-        return weights, weights.min(axis=1) * self._sizes(slots, x) - self.margin_floor[slots]
+    def _margins(self, slots, x, v) -> tuple[ElementTerms, FloatArray]:
+        """Held ``slots`` against their elements (:class:`ElementTerms`) and how far inside
+        them their particles project (m, (k,)): the smallest weight times the element's size."""
+        terms = self._element_terms(slots, x, v)
+        return terms, terms.weights.min(axis=1) * self._sizes(slots, x)
 
     def element_margins(self, y, p, held) -> FloatArray:
         """How far each held slot's particle projects inside its element (m), shape (nc,):
@@ -492,7 +506,7 @@ class BodyContactModel(Model):
         if len(slots):
             x, v = self._state(np.asarray(y, float), p)
             self._constrain_elements(slots, x)
-            out[ng + slots] = self._margins(slots, x, v)[1]
+            out[ng + slots] = self._margins(slots, x, v)[1] - self.margin_floor[slots]
         return out
 
     def switch_elements(self, y, p, held: np.ndarray, gap_tolerance: float, speed_tolerance: float
@@ -516,24 +530,24 @@ class BodyContactModel(Model):
         if not len(slots):
             return empty, empty, empty, empty
         x, v = self._state(np.asarray(y, float), p)
-        weights, margins = self._margins(slots, x, v)
-        passed = margins <= gap_tolerance
+        terms, margins = self._margins(slots, x, v)
+        passed = margins - self.margin_floor[slots] <= gap_tolerance
         out = slots[passed]
         if not len(out):
             return empty, empty, empty, empty
         came_from = self.element_of[out].copy()
-        corner = np.argmin(weights[passed], axis=1)
+        corner = np.argmin(terms.weights[passed], axis=1)
         self.element_of[out] = self._neighbour[came_from, corner]
-        terms = self._element_terms(out, x, v)
+        terms, margin = self._margins(out, x, v)
         # a hand-over a hair past the boundary (a particle a hair inside a corner) starts
         # below 0 on the new element too: its floor keeps its next pass findable
-        margin = terms.weights.min(axis=1) * self._sizes(out, x)
         self.margin_floor[out] = np.where(margin < gap_tolerance, margin - gap_tolerance, 0.0)
         rate = terms.rate
         approach = out[rate < -speed_tolerance]
-        twins = approach + self.n_primary
+        twins = self._twin_slots(approach)  # held on the elements they came from, as their slots were
         self.element_of[twins] = came_from[rate < -speed_tolerance]
         self.margin_floor[twins] = 0.0
+        self._slip[ng + twins] = self._slip[ng + approach]
         return ng + out[np.abs(rate) <= speed_tolerance], ng + approach, ng + out[rate > speed_tolerance], \
             ng + twins
 
@@ -592,7 +606,7 @@ class BodyContactModel(Model):
         row_of = dict(zip(slot_rows[found].tolist(), np.flatnonzero(found).tolist()))
         normals = (segment_normals if self.dim == 2 else triangle_normals)(x, self.elements)
         for slot in missing.tolist():
-            r = row_of[slot if slot < self.n_primary else slot - self.n_primary]  # a twin: its slot's answer
+            r = row_of[min(slot, int(self._twin_slots(slot)))]  # a twin: its slot's answer
             if contact.kind[r] == FACE:
                 self.element_of[slot] = contact.element[r]
                 continue

@@ -557,7 +557,6 @@ class _Run:
         # At a concave corner the contact on the element left behind goes on as the slot's
         # twin, held as the slot was: the impact on the new element decides if it stays.
         phases.phase[corners] = phases.phase[approach]
-        self.model.slip_directions(self.p)[corners] = self.model.slip_directions(self.p)[approach]
         for c in np.concatenate([approach, leave]).tolist():
             phases.phase[c] = FREE
             phases.floor[c] = -self.gap_tolerance
@@ -570,19 +569,19 @@ class _Run:
         holds on, the slot takes the twin's element and phase, and the lift-off just
         recorded is the twin's (the particle left the slot's element, not the body)."""
         model, phases = self.model, self.phases
-        ng = model.n_ground_contacts
-        twins = ng + model.n_primary + np.flatnonzero(phases.on_ground[ng + model.n_primary :])
+        first_twin = model.n_ground_contacts + model.n_primary
+        twins = first_twin + np.flatnonzero(phases.on_ground[first_twin:])
         orphans = twins[~phases.on_ground[model.twin(twins)]]
-        for twin in orphans.tolist():
-            slot = int(model.twin(twin))
-            phases.phase[slot], phases.phase[twin] = phases.phase[twin], FREE
-            phases.floor[twin] = -self.gap_tolerance
-            model.element_of[[slot - ng, twin - ng]] = model.element_of[twin - ng], -1
-            model.margin_floor[[slot - ng, twin - ng]] = model.margin_floor[twin - ng], 0.0
-            model.slip_directions(self.p)[slot] = model.slip_directions(self.p)[twin]
-            for e in new:
-                if e.contact == slot and e.kind == "liftoff":
-                    e.contact = twin
+        if not len(orphans):
+            return
+        slots = model.twin(orphans)
+        model.hand_to_slots(orphans)
+        phases.phase[slots], phases.phase[orphans] = phases.phase[orphans], FREE
+        phases.floor[orphans] = -self.gap_tolerance
+        twin_of = dict(zip(slots.tolist(), orphans.tolist()))
+        for e in new:
+            if e.kind == "liftoff" and e.contact in twin_of:
+                e.contact = twin_of[e.contact]
 
     def track_windows(self, t: float, was_pushed: np.ndarray) -> None:
         """Record the thesis-mode windows that start or end at ``t`` (positions, constant force)."""
