@@ -225,6 +225,41 @@ def test_one_contact_alone_equals_the_whole_system_and_reads_only_its_stencil(se
 
 
 @pytest.mark.skipif(not HAS_CC, reason="no C compiler")
+@pytest.mark.parametrize("dim", [2, 3])
+def test_threads_change_no_bit_of_a_large_bodys_equations(dim, rng):
+    """A body of more than 2 x 4096 links splits the right-hand side's link loop over two
+    threads (where the compiler has OpenMP): its accelerations, held forces and damping power
+    must equal one thread's bit for bit, each held contact's force must equal the one
+    evaluated alone (event location's), and the NumPy twin's to 1e-12."""
+    from flexbody import cbuild
+    from flexbody.bench_scale import cube_scene_table, disc_scene_table
+
+    table = disc_scene_table(3000) if dim == 2 else cube_scene_table(1000)
+    table["bodies"][0]["damper"] = "relative" if dim == 2 else "axial"
+    scene = flexbody.load_scene(table)
+    model, twin = assembled_model(scene, "c"), assembled_model(scene, "numpy")
+    assert len(model.links) >= 2 * 4096
+    p, nc = model.parameters(scene), model.n_contacts
+    y = random_state(model, rng, scene)
+    held = (rng.random(nc) < 0.05).astype(np.intc)
+    push = np.where(rng.random(nc) < 0.05, rng.uniform(0, 5, nc), 0.0) * (1 - held)
+    model.use_threads(1)
+    one = model.rhs(y, p, held, push)
+    assert model.threads == 1
+    model.use_threads(2)
+    two = model.rhs(y, p, held, push)
+    if cbuild.OPENMP in cbuild.flags(cbuild.compiler()):
+        assert model.threads == 2
+    np.testing.assert_array_equal(two[0], one[0])
+    np.testing.assert_array_equal(two[1], one[1])
+    for c in np.flatnonzero(held)[:40]:
+        assert model.contact(y, p, held, push, int(c))[2] == two[1][c], f"contact {c}"
+    expected = twin.rhs(y, p, held, push)
+    assert_close(two[0], expected[0], "right-hand side")
+    assert_close(two[1], expected[1], "held forces")
+
+
+@pytest.mark.skipif(not HAS_CC, reason="no C compiler")
 def test_whole_scene_models_have_no_per_contact_evaluation():
     """Contacts of the floating formulation couple through M: no per-contact shortcut."""
     scene = flexbody.load_scene("dumbbell")

@@ -16,10 +16,16 @@
 #include <string.h>
 #include "fb_runtime.h"
 #include "kernels.h"
+#ifdef _OPENMP
+#include <omp.h>
+#endif
 
 /* Links per block of the right-hand side's link loop: a block's gathered states and forces
  * (12 rows in 3D) stay in L1. */
 #define LINK_BLOCK 64
+/* Links per thread of the right-hand side, at least: a share must outweigh a parallel
+ * region's start and join (a few microseconds; ~10 ns per link). */
+#define LINKS_PER_THREAD 4096
 
 enum { BLOCK_RELATIVE, BLOCK_AXIAL, BLOCK_MIXED }; /* the damper laws of a block's links */
 
@@ -38,6 +44,9 @@ typedef struct {
      * its stencil, the state entries its force reads: its own q and u, then its neighbours'. */
     int *adj_start, *adj, *stencil_start, *stencil;
     int *block_law;    /* (ceil(n_links / LINK_BLOCK),): BLOCK_RELATIVE, BLOCK_AXIAL or BLOCK_MIXED */
+    double *link_force;  /* (n_links, dim): the right-hand side's link forces on their first particle */
+    double *block_power; /* (ceil(n_links / LINK_BLOCK),): the right-hand side's damping power per block */
+    int threads;       /* the right-hand side's threads: 1, or up to OpenMP's, one per LINKS_PER_THREAD links */
 } Assembly;
 
 static int n_parameters(const Assembly *A)
@@ -46,6 +55,7 @@ static int n_parameters(const Assembly *A)
 }
 
 void fb_asm_free(Assembly *A);
+int fb_asm_threads(Assembly *A, int threads);
 
 /* A new assembly of n particles of dimension dim, links (n_links, 2) with their damper
  * laws, and n_grounds grounds; the index arrays are copied.  Bind parameters before use. */
@@ -70,12 +80,16 @@ Assembly *fb_asm_new(int dim, int n, int n_links, int n_grounds, const int *link
     A->slip = calloc(3 * (size_t)n * (size_t)n_grounds + 1, sizeof(double));
     A->tangential_push = calloc(3 * (size_t)n * (size_t)n_grounds + 1, sizeof(double));
     A->block_law = malloc(sizeof(int) * ((size_t)n_links / LINK_BLOCK + 1));
+    A->link_force = malloc(sizeof(double) * ((size_t)dim * n_links + 1));
+    A->block_power = malloc(sizeof(double) * ((size_t)n_links / LINK_BLOCK + 1));
     if (!A->links || !A->axial || !A->p || !A->link_par || !A->inv_mass || !A->adj_start || !A->adj
-        || !A->stencil_start || !A->stencil || !A->laws || !A->slip || !A->tangential_push || !A->block_law) {
+        || !A->stencil_start || !A->stencil || !A->laws || !A->slip || !A->tangential_push || !A->block_law
+        || !A->link_force || !A->block_power) {
         fb_asm_free(A);
         return 0;
     }
     memcpy(A->links, links, sizeof(int) * 2 * (size_t)n_links);
+    fb_asm_threads(A, 0);
     memcpy(A->axial, axial, sizeof(int) * (size_t)n_links);
     for (int first = 0; first < n_links; first += LINK_BLOCK) {
         const int count = n_links - first < LINK_BLOCK ? n_links - first : LINK_BLOCK;
@@ -109,12 +123,27 @@ Assembly *fb_asm_new(int dim, int n, int n_links, int n_grounds, const int *link
     return A;
 }
 
+/* Let the right-hand side use up to `threads` threads (0: OpenMP's default, OMP_NUM_THREADS
+ * or the cores), one per LINKS_PER_THREAD links at most, one without OpenMP; returns how
+ * many it will use.  Its values do not depend on the number. */
+int fb_asm_threads(Assembly *A, int threads)
+{
+#ifdef _OPENMP
+    if (threads <= 0) threads = omp_get_max_threads();
+#else
+    threads = 1;
+#endif
+    if (threads > A->n_links / LINKS_PER_THREAD) threads = A->n_links / LINKS_PER_THREAD;
+    A->threads = threads < 1 ? 1 : threads;
+    return A->threads;
+}
+
 void fb_asm_free(Assembly *A)
 {
     if (!A) return;
     free(A->links); free(A->axial); free(A->p); free(A->link_par); free(A->inv_mass);
     free(A->adj_start); free(A->adj); free(A->stencil_start); free(A->stencil); free(A->laws);
-    free(A->slip); free(A->tangential_push); free(A->block_law);
+    free(A->slip); free(A->tangential_push); free(A->block_law); free(A->link_force); free(A->block_power);
     free(A);
 }
 
@@ -378,16 +407,24 @@ static void link_block_2d(const Assembly *A, int first, int count, const double 
 #undef LINK_ELEMENT
 }
 
-/* The links' springs and dampers added to acc (nq) in link order; returns their damping
- * power.  By blocks of LINK_BLOCK links: their ends' states gathered into rows, their forces
- * (link_block), then added to both ends.  A run of links from the same first particle i (the
- * presets list a particle's links together) keeps i's sum in registers, in the same order
- * as through memory: every particle's sum is free_acceleration's, bit for bit. */
-static double link_forces_2d(const Assembly *A, const double *x, const double *v, double *acc)
+/* The free part of the right-hand side: ydot's positions rows (the velocities) and its
+ * accelerations from the links' springs and dampers and gravity (not the contacts), the
+ * share `part` of `parts` (a thread's).  Two passes, a barrier between them:
+ *   1. by blocks of LINK_BLOCK links: their ends' states gathered into rows, their forces on
+ *      their first particle (link_block) into link_force, each block's damping power (in
+ *      link order) into block_power;
+ *   2. by particles: each particle's links' forces summed in its CSR order (ascending link
+ *      order, what free_acceleration sums in: every particle's sum is its, bit for bit),
+ *      plus gravity, over the mass.
+ * Nothing is written by two shares and nothing is summed in an order that depends on them:
+ * the result is the same, bit for bit, for any number of parts. */
+static void free_rhs_share_2d(const Assembly *A, const double *x, const double *v, double *ydot, int part, int parts)
 {
-    double in[8][LINK_BLOCK], f[2][LINK_BLOCK], pw[LINK_BLOCK], power = 0.0;
-    for (int first = 0; first < A->n_links; first += LINK_BLOCK) {
-        const int count = A->n_links - first < LINK_BLOCK ? A->n_links - first : LINK_BLOCK;
+    const int n = A->n, nl = A->n_links, n_blocks = (nl + LINK_BLOCK - 1) / LINK_BLOCK;
+    double *restrict force = A->link_force, *restrict block_power = A->block_power, *acc = ydot + 2 * n;
+    double in[8][LINK_BLOCK], f[2][LINK_BLOCK], pw[LINK_BLOCK];
+    for (int b = (int)((long)n_blocks * part / parts); b < (int)((long)n_blocks * (part + 1) / parts); ++b) {
+        const int first = b * LINK_BLOCK, count = nl - first < LINK_BLOCK ? nl - first : LINK_BLOCK;
         const int *ends = A->links + 2 * first;
         for (int m = 0; m < count; ++m) {
             const int i = 2 * ends[2 * m], j = 2 * ends[2 * m + 1];
@@ -399,21 +436,48 @@ static double link_forces_2d(const Assembly *A, const double *x, const double *v
             }
         }
         link_block_2d(A, first, count, (const double (*)[LINK_BLOCK])in, f, pw);
-        for (int m = 0; m < count;) {
-            const int i = 2 * ends[2 * m];
-            double sum[2];
-            for (int a = 0; a < 2; ++a) sum[a] = acc[i + a];
-            do {
-                const int j = 2 * ends[2 * m + 1];
-                for (int a = 0; a < 2; ++a) {
-                    sum[a] += f[a][m];
-                    acc[j + a] -= f[a][m]; /* j != i: a link joins two particles */
-                }
-                power += pw[m];
-            } while (++m < count && 2 * ends[2 * m] == i);
-            for (int a = 0; a < 2; ++a) acc[i + a] = sum[a];
+        double power = 0.0;
+        for (int m = 0; m < count; ++m) {
+            for (int a = 0; a < 2; ++a) force[2 * (first + m) + a] = f[a][m];
+            power += pw[m];
+        }
+        block_power[b] = power;
+    }
+    if (parts > 1) {
+#pragma omp barrier
+    }
+    for (int i = (int)((long)n * part / parts); i < (int)((long)n * (part + 1) / parts); ++i) {
+        double sum[2] = {0.0}, g[2], potential, kinetic;
+        for (int m = A->adj_start[i]; m < A->adj_start[i + 1]; ++m) {
+            const int l = A->adj[m];
+            const double *fl = force + 2 * l;
+            if (A->links[2 * l] == i)
+                for (int a = 0; a < 2; ++a) sum[a] += fl[a];
+            else
+                for (int a = 0; a < 2; ++a) sum[a] -= fl[a];
+        }
+        fb_k_particle_2d(x + 2 * i, v + 2 * i, A->mass + i, A->gravity, g, &potential, &kinetic);
+        for (int a = 0; a < 2; ++a) {
+            ydot[2 * i + a] = v[2 * i + a];
+            acc[2 * i + a] = (sum[a] + g[a]) * A->inv_mass[i];
         }
     }
+}
+
+/* The free part of the right-hand side (free_rhs_share) on the assembly's threads; returns
+ * the links' damping power.  One thread enters no parallel region (its start alone would
+ * cost a small body's whole right-hand side). */
+static double free_rhs_2d(const Assembly *A, const double *x, const double *v, double *ydot)
+{
+#ifdef _OPENMP
+    if (A->threads > 1) {
+#pragma omp parallel num_threads(A->threads)
+        free_rhs_share_2d(A, x, v, ydot, omp_get_thread_num(), omp_get_num_threads());
+    } else
+#endif
+        free_rhs_share_2d(A, x, v, ydot, 0, 1);
+    double power = 0.0;
+    for (int b = 0; b < (A->n_links + LINK_BLOCK - 1) / LINK_BLOCK; ++b) power += A->block_power[b];
     return power;
 }
 
@@ -426,22 +490,24 @@ static int rhs_2d(const FbSystem *s, double t, const double *y, const int *held,
     const Assembly *A = s->data;
     const int n = A->n, nq = s->nq, G = A->n_grounds;
     const double *x = y, *v = y + nq;
-    double *acc = ydot + nq, power = 0.0, impact_power = 0.0;
-    memcpy(ydot, v, sizeof(double) * nq);
-    memset(acc, 0, sizeof(double) * nq);
-    power = link_forces_2d(A, x, v, acc);
-    for (int i = 0; i < n; ++i) {
-        double f[2], potential, kinetic;
-        fb_k_particle_2d(x + 2 * i, v + 2 * i, A->mass + i, A->gravity, f, &potential, &kinetic);
-        for (int a = 0; a < 2; ++a) acc[2 * i + a] = (acc[2 * i + a] + f[a]) * A->inv_mass[i];
-    }
+    double *acc = ydot + nq, impact_power = 0.0;
+    const double power = free_rhs_2d(A, x, v, ydot);
     memset(lam, 0, sizeof(double) * (size_t)n * G);
     for (int i = 0; i < n; ++i) {
+        if (i % LINK_BLOCK == 0) { /* most particles are free, their lam 0: skip them by blocks */
+            const int end = (n - i < LINK_BLOCK ? n : i + LINK_BLOCK) * G;
+            int any = 0;
+            for (int k = i * G; k < end; ++k) any |= held[k] | (push[k] != 0.0); /* no early exit: vectorises */
+            if (!any) {
+                i += LINK_BLOCK - 1;
+                continue;
+            }
+        }
         const int *h = held + i * G;
         const double *f = push + i * G;
         int any_held = 0, touched = 0;
         for (int g = 0; g < G; ++g) touched |= h[g] | (f[g] != 0.0);
-        if (!touched) continue; /* most particles: free, their lam 0; a cheap test, no more */
+        if (!touched) continue;
         for (int g = 0; g < G; ++g) {
             any_held |= h[g];
             if (f[g] != 0.0) { /* the thesis impact mode's force: along the ground's normal and tangential */
@@ -840,16 +906,24 @@ static void link_block_3d(const Assembly *A, int first, int count, const double 
 #undef LINK_ELEMENT
 }
 
-/* The links' springs and dampers added to acc (nq) in link order; returns their damping
- * power.  By blocks of LINK_BLOCK links: their ends' states gathered into rows, their forces
- * (link_block), then added to both ends.  A run of links from the same first particle i (the
- * presets list a particle's links together) keeps i's sum in registers, in the same order
- * as through memory: every particle's sum is free_acceleration's, bit for bit. */
-static double link_forces_3d(const Assembly *A, const double *x, const double *v, double *acc)
+/* The free part of the right-hand side: ydot's positions rows (the velocities) and its
+ * accelerations from the links' springs and dampers and gravity (not the contacts), the
+ * share `part` of `parts` (a thread's).  Two passes, a barrier between them:
+ *   1. by blocks of LINK_BLOCK links: their ends' states gathered into rows, their forces on
+ *      their first particle (link_block) into link_force, each block's damping power (in
+ *      link order) into block_power;
+ *   2. by particles: each particle's links' forces summed in its CSR order (ascending link
+ *      order, what free_acceleration sums in: every particle's sum is its, bit for bit),
+ *      plus gravity, over the mass.
+ * Nothing is written by two shares and nothing is summed in an order that depends on them:
+ * the result is the same, bit for bit, for any number of parts. */
+static void free_rhs_share_3d(const Assembly *A, const double *x, const double *v, double *ydot, int part, int parts)
 {
-    double in[12][LINK_BLOCK], f[3][LINK_BLOCK], pw[LINK_BLOCK], power = 0.0;
-    for (int first = 0; first < A->n_links; first += LINK_BLOCK) {
-        const int count = A->n_links - first < LINK_BLOCK ? A->n_links - first : LINK_BLOCK;
+    const int n = A->n, nl = A->n_links, n_blocks = (nl + LINK_BLOCK - 1) / LINK_BLOCK;
+    double *restrict force = A->link_force, *restrict block_power = A->block_power, *acc = ydot + 3 * n;
+    double in[12][LINK_BLOCK], f[3][LINK_BLOCK], pw[LINK_BLOCK];
+    for (int b = (int)((long)n_blocks * part / parts); b < (int)((long)n_blocks * (part + 1) / parts); ++b) {
+        const int first = b * LINK_BLOCK, count = nl - first < LINK_BLOCK ? nl - first : LINK_BLOCK;
         const int *ends = A->links + 2 * first;
         for (int m = 0; m < count; ++m) {
             const int i = 3 * ends[2 * m], j = 3 * ends[2 * m + 1];
@@ -861,21 +935,48 @@ static double link_forces_3d(const Assembly *A, const double *x, const double *v
             }
         }
         link_block_3d(A, first, count, (const double (*)[LINK_BLOCK])in, f, pw);
-        for (int m = 0; m < count;) {
-            const int i = 3 * ends[2 * m];
-            double sum[3];
-            for (int a = 0; a < 3; ++a) sum[a] = acc[i + a];
-            do {
-                const int j = 3 * ends[2 * m + 1];
-                for (int a = 0; a < 3; ++a) {
-                    sum[a] += f[a][m];
-                    acc[j + a] -= f[a][m]; /* j != i: a link joins two particles */
-                }
-                power += pw[m];
-            } while (++m < count && 3 * ends[2 * m] == i);
-            for (int a = 0; a < 3; ++a) acc[i + a] = sum[a];
+        double power = 0.0;
+        for (int m = 0; m < count; ++m) {
+            for (int a = 0; a < 3; ++a) force[3 * (first + m) + a] = f[a][m];
+            power += pw[m];
+        }
+        block_power[b] = power;
+    }
+    if (parts > 1) {
+#pragma omp barrier
+    }
+    for (int i = (int)((long)n * part / parts); i < (int)((long)n * (part + 1) / parts); ++i) {
+        double sum[3] = {0.0}, g[3], potential, kinetic;
+        for (int m = A->adj_start[i]; m < A->adj_start[i + 1]; ++m) {
+            const int l = A->adj[m];
+            const double *fl = force + 3 * l;
+            if (A->links[2 * l] == i)
+                for (int a = 0; a < 3; ++a) sum[a] += fl[a];
+            else
+                for (int a = 0; a < 3; ++a) sum[a] -= fl[a];
+        }
+        fb_k_particle_3d(x + 3 * i, v + 3 * i, A->mass + i, A->gravity, g, &potential, &kinetic);
+        for (int a = 0; a < 3; ++a) {
+            ydot[3 * i + a] = v[3 * i + a];
+            acc[3 * i + a] = (sum[a] + g[a]) * A->inv_mass[i];
         }
     }
+}
+
+/* The free part of the right-hand side (free_rhs_share) on the assembly's threads; returns
+ * the links' damping power.  One thread enters no parallel region (its start alone would
+ * cost a small body's whole right-hand side). */
+static double free_rhs_3d(const Assembly *A, const double *x, const double *v, double *ydot)
+{
+#ifdef _OPENMP
+    if (A->threads > 1) {
+#pragma omp parallel num_threads(A->threads)
+        free_rhs_share_3d(A, x, v, ydot, omp_get_thread_num(), omp_get_num_threads());
+    } else
+#endif
+        free_rhs_share_3d(A, x, v, ydot, 0, 1);
+    double power = 0.0;
+    for (int b = 0; b < (A->n_links + LINK_BLOCK - 1) / LINK_BLOCK; ++b) power += A->block_power[b];
     return power;
 }
 
@@ -888,22 +989,24 @@ static int rhs_3d(const FbSystem *s, double t, const double *y, const int *held,
     const Assembly *A = s->data;
     const int n = A->n, nq = s->nq, G = A->n_grounds;
     const double *x = y, *v = y + nq;
-    double *acc = ydot + nq, power = 0.0, impact_power = 0.0;
-    memcpy(ydot, v, sizeof(double) * nq);
-    memset(acc, 0, sizeof(double) * nq);
-    power = link_forces_3d(A, x, v, acc);
-    for (int i = 0; i < n; ++i) {
-        double f[3], potential, kinetic;
-        fb_k_particle_3d(x + 3 * i, v + 3 * i, A->mass + i, A->gravity, f, &potential, &kinetic);
-        for (int a = 0; a < 3; ++a) acc[3 * i + a] = (acc[3 * i + a] + f[a]) * A->inv_mass[i];
-    }
+    double *acc = ydot + nq, impact_power = 0.0;
+    const double power = free_rhs_3d(A, x, v, ydot);
     memset(lam, 0, sizeof(double) * (size_t)n * G);
     for (int i = 0; i < n; ++i) {
+        if (i % LINK_BLOCK == 0) { /* most particles are free, their lam 0: skip them by blocks */
+            const int end = (n - i < LINK_BLOCK ? n : i + LINK_BLOCK) * G;
+            int any = 0;
+            for (int k = i * G; k < end; ++k) any |= held[k] | (push[k] != 0.0); /* no early exit: vectorises */
+            if (!any) {
+                i += LINK_BLOCK - 1;
+                continue;
+            }
+        }
         const int *h = held + i * G;
         const double *f = push + i * G;
         int any_held = 0, touched = 0;
         for (int g = 0; g < G; ++g) touched |= h[g] | (f[g] != 0.0);
-        if (!touched) continue; /* most particles: free, their lam 0; a cheap test, no more */
+        if (!touched) continue;
         for (int g = 0; g < G; ++g) {
             any_held |= h[g];
             if (f[g] != 0.0) { /* the thesis impact mode's force: along the ground's normal and tangential */

@@ -174,6 +174,7 @@ class AssembledC(runtime.SystemModel, AssembledModel):
         self.lib = runtime.library()
         self._axial = np.ascontiguousarray(self.axial, dtype=np.intc)
         self._system_cache: tuple[bytes, runtime.FbSystem] | None = None
+        self._threads_wanted = 0
 
     def system(self, p: np.ndarray) -> runtime.FbSystem:
         """An FbSystem of this assembly with parameters ``p`` bound (copied into C)."""
@@ -186,6 +187,7 @@ class AssembledC(runtime.SystemModel, AssembledModel):
                                 self.links.ctypes.data, self._axial.ctypes.data)
         if not handle:
             raise MemoryError(f"cannot allocate the assembly of {self.n_particles} particles")
+        self.threads = lib.fb_asm_threads(handle, self._threads_wanted)
         lib.fb_asm_bind(handle, p.ctypes.data)
         lib.fb_asm_laws(handle, np.ascontiguousarray(self.laws).ctypes.data)
         system = runtime.FbSystem()
@@ -197,6 +199,13 @@ class AssembledC(runtime.SystemModel, AssembledModel):
         system.owner = _AssemblyHandle(lib, handle)
         self._system_cache = (key, system)
         return system
+
+    def use_threads(self, threads: int) -> None:
+        """Let the right-hand side use up to ``threads`` threads (0: OpenMP's default, the
+        cores or OMP_NUM_THREADS), at most one per 4096 links; ``threads`` then says how many
+        it uses.  The values do not depend on it, bit for bit."""
+        self._threads_wanted = int(threads)
+        self._system_cache = None
 
     def slip_directions(self, p) -> FloatArray:
         return self._contact_vectors(self.system(p).slip)

@@ -11,6 +11,8 @@ spacing so their fastest mode, and so the explicit step size, does not change wi
   and the same run again, whose difference is what a new topology costs;
 * the C right-hand side per link (timed inside C);
 * the integration time of the 1 s drop, its RHS evaluations and events;
+* the threads its right-hand side used (OpenMP: one per 4096 links, up to the cores) and,
+  where that is more than one, the same integration on one thread (``OMP_NUM_THREADS=1``);
 * the peak memory of that process (resident set, MB);
 * beside them, the old whole-scene path where it finishes: deriving and rendering the
   scene's particles model with SymPy (2D sizes up to :data:`DERIVE_MAX`, or
@@ -23,6 +25,7 @@ Each size runs in its own process, so its peak memory is its own.  Every row has
 from __future__ import annotations
 
 import json
+import os
 import statistics
 import subprocess
 import sys
@@ -107,7 +110,8 @@ zeros = np.zeros(model.n_contacts)
 rhs = sorted(model.time_rhs(y, p, zeros.astype(np.intc), zeros, calls=max(20, 2_000_000 // (len(model.links) + 1)))
              for _ in range(3))[1]
 print(json.dumps({
-    "dim": dim, "particles": scene.n_particles, "links": int(len(model.links)), "status": result.status,
+    "dim": dim, "particles": scene.n_particles, "links": int(len(model.links)), "threads": result.stats["threads"],
+    "status": result.status,
     "process_s": saved - start, "scene_s": loaded - start, "assembly_s": built - loaded,
     "integration_s": result.stats["wall_time_s"], "simulate_s": simulated - built, "save_s": saved - simulated,
     "rhs_s": rhs, "rhs_per_link_ns": rhs / max(len(model.links), 1) * 1e9,
@@ -119,11 +123,13 @@ print(json.dumps({
 """
 
 
-def _child(dim: int, count: int) -> dict:
+def _child(dim: int, count: int, threads: int | None = None) -> dict:
+    """One size's run in a fresh process (on ``threads`` threads if given: OMP_NUM_THREADS)."""
+    env = dict(os.environ, OMP_NUM_THREADS=str(threads)) if threads else None
     with tempfile.TemporaryDirectory() as tmp:
         start = time.perf_counter()
         run = subprocess.run([sys.executable, "-c", _CHILD, str(dim), str(count), tmp], capture_output=True,
-                             text=True, check=False)
+                             text=True, check=False, env=env)
         wall = time.perf_counter() - start
     if run.returncode != 0:
         raise RuntimeError(f"scale run of about {count} particles in {dim}D failed:\n{run.stderr}")
@@ -159,7 +165,8 @@ def scale_study(out: Path, quick: bool, repeats: int = 3) -> dict:
     print("scale: 2D discs and 3D cubes dropped for 1 s (assembled particles formulation, compiled dopri5, "
           "rtol 1e-6)")
     print(f"  {'dim':>3} {'n':>6} {'links':>6} {'first run':>9} {'again':>7} {'new-topology cost':>17} "
-          f"{'ns/link':>8} {'integrate':>9} {'RHS evals':>9} {'events':>6} {'peak MB':>8} {'whole-scene derive':>18}")
+          f"{'ns/link':>8} {'integrate':>9} {'threads':>7} {'on one':>7} {'RHS evals':>9} {'events':>6} "
+          f"{'peak MB':>8} {'whole-scene derive':>18}")
     for dim, count in ((dim, count) for dim in DIMS for count in sizes):
         first = _child(dim, count)  # never seen: nothing to reuse but the compiled runtime
         again = [_child(dim, count) for _ in range(max(1, repeats - 1) if count <= 1000 else 1)]  # the largest: once
@@ -169,10 +176,16 @@ def scale_study(out: Path, quick: bool, repeats: int = 3) -> dict:
                    again_rhs_per_link_ns=statistics.median(r["rhs_per_link_ns"] for r in again),
                    whole_scene_derive_s=derive)
         row["new_topology_overhead_s"] = row["wall_s"] - row["again_wall_s"]
+        if row["threads"] > 1:  # beside it, the same run on one thread
+            single = _child(dim, count, threads=1)
+            row.update(one_thread_integration_s=single["integration_s"],
+                       one_thread_rhs_per_link_ns=single["rhs_per_link_ns"])
         rows.append(row)
         print(f"  {dim:>3} {row['particles']:>6} {row['links']:>6} {row['wall_s']:>8.2f}s {row['again_wall_s']:>6.2f}s "
               f"{row['new_topology_overhead_s']:>16.2f}s {row['again_rhs_per_link_ns']:>8.1f} "
-              f"{row['again_integration_s']:>8.2f}s {row['rhs_evaluations']:>9} {row['events']:>6} "
+              f"{row['again_integration_s']:>8.2f}s {row['threads']:>7} "
+              + (f"{row['one_thread_integration_s']:>6.2f}s " if row["threads"] > 1 else f"{'-':>7} ")
+              + f"{row['rhs_evaluations']:>9} {row['events']:>6} "
               f"{row['peak_rss_mb']:>8.0f} " + (f"{derive:>17.1f}s" if derive else f"{'-':>18}"))
     data = {"environment": _environment(), "rows": rows}
     _save(out, "scale", data, _plot(rows))
@@ -194,13 +207,16 @@ def _plot(rows: list[dict]):
     fig, (ax, mem) = plt.subplots(1, 2, figsize=(11, 5.0))
     quantities = (("o", "C0", "whole process: scene, run 1 s, save", lambda r: r["again_wall_s"]),
                   ("s", "C1", "integration of the 1 s drop", lambda r: r["again_integration_s"]),
+                  ("v", "C3", "the same on one thread", lambda r: r.get("one_thread_integration_s")),
                   ("^", "C2", "one RHS evaluation", lambda r: r["again_rhs_per_link_ns"] * r["links"] * 1e-9))
     dims = sorted({r.get("dim", 2) for r in rows})  # rows saved before 3D joined are 2D
     for dim in dims:
         mine = [r for r in rows if r.get("dim", 2) == dim]
         n = [r["particles"] for r in mine]
         for marker, colour, _, value in quantities:
-            ax.loglog(n, [value(r) for r in mine], marker=marker, color=colour, **_STYLE[dim])
+            points = [(k, value(r)) for k, r in zip(n, mine) if value(r) is not None]
+            if points:
+                ax.loglog(*zip(*points), marker=marker, color=colour, **_STYLE[dim])
         derived = [(r["particles"], r["whole_scene_derive_s"]) for r in mine if r.get("whole_scene_derive_s")]
         if derived:
             ax.loglog(*zip(*derived), "x", color="k", **_STYLE[dim])

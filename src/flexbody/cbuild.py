@@ -7,6 +7,7 @@ raised with the compiler's full output.
 
 from __future__ import annotations
 
+import ctypes
 import functools
 import hashlib
 import os
@@ -14,6 +15,7 @@ import platform
 import shutil
 import subprocess
 import sys
+import tempfile
 from pathlib import Path
 
 from .paths import cache_root, generated_root, staged_file
@@ -47,11 +49,25 @@ def _compiler_identity(cc: str) -> str:
     return run.stdout.splitlines()[0] if run.stdout else cc
 
 
+#: Used when the compiler can build and link it: the assembled right-hand side of a large
+#: body splits its link loop over threads (OpenMP; without it the same code runs on one).
+OPENMP = "-fopenmp"
+_OPENMP_PROBE = "#include <omp.h>\nint fb_probe(void) { return omp_get_max_threads(); }\n"
+
+
 @functools.cache
 def flags(cc: str) -> tuple[str, ...]:
-    """The compile flags: FLAGS, plus NATIVE if ``cc`` accepts it."""
+    """The compile flags: FLAGS, plus NATIVE and OPENMP where ``cc`` accepts them."""
+    extra = []
     probe = subprocess.run([cc, NATIVE, "-x", "c", "-E", os.devnull], capture_output=True, check=False)
-    return FLAGS + (NATIVE,) if probe.returncode == 0 else FLAGS
+    if probe.returncode == 0:
+        extra.append(NATIVE)
+    with tempfile.TemporaryDirectory() as tmp:
+        probe = subprocess.run([cc, OPENMP, "-shared", "-fPIC", "-x", "c", "-", "-o", str(Path(tmp) / "probe.so")],
+                               input=_OPENMP_PROBE, capture_output=True, text=True, check=False)
+    if probe.returncode == 0:
+        extra.append(OPENMP)
+    return FLAGS + tuple(extra)
 
 
 @functools.cache
@@ -92,6 +108,15 @@ def build(sources: list[Path], include_dirs: list[Path], what: str, announce: st
                 f"compiling {what} failed (exit {run.returncode}):\n$ {' '.join(command)}\n{run.stdout}{run.stderr}"
             )
     return target
+
+
+def load(path: Path) -> ctypes.CDLL:
+    """Load a compiled library.  OpenMP's threads then wait asleep, not spinning, unless
+    OMP_WAIT_POLICY says otherwise: on a shared machine a spinning thread holds the core its
+    partner needs (the 10 000-particle drop ran 2.3x slower than on one thread beside one
+    busy process; asleep it ran as fast as one thread, and 1.3x faster on an idle machine)."""
+    os.environ.setdefault("OMP_WAIT_POLICY", "passive")  # read when libgomp loads
+    return ctypes.CDLL(str(path))
 
 
 def library_path(model_dir: Path) -> Path:

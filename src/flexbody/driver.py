@@ -808,6 +808,7 @@ class _Run:
             "scene": self.scene.name, "source": self.scene.source,
             "method": s.method, "rtol": s.rtol, "atol": s.atol, "backend": model.backend,
             "formulation": model.formulation, "model": "assembled" if isinstance(getattr(model, "inner", model), AssembledModel) else "derived",
+            "threads": getattr(model, "inner", model).threads,
             "impact": s.impact, "impact_dt": s.impact_dt,
             "t_end": s.t_end, "t_reached": float(T[-1]) if len(T) else 0.0,
             "wall_time_s": wall, "rhs_evaluations": self.nfev + int(self.counters[0]),

@@ -49,6 +49,7 @@ class Model:
     digest = ""
     coupled = False  # True where contacts couple (a rigid body's, or between bodies): instants are LCPs (flexbody.coupled)
     compiled_segments = True  # with backend "c", segments run in the compiled loop (not for body-body contacts)
+    threads = 1  # threads of the right-hand side: more only in the assembled C model of a large body
     dim = 2
     nq = nu = ny = n_particles = n_contacts = 0
     contacts: np.ndarray
@@ -315,7 +316,7 @@ class CModel(runtime.SystemModel, GeneratedModel):
     def __init__(self, directory: Path) -> None:
         super().__init__(directory)
         self.library_path = cbuild.library_path(self.directory)
-        lib = ctypes.CDLL(str(self.library_path))
+        lib = cbuild.load(self.library_path)
         lib.fb_digest.restype = ctypes.c_char_p
         if lib.fb_digest().decode() != self.digest:
             raise ModelError(f"{self.library_path} was built for another model than {self.directory}")

@@ -42,6 +42,7 @@ SIGNATURES = {
     "fb_asm_new": (_ptr, [_int, _int, _int, _int, _ptr, _ptr]),
     "fb_asm_free": (None, [_ptr]),
     "fb_asm_bind": (None, [_ptr, _ptr]),
+    "fb_asm_threads": (_int, [_ptr, _int]),
     "fb_asm_laws": (None, [_ptr, _ptr]),
     "fb_asm_system": (None, [_ptr, _ptr]),
     "fb_asm_link_jacobians": (None, [_ptr, _ptr, _ptr]),
@@ -61,7 +62,7 @@ SIGNATURES = {
 @functools.cache
 def library() -> ctypes.CDLL:
     """The runtime library, compiled on first use, with every entry point typed."""
-    lib = ctypes.CDLL(str(cbuild.runtime_library_path()))
+    lib = cbuild.load(cbuild.runtime_library_path())
     for name, (restype, argtypes) in SIGNATURES.items():
         fn = getattr(lib, name)
         fn.restype, fn.argtypes = restype, argtypes
