@@ -411,3 +411,47 @@ def test_a_particle_sliding_into_a_v_notch_comes_to_rest_in_it_held_on_both_flan
     forces = np.linalg.solve(np.column_stack(normals), weight)
     assert np.all(forces > 0.0)
     assert result.contact_force[-1, tip] == pytest.approx(forces.sum(), rel=1e-6)
+
+
+def _loop_and_dart(kick: float, braced: bool) -> dict:
+    """A hexagonal loop, its opposite particles 0 and 3 thrown at each other at ``kick`` m/s
+    (only its perimeter linked, softly, unless ``braced``), and a dart flying at it."""
+    ring = [[k, (k + 1) % 6] for k in range(6)]
+    angles = np.arange(6) * np.pi / 3
+    kicks = np.zeros((6, 2))
+    kicks[0, 0], kicks[3, 0] = -kick, kick
+    braces = [[k, (k + j) % 6] for k in range(6) for j in (2, 3) if k < (k + j) % 6 or j == 2]
+    return {
+        "name": "loop_and_dart", "gravity": [0.0, 0.0],
+        "bodies": [
+            {"name": "loop", "particles": (0.05 * np.column_stack([np.cos(angles), np.sin(angles)])).tolist(),
+             "links": ring + (braces if braced else []), "surface": ring, "mass": 0.05,
+             "stiffness": 2000.0 if braced else 10.0, "damping": 0.0, "position": [0.0, 1.0],
+             "particle_velocities": kicks.tolist(), "collide": True},
+            {"name": "dart", "shape": "polygon", "vertices": [[-0.03, -0.02], [0.03, 0.0], [-0.03, 0.02]],
+             "mass": 0.05, "stiffness": 2000.0, "damping": 0.0, "position": [-0.15, 1.0], "velocity": [1.0, 0.0],
+             "collide": True},
+        ],
+        "simulation": {"t_end": 0.3, "output_dt": 0.001},
+    }
+
+
+def test_a_contact_against_a_surface_folded_over_itself_is_refused():
+    """Particles 0 and 3 of a soft loop pass each other: its boundary crosses itself, and a
+    gap's sign against it means nothing.  When the dart then touches it the run stops as
+    unsupported, naming the body and the crossing segments, after the samples show the fold;
+    a braced loop with the same kick does not fold and the dart's hit is simulated."""
+    from flexbody.surface import apart_pairs, crossings
+
+    ring = np.array([[k, (k + 1) % 6] for k in range(6)])
+    folded = flexbody.simulate(flexbody.load_scene(_loop_and_dart(kick=1.0, braced=False)))
+    assert folded.status == "unsupported"
+    assert "'loop' crosses itself" in folded.message
+    crossed = [crossings(x[:6], ring, apart_pairs(ring)).any() for x in folded.positions]
+    assert crossed[-1] and not crossed[0]
+    assert folded.stats["events"] >= 1
+    braced = flexbody.simulate(flexbody.load_scene(_loop_and_dart(kick=1.0, braced=True)))
+    assert braced.status == "success", braced.message
+    assert braced.stats["impacts"] >= 1
+    assert not any(crossings(x[:6], ring, apart_pairs(ring)).any() for x in braced.positions)
+

@@ -20,7 +20,7 @@ from flexbody import presets
 from flexbody.cli import main
 from flexbody.errors import InputError
 from flexbody.scene import BodyContact, SceneError
-from flexbody.surface import boundary, closure_problem, signed_measure
+from flexbody.surface import apart_pairs, boundary, closure_problem, crossings, signed_measure
 
 from .conftest import body, scene_table
 
@@ -58,6 +58,24 @@ def test_ring_and_ellipse_perimeters_are_closed_counter_clockwise_and_leave_out_
     expected = 0.5 * count * math.sin(2 * math.pi / count) * a * b
     assert shoelace(points, surface) == pytest.approx(expected, rel=1e-12)
     assert signed_measure(points, surface) == pytest.approx(expected, rel=1e-12)
+
+
+def test_a_folded_loop_crosses_itself_and_a_convex_or_touching_one_does_not():
+    """Segment pairs sharing no particle are the ones that can cross; a square with a corner
+    pulled over its far side (a bow tie) crosses itself, the square does not, and ends that
+    only touch another segment do not count."""
+    loop = np.array([[0, 1], [1, 2], [2, 3], [3, 0]])
+    assert apart_pairs(loop).tolist() == [[0, 2], [1, 3]]
+    square = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
+    assert not crossings(square, loop, apart_pairs(loop)).any()
+    bow_tie = square[[0, 1, 3, 2]]  # 0-1 and 2-3 cross at (0.5, 0.5)
+    assert crossings(bow_tie, loop, apart_pairs(loop)).tolist() == [False, True]
+    touching = square.copy()
+    touching[2] = [0.5, 0.0]  # particle 2 lands on segment 0-1's middle: touching, not crossing
+    assert not crossings(touching, loop, apart_pairs(loop)).any()
+    hexagon = np.arange(6)
+    ring = np.column_stack([hexagon, (hexagon + 1) % 6])
+    assert len(apart_pairs(ring)) == 6 * 3 // 2  # each segment is apart from the 3 not next to it
 
 
 def test_two_particles_enclose_nothing():

@@ -73,6 +73,7 @@ from .constants import HELD, SLIDING
 from .dynamics import contact_solve
 from .model import GeneratedModel, Model
 from .scene import Scene
+from .surface import apart_pairs, crossings
 from .surface_contact import (FACE, CompiledClosestFeatures, SurfaceContact, closest_features, segment_normals,
                               triangle_normals)
 
@@ -152,6 +153,7 @@ class BodyContactModel(Model):
         self._body_count = len(counts)
         self._incident = _incidence(self.elements, self.n_particles)
         self._body_elements = [np.flatnonzero(self.element_body == b) for b in range(len(counts))]
+        self._apart: dict[int, IntArray] = {}  # per body: its segment pairs that can cross (fold), on first use
         self._neighbour = _neighbours(self.elements)
         x0 = scene.initial_positions()
         lengths = np.linalg.norm(x0[self.elements[:, 1]] - x0[self.elements[:, 0]], axis=1)
@@ -455,6 +457,25 @@ class BodyContactModel(Model):
         out = super().particle_forces(lam)
         np.add.at(out.T, self.slot_particle, lam[:, self.n_ground_contacts :].T)
         return out
+
+    def fold(self, y, p, contacts: IntArray) -> tuple[int, int, int] | None:
+        """The first self-crossing of a surface that slot contacts ``contacts`` touch: ``(body,
+        element, element)``, or None (2D; a 3D surface is not checked).  On a surface folded
+        over itself inside and outside are not defined, so a gap's sign against it is not
+        either: another body's particle can read "inside" far from any contact."""
+        if self.dim != 2:
+            return None
+        x = self._state(y, p)[0]
+        for body in np.unique(self.slot_body[np.asarray(contacts, np.intp) - self.n_ground_contacts]):
+            elements = self._body_elements[body]
+            if body not in self._apart:
+                self._apart[body] = apart_pairs(self.elements[elements])
+            pairs = self._apart[body]
+            crossed = np.flatnonzero(crossings(x, self.elements[elements], pairs))
+            if len(crossed):
+                a, b = elements[pairs[crossed[0]]]
+                return int(body), int(a), int(b)
+        return None
 
     def forget_free(self, free: np.ndarray) -> None:
         """Let free slots pick their element afresh at their next instant (``free`` (nc,) bool)."""

@@ -659,6 +659,8 @@ class _Run:
                                    f"of each other at t = {t:.12g} s; tighten --rtol/--atol.")
         if self.friction:
             self.check_corners(t)
+        if self.model.n_slots:
+            self.check_folds(t, new_events)
         for e in new_events:
             if e.kind in ("stick", "slip"):
                 self.check_stick_slip(t, e)
@@ -677,6 +679,22 @@ class _Run:
                     f"t = {t:.9g} s at normal speeds up to {speed:.3g} m/s (an accumulation of impacts); "
                     "tighten --rtol/--atol, or add damping so the body settles.",
                 )
+
+    def check_folds(self, t: float, new_events: list[Event]) -> None:
+        """Refuse to go on where a contact decided at this instant is against a surface that
+        crosses itself (a body folded over: its particles passed through its boundary)."""
+        touched = [e.contact for e in new_events if e.contact >= self.model.n_ground_contacts]
+        fold = self.model.fold(self.y, self.p, touched) if touched else None
+        if fold is not None:
+            body, a, b = fold
+            segments = [self.model.elements[k].tolist() for k in (a, b)]
+            raise SimulationFailed(
+                "unsupported",
+                f"at t = {t:.9g} s the surface of body {self.scene.bodies[body].name!r} crosses itself (segments "
+                f"{segments[0]} and {segments[1]}): the body has folded over, so inside and outside of it are not "
+                "defined and contacts against it would be wrong (self-contact, which would stop the fold, is not "
+                "modelled); stiffen the body, give it more particles, or soften what hits it.",
+            )
 
     def check_stick_slip(self, t: float, e: Event) -> None:
         """Stick-slip chattering: a contact switching more than CHATTER_FRICTION times within CHATTER_WINDOW."""

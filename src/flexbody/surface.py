@@ -155,6 +155,49 @@ def hull(points: np.ndarray) -> np.ndarray:
     return tri
 
 
+def apart_pairs(segments: np.ndarray) -> np.ndarray:
+    """The pairs of 2D segments that share no particle: those that can cross.
+
+    Parameters
+    ----------
+    segments : ndarray of int, shape (m, 2)
+
+    Returns
+    -------
+    ndarray of int, shape (k, 2)
+        Row indices ``(a, b)``, ``a < b``, into ``segments``.
+    """
+    segments = np.asarray(segments, dtype=np.intp)
+    a, b = np.triu_indices(len(segments), 1)
+    apart = (segments[a][:, :, None] != segments[b][:, None, :]).all(axis=(1, 2))
+    return np.column_stack([a[apart], b[apart]])
+
+
+def crossings(points: np.ndarray, segments: np.ndarray, pairs: np.ndarray) -> np.ndarray:
+    """Which pairs of 2D segments cross: each one's ends strictly on either side of the
+    other's line (a surface that folds over itself; ends merely touching do not count).
+
+    Parameters
+    ----------
+    points : ndarray, shape (n, 2)
+    segments : ndarray of int, shape (m, 2)
+    pairs : ndarray of int, shape (k, 2)
+        Rows of ``segments`` (:func:`apart_pairs`).
+
+    Returns
+    -------
+    ndarray of bool, shape (k,)
+    """
+    first, second = points[segments[pairs[:, 0]]], points[segments[pairs[:, 1]]]  # (k, 2 ends, 2)
+
+    def side(line: np.ndarray, x: np.ndarray) -> np.ndarray:  # > 0 left of the line, < 0 right
+        d, r = line[:, 1] - line[:, 0], x - line[:, 0]
+        return d[:, 0] * r[:, 1] - d[:, 1] * r[:, 0]
+
+    return ((side(first, second[:, 0]) * side(first, second[:, 1]) < 0.0)
+            & (side(second, first[:, 0]) * side(second, first[:, 1]) < 0.0))
+
+
 def _rows_in(rows: np.ndarray, table: np.ndarray) -> np.ndarray:
     """Which rows of ``rows`` (shape (a, k)) are rows of ``table`` (shape (b, k)), shape (a,)."""
     if len(table) == 0:
