@@ -446,7 +446,7 @@ def test_a_contact_against_a_surface_folded_over_itself_is_refused():
     ring = np.array([[k, (k + 1) % 6] for k in range(6)])
     folded = flexbody.simulate(flexbody.load_scene(_loop_and_dart(kick=1.0, braced=False)))
     assert folded.status == "unsupported"
-    assert "'loop' crosses itself" in folded.message
+    assert "'loop' has folded over (its segments" in folded.message
     crossed = [crossings(x[:6], ring, apart_pairs(ring)).any() for x in folded.positions]
     assert crossed[-1] and not crossed[0]
     assert folded.stats["events"] >= 1
@@ -454,4 +454,30 @@ def test_a_contact_against_a_surface_folded_over_itself_is_refused():
     assert braced.status == "success", braced.message
     assert braced.stats["impacts"] >= 1
     assert not any(crossings(x[:6], ring, apart_pairs(ring)).any() for x in braced.positions)
+
+
+def test_the_fold_check_names_the_folded_3d_body_and_how():
+    """Two spheres that may touch: at their initial state neither has folded; with a vertex
+    of the second thrown through its centre, a contact against it reports that body and an
+    edge through a triangle; against the first, nothing."""
+    ball = {"shape": "sphere", "count": 30, "radius": 0.1, "mass": 0.05, "stiffness": 2000.0, "damping": 0.1,
+            "collide": True}
+    scene = flexbody.load_scene({"name": "two_balls", "gravity": [0.0, 0.0, -9.81],
+                                 "bodies": [{**ball, "name": "a", "position": [0.0, 0.0, 0.5]},
+                                            {**ball, "name": "b", "position": [0.3, 0.0, 0.5]}],
+                                 "simulation": {"t_end": 0.1}})
+    model = load_model(scene, backend="numpy")
+    assert isinstance(model, BodyContactModel)
+    p = model.parameters(scene)
+    y = np.concatenate([scene.initial_positions().ravel(), np.zeros(model.nu + 2)])
+    on = {body: [model.n_ground_contacts + int(np.flatnonzero(model.slot_body == body)[0])] for body in (0, 1)}
+    assert model.fold(y, p, on[0] + on[1]) is None
+    x = scene.initial_positions()
+    first_b = scene.bodies[0].n_particles
+    centre = x[first_b:].mean(axis=0)
+    x[first_b] = centre - 2.0 * (x[first_b] - centre)
+    y[: model.nq] = x.ravel()
+    assert model.fold(y, p, on[0]) is None
+    body, how = model.fold(y, p, on[1])
+    assert body == 1 and "passes through its triangle" in how
 

@@ -20,7 +20,8 @@ from flexbody import presets
 from flexbody.cli import main
 from flexbody.errors import InputError
 from flexbody.scene import BodyContact, SceneError
-from flexbody.surface import apart_pairs, boundary, closure_problem, crossings, signed_measure
+from flexbody.surface import (apart_pairs, boundary, closure_problem, crossings, edges, hull, piercings,
+                              signed_measure)
 
 from .conftest import body, scene_table
 
@@ -76,6 +77,35 @@ def test_a_folded_loop_crosses_itself_and_a_convex_or_touching_one_does_not():
     hexagon = np.arange(6)
     ring = np.column_stack([hexagon, (hexagon + 1) % 6])
     assert len(apart_pairs(ring)) == 6 * 3 // 2  # each segment is apart from the 3 not next to it
+
+
+def test_a_3d_surface_pushed_through_itself_is_pierced_and_a_dented_one_is_not():
+    """A hull of 30 points on a sphere: no edge passes through a triangle; with one vertex
+    thrown through the centre to the far side its fan's edges pierce the far triangles; pushed
+    in to 0.3 of the radius (a dent) nothing is pierced.  An octahedron whose top is pulled
+    below its bottom pierces nothing (the caps meet only at shared corners) but encloses a
+    negative volume: what the fold check looks at besides."""
+    rng = np.random.default_rng(3)
+    points = rng.normal(size=(30, 3))
+    points /= np.linalg.norm(points, axis=1)[:, None]
+    triangles = hull(points)
+    assert len(edges(triangles)) == 3 * len(triangles) // 2
+    assert piercings(points, triangles).shape == (0, 2)
+    through = points.copy()
+    through[0] = -2.0 * points[0]
+    pierced = piercings(through, triangles)
+    assert len(pierced)
+    for tri, edge in pierced:  # none of them shares a particle: a crossing, not a neighbour
+        assert not set(triangles[tri]) & set(edges(triangles)[edge])
+    dented = points.copy()
+    dented[0] = 0.3 * points[0]
+    assert piercings(dented, triangles).shape == (0, 2) and signed_measure(dented, triangles) > 0.0
+    octahedron = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], float)
+    faces = hull(octahedron)
+    inverted = octahedron.copy()
+    inverted[4] = [0.2, 0.1, -2.0]
+    assert piercings(inverted, faces).shape == (0, 2)
+    assert signed_measure(octahedron, faces) > 0.0 > signed_measure(inverted, faces)
 
 
 def test_two_particles_enclose_nothing():

@@ -73,7 +73,7 @@ from .constants import HELD, SLIDING
 from .dynamics import contact_solve
 from .model import GeneratedModel, Model
 from .scene import Scene
-from .surface import apart_pairs, crossings
+from .surface import apart_pairs, closure_problem, crossings, edges, piercings, signed_measure
 from .surface_contact import (FACE, CompiledClosestFeatures, SurfaceContact, closest_features, segment_normals,
                               triangle_normals)
 
@@ -154,6 +154,7 @@ class BodyContactModel(Model):
         self._incident = _incidence(self.elements, self.n_particles)
         self._body_elements = [np.flatnonzero(self.element_body == b) for b in range(len(counts))]
         self._apart: dict[int, IntArray] = {}  # per body: its segment pairs that can cross (fold), on first use
+        self._closed: dict[int, bool] = {}  # per body: whether its surface is closed (fold), on first use
         self._neighbour = _neighbours(self.elements)
         x0 = scene.initial_positions()
         lengths = np.linalg.norm(x0[self.elements[:, 1]] - x0[self.elements[:, 0]], axis=1)
@@ -458,23 +459,33 @@ class BodyContactModel(Model):
         np.add.at(out.T, self.slot_particle, lam[:, self.n_ground_contacts :].T)
         return out
 
-    def fold(self, y, p, contacts: IntArray) -> tuple[int, int, int] | None:
-        """The first self-crossing of a surface that slot contacts ``contacts`` touch: ``(body,
-        element, element)``, or None (2D; a 3D surface is not checked).  On a surface folded
-        over itself inside and outside are not defined, so a gap's sign against it is not
-        either: another body's particle can read "inside" far from any contact."""
-        if self.dim != 2:
-            return None
+    def fold(self, y, p, contacts: IntArray) -> tuple[int, str] | None:
+        """A body whose surface slot contacts ``contacts`` touch and how it has folded (its
+        index and a description), or None.  Folded: two of its 2D segments cross, an edge of
+        its 3D surface passes through one of its triangles, or its closed surface encloses no
+        positive area or volume (turned inside out).  On a folded surface inside and outside
+        are not defined, so a gap's sign against it is not either: another body's particle
+        can read "inside" far from any contact."""
         x = self._state(y, p)[0]
         for body in np.unique(self.slot_body[np.asarray(contacts, np.intp) - self.n_ground_contacts]):
-            elements = self._body_elements[body]
-            if body not in self._apart:
-                self._apart[body] = apart_pairs(self.elements[elements])
-            pairs = self._apart[body]
-            crossed = np.flatnonzero(crossings(x, self.elements[elements], pairs))
-            if len(crossed):
-                a, b = elements[pairs[crossed[0]]]
-                return int(body), int(a), int(b)
+            mine = self.elements[self._body_elements[body]]
+            if self.dim == 2:
+                if body not in self._apart:
+                    self._apart[body] = apart_pairs(mine)
+                pairs = self._apart[body]
+                crossed = pairs[crossings(x, mine, pairs)]
+                if len(crossed):
+                    a, b = mine[crossed[0]].tolist()
+                    return int(body), f"its segments {a} and {b} cross"
+            else:
+                pierced = piercings(x, mine)
+                if len(pierced):
+                    return int(body), (f"its edge {edges(mine)[pierced[0, 1]].tolist()} passes through its "
+                                       f"triangle {mine[pierced[0, 0]].tolist()}")
+            if body not in self._closed:
+                self._closed[body] = closure_problem(mine) == ""
+            if self._closed[body] and signed_measure(x, mine) <= 0.0:
+                return int(body), f"it encloses no positive {'area' if self.dim == 2 else 'volume'} (turned inside out)"
         return None
 
     def forget_free(self, free: np.ndarray) -> None:

@@ -686,14 +686,12 @@ class _Run:
         touched = [e.contact for e in new_events if e.contact >= self.model.n_ground_contacts]
         fold = self.model.fold(self.y, self.p, touched) if touched else None
         if fold is not None:
-            body, a, b = fold
-            segments = [self.model.elements[k].tolist() for k in (a, b)]
+            body, how = fold
             raise SimulationFailed(
                 "unsupported",
-                f"at t = {t:.9g} s the surface of body {self.scene.bodies[body].name!r} crosses itself (segments "
-                f"{segments[0]} and {segments[1]}): the body has folded over, so inside and outside of it are not "
-                "defined and contacts against it would be wrong (self-contact, which would stop the fold, is not "
-                "modelled); stiffen the body, give it more particles, or soften what hits it.",
+                f"at t = {t:.9g} s body {self.scene.bodies[body].name!r} has folded over ({how}): inside and outside of it "
+                "are not defined and contacts against it would be wrong (self-contact, which would stop the fold, "
+                "is not modelled); stiffen the body, give it more particles, or soften what hits it.",
             )
 
     def check_stick_slip(self, t: float, e: Event) -> None:

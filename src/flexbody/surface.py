@@ -198,6 +198,61 @@ def crossings(points: np.ndarray, segments: np.ndarray, pairs: np.ndarray) -> np
             & (side(second, first[:, 0]) * side(second, first[:, 1]) < 0.0))
 
 
+def piercings(points: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """The edges of a 3D surface that pass through one of its triangles they share no particle
+    with (a surface that folds through itself; touching does not count): each edge's
+    ends strictly on either side of the triangle's plane, and its line strictly inside the
+    triangle's three edges.  Only pairs whose bounding boxes meet are tested (a k-d tree on
+    the edges' midpoints, ``scipy.spatial.cKDTree``), so the cost grows as m log m.
+
+    Parameters
+    ----------
+    points : ndarray, shape (n, 3)
+    triangles : ndarray of int, shape (m, 3)
+
+    Returns
+    -------
+    ndarray of int, shape (k, 2)
+        Rows ``(triangle, edge)``: a triangle's index in ``triangles`` and an edge's particles'
+        row in ``edges(triangles)``.
+    """
+    from scipy.spatial import cKDTree
+
+    triangles = np.asarray(triangles, dtype=np.intp)
+    edge = edges(triangles)
+    if len(triangles) == 0:
+        return np.zeros((0, 2), np.intp)
+    corners, ends = points[triangles], points[edge]  # (m, 3, 3), (e, 2, 3)
+    centre, middle = corners.mean(axis=1), ends.mean(axis=1)
+    reach = (np.linalg.norm(corners - centre[:, None], axis=2).max()
+             + 0.5 * np.linalg.norm(ends[:, 1] - ends[:, 0], axis=1).max())
+    near = cKDTree(middle).query_ball_point(centre, reach)
+    tri = np.repeat(np.arange(len(triangles)), [len(k) for k in near])
+    if len(tri) == 0:
+        return np.zeros((0, 2), np.intp)
+    ed = np.concatenate([np.asarray(k, np.intp) for k in near])
+    apart = (triangles[tri][:, :, None] != edge[ed][:, None, :]).all(axis=(1, 2))
+    tri, ed = tri[apart], ed[apart]
+    a, b, c = (corners[tri, k] for k in range(3))
+    p, q = ends[ed, 0], ends[ed, 1]
+
+    def volume(u, v, w, x):  # six times the signed volume of the tetrahedron (u, v, w, x)
+        return np.einsum("ij,ij->i", np.cross(v - u, w - u), x - u)
+
+    through_plane = volume(a, b, c, p) * volume(a, b, c, q) < 0.0
+    sides = np.stack([volume(p, q, a, b), volume(p, q, b, c), volume(p, q, c, a)])
+    inside = ((sides > 0.0).all(axis=0)) | ((sides < 0.0).all(axis=0))
+    hit = through_plane & inside
+    return np.column_stack([tri[hit], ed[hit]])
+
+
+def edges(triangles: np.ndarray) -> np.ndarray:
+    """The distinct edges of triangles ``(m, 3)``, each as its two particles ascending, shape (e, 2)."""
+    triangles = np.asarray(triangles, dtype=np.intp)
+    pairs = np.sort(triangles[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    return np.unique(pairs, axis=0) if len(pairs) else np.zeros((0, 2), np.intp)
+
+
 def _rows_in(rows: np.ndarray, table: np.ndarray) -> np.ndarray:
     """Which rows of ``rows`` (shape (a, k)) are rows of ``table`` (shape (b, k)), shape (a,)."""
     if len(table) == 0:
