@@ -91,12 +91,16 @@ def build(sources: list[Path], include_dirs: list[Path], what: str, announce: st
     cc = compiler()
     headers = [h for d in include_dirs for h in sorted(Path(d).glob("*.h"))]
     source = b"".join(p.name.encode() + b"\0" + p.read_bytes() for p in list(sources) + headers)
-    options = flags(cc)
-    identity = "\n".join([_compiler_identity(cc), " ".join(options), _cpu_identity()])
+    # The key names the compiler (command and version) and every flag it may get, not the
+    # flags it accepts: those follow from the compiler, and probing them costs a compile
+    # (~0.07 s), paid only when something is built.
+    wanted = " ".join(FLAGS + (NATIVE, OPENMP))
+    identity = "\n".join([cc, _compiler_identity(cc), wanted, _cpu_identity()])
     key = hashlib.sha256(source + identity.encode()).hexdigest()[:24]
     target = cache_root() / "lib" / f"{key}.so"
     if target.exists():
         return target
+    options = flags(cc)
     if announce:
         print(announce, file=sys.stderr, flush=True)
     includes = [arg for d in include_dirs for arg in ("-I", str(d))]
