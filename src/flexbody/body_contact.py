@@ -251,7 +251,7 @@ class BodyContactModel(Model):
         solved = self._dynamics(y, p, held, push)
         ng, d = self.n_ground_contacts, self.dim
         vt, ft, slack = np.zeros((self.n_contacts, d)), np.zeros((self.n_contacts, d)), np.full(self.n_contacts, np.inf)
-        if hasattr(self.inner, "friction") and (solved.fast != 0).any():
+        if self.inner.friction is not None and (solved.fast != 0).any():
             self._share_slips(p)
             vt[:ng], ft[:ng], slack[:ng] = self.inner.friction(y, p, solved.fast, np.asarray(push, float)[:ng])
         rows = solved.rows

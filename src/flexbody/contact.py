@@ -276,7 +276,7 @@ def resolve(
             stop[hit & rebounds] = REBOUND
             y, lost = model.impact(y, p, stop.astype(np.intc))
             loss += lost
-            if impact == "instant" and hasattr(model, "settle"):
+            if impact == "instant" and model.settle is not None:
                 # found by event location up to the gap tolerance below the ground: set onto it
                 # (not the thesis mode's windows, whose penetration is the model's)
                 y = model.settle(y, p, stop.astype(np.intc))
@@ -318,7 +318,7 @@ def resolve(
                 events.append(Event(t, c, "liftoff"))
     else:
         raise UnsettledInstant(t, iterations)
-    if hasattr(model, "friction") and getattr(model, "laws", np.zeros((0, 2)))[:, 0].any():
+    if model.friction is not None and model.laws[:, 0].any():
         # coupled contacts (between bodies, a rigid body's): stick and slip decided jointly
         if model.coupled:
             y, lost, found = coupled_friction_phases(model, t, y, p, phases, leaving, was_held, force_tolerance,

@@ -79,8 +79,7 @@ def _within_rounding(solution, rates: np.ndarray, slowest: np.ndarray | float = 
 
 def _frictional(model, rows: np.ndarray) -> bool:
     """Whether any of the contacts ``rows`` has Coulomb friction (models with ``mu`` (nc,))."""
-    mu = getattr(model, "mu", None)
-    return mu is not None and bool((mu[rows] > 0.0).any())
+    return model.mu is not None and bool((model.mu[rows] > 0.0).any())
 
 
 def _coupling(model, q: np.ndarray, u: np.ndarray, p: np.ndarray, rows: np.ndarray, tangents: bool = False):
@@ -89,7 +88,7 @@ def _coupling(model, q: np.ndarray, u: np.ndarray, p: np.ndarray, rows: np.ndarr
     gap accelerations' velocity terms (k,).  The model's own where it has them (contacts
     between bodies: the few particles they move, M diagonal), else from its dense matrices.
     With ``tangents`` (models with friction) the k tangent rows follow the k normal ones."""
-    if hasattr(model, "contact_coupling"):
+    if model.contact_coupling is not None:
         return model.contact_coupling(q, u, p, rows, tangents)
     M, J = model.mass_matrix(q, p), model.gap_jacobian(q, p)[rows]
     return J, slice(None), delassus(J, M), lambda P: velocity_change(J, M, P), model.gap_bias(q, u, p)[rows]

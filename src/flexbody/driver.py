@@ -308,7 +308,7 @@ class _Run:
         self.restitution, self.min_rebound = _rebound_laws(scene, model, size)
         # A sliding contact slower than this has come to rest (a stop's root is ~1e-15 s wide).
         self.speed_tolerance = SPEED_TOLERANCE * np.sqrt(max(float(np.linalg.norm(scene.gravity)), 1.0) * max(size, 1.0))
-        if hasattr(model, "mu"):  # contacts between bodies: the grounds', then the pairs'
+        if model.mu is not None:  # contacts between bodies: the grounds', then the pairs'
             self.mu = model.mu.copy()
         else:
             self.mu = np.array([g.friction for g in scene.grounds], float)[model.contacts[:, 1]] \

@@ -46,8 +46,7 @@ class EventFunctions:
         self.margins = model.element_margins if model.n_slots else None
         # Contacts between bodies (past the grounds'): a just released one is checked more densely.
         self.between_bodies = np.arange(model.n_contacts) >= model.n_ground_contacts
-        laws = getattr(model, "laws", np.zeros((0, 2)))
-        self.friction = bool(self.held_mask.any() and laws[:, 0].any())
+        self.friction = bool(self.held_mask.any() and model.laws[:, 0].any())
         # Each sliding contact's direction at the step's start: the model's own (FbSystem.slip), whose
         # right-hand side continues a slip past its stop along it; one from an earlier slide is stale.
         self.direction = model.slip_directions(p) if self.friction else np.zeros((model.n_contacts, model.dim))

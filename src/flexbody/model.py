@@ -57,6 +57,16 @@ class Model:
     #: index in ``scene.contacts``: none unless bodies may touch each other.
     n_slots = 0
     slot_pair = np.zeros(0, np.intp)
+    #: Contact laws (Coulomb mu, Newton e) per ground, then per pair of bodies, shape (k, 2):
+    #: none where the model does not keep them.
+    laws = np.zeros((0, 2))
+    #: Each contact's Coulomb coefficient (nc,), where the model keeps its own (contacts
+    #: between bodies: the grounds', then the pairs'); None: the scene's grounds decide.
+    mu: FloatArray | None = None
+    #: Optional evaluations, None where a model has none: ``friction`` (each contact's
+    #: tangential velocity, force and sticking slack), ``settle`` (put stopped particles onto
+    #: their grounds) and ``contact_coupling`` (its own contact rows and ``J M^-1 J^T``).
+    friction = settle = contact_coupling = None
 
     @property
     def n_ground_contacts(self) -> int:

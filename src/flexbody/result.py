@@ -27,7 +27,8 @@ STATUSES = {
     "blow_up": "The state became non-finite or the mass matrix singular.",
     "max_events": "The maximum number of events was reached.",
     "too_slow": "The run exceeded its max_wall_time.",
-    "unsupported": "The scene reached a situation flexbody refuses to approximate (a frictional corner).",
+    "unsupported": ("The scene reached a situation flexbody refuses to approximate (a frictional corner, "
+                    "a contact against a body folded over itself)."),
 }
 
 
