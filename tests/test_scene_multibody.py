@@ -20,8 +20,7 @@ from flexbody import presets
 from flexbody.cli import main
 from flexbody.errors import InputError
 from flexbody.scene import BodyContact, SceneError
-from flexbody.surface import (apart_pairs, boundary, closure_problem, crossings, edges, hull, piercings,
-                              signed_measure)
+from flexbody.surface import boundary, closure_problem, crossings, edges, hull, piercings, signed_measure
 
 from .conftest import body, scene_table
 
@@ -62,21 +61,32 @@ def test_ring_and_ellipse_perimeters_are_closed_counter_clockwise_and_leave_out_
 
 
 def test_a_folded_loop_crosses_itself_and_a_convex_or_touching_one_does_not():
-    """Segment pairs sharing no particle are the ones that can cross; a square with a corner
-    pulled over its far side (a bow tie) crosses itself, the square does not, and ends that
-    only touch another segment do not count."""
+    """A square with a corner pulled over its far side (a bow tie) crosses itself, the square
+    does not, ends that only touch another segment do not count, and neighbours sharing a
+    particle never do; a long folded zigzag's crossings are found whichever of its segments
+    are near each other (the k-d tree's candidates), as by testing every pair."""
     loop = np.array([[0, 1], [1, 2], [2, 3], [3, 0]])
-    assert apart_pairs(loop).tolist() == [[0, 2], [1, 3]]
     square = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
-    assert not crossings(square, loop, apart_pairs(loop)).any()
-    bow_tie = square[[0, 1, 3, 2]]  # 0-1 and 2-3 cross at (0.5, 0.5)
-    assert crossings(bow_tie, loop, apart_pairs(loop)).tolist() == [False, True]
+    assert crossings(square, loop).shape == (0, 2)
+    bow_tie = square[[0, 1, 3, 2]]  # segments 1-2 and 3-0 (rows 1 and 3) cross at (0.5, 0.5)
+    assert crossings(bow_tie, loop).tolist() == [[1, 3]]
     touching = square.copy()
     touching[2] = [0.5, 0.0]  # particle 2 lands on segment 0-1's middle: touching, not crossing
-    assert not crossings(touching, loop, apart_pairs(loop)).any()
-    hexagon = np.arange(6)
-    ring = np.column_stack([hexagon, (hexagon + 1) % 6])
-    assert len(apart_pairs(ring)) == 6 * 3 // 2  # each segment is apart from the 3 not next to it
+    assert crossings(touching, loop).shape == (0, 2)
+    rng = np.random.default_rng(5)
+    walk = np.cumsum(rng.normal(size=(200, 2)), axis=0)  # a random walk: it crosses itself often
+    chain = np.column_stack([np.arange(199), np.arange(1, 200)])
+    found = crossings(walk, chain)
+    every = [(a, b) for a in range(199) for b in range(a + 2, 199)
+             if _segments_cross(walk[chain[a]], walk[chain[b]])]
+    assert len(every) > 10 and found.tolist() == [list(pair) for pair in every]
+
+
+def _segments_cross(p: np.ndarray, q: np.ndarray) -> bool:
+    """Two segments' ends strictly on either side of each other's line (by hand, pair by pair)."""
+    def side(a, b, c):
+        return (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0])
+    return side(p[0], p[1], q[0]) * side(p[0], p[1], q[1]) < 0 and side(q[0], q[1], p[0]) * side(q[0], q[1], p[1]) < 0
 
 
 def test_a_3d_surface_pushed_through_itself_is_pierced_and_a_dented_one_is_not():

@@ -73,7 +73,7 @@ from .constants import HELD, SLIDING
 from .dynamics import contact_solve
 from .model import GeneratedModel, Model
 from .scene import Scene
-from .surface import apart_pairs, closure_problem, crossings, edges, piercings, signed_measure
+from .surface import closure_problem, crossings, edges, piercings, signed_measure
 from .surface_contact import (FACE, CompiledClosestFeatures, SurfaceContact, closest_features, segment_normals,
                               triangle_normals)
 
@@ -153,7 +153,6 @@ class BodyContactModel(Model):
         self._body_count = len(counts)
         self._incident = _incidence(self.elements, self.n_particles)
         self._body_elements = [np.flatnonzero(self.element_body == b) for b in range(len(counts))]
-        self._apart: dict[int, IntArray] = {}  # per body: its segment pairs that can cross (fold), on first use
         self._closed: dict[int, bool] = {}  # per body: whether its surface is closed (fold), on first use
         self._neighbour = _neighbours(self.elements)
         x0 = scene.initial_positions()
@@ -470,10 +469,7 @@ class BodyContactModel(Model):
         for body in np.unique(self.slot_body[np.asarray(contacts, np.intp) - self.n_ground_contacts]):
             mine = self.elements[self._body_elements[body]]
             if self.dim == 2:
-                if body not in self._apart:
-                    self._apart[body] = apart_pairs(mine)
-                pairs = self._apart[body]
-                crossed = pairs[crossings(x, mine, pairs)]
+                crossed = crossings(x, mine)
                 if len(crossed):
                     a, b = mine[crossed[0]].tolist()
                     return int(body), f"its segments {a} and {b} cross"

@@ -155,47 +155,48 @@ def hull(points: np.ndarray) -> np.ndarray:
     return tri
 
 
-def apart_pairs(segments: np.ndarray) -> np.ndarray:
-    """The pairs of 2D segments that share no particle: those that can cross.
-
-    Parameters
-    ----------
-    segments : ndarray of int, shape (m, 2)
-
-    Returns
-    -------
-    ndarray of int, shape (k, 2)
-        Row indices ``(a, b)``, ``a < b``, into ``segments``.
-    """
-    segments = np.asarray(segments, dtype=np.intp)
-    a, b = np.triu_indices(len(segments), 1)
-    apart = (segments[a][:, :, None] != segments[b][:, None, :]).all(axis=(1, 2))
-    return np.column_stack([a[apart], b[apart]])
-
-
-def crossings(points: np.ndarray, segments: np.ndarray, pairs: np.ndarray) -> np.ndarray:
-    """Which pairs of 2D segments cross: each one's ends strictly on either side of the
-    other's line (a surface that folds over itself; ends merely touching do not count).
+def crossings(points: np.ndarray, segments: np.ndarray) -> np.ndarray:
+    """The pairs of 2D segments that share no particle and cross: each one's ends strictly on
+    either side of the other's line (a surface that folds over itself; ends merely touching
+    do not count).  Only pairs whose midpoints are within the longest segment's length can
+    cross, and only those are tested (a k-d tree on the midpoints, ``scipy.spatial.cKDTree``),
+    so the cost grows as m log m.
 
     Parameters
     ----------
     points : ndarray, shape (n, 2)
     segments : ndarray of int, shape (m, 2)
-    pairs : ndarray of int, shape (k, 2)
-        Rows of ``segments`` (:func:`apart_pairs`).
 
     Returns
     -------
-    ndarray of bool, shape (k,)
+    ndarray of int, shape (k, 2)
+        Rows ``(a, b)``, ``a < b``, of ``segments``, ascending.
     """
-    first, second = points[segments[pairs[:, 0]]], points[segments[pairs[:, 1]]]  # (k, 2 ends, 2)
+    from scipy.spatial import cKDTree
+
+    segments = np.asarray(segments, dtype=np.intp)
+    if len(segments) < 2:
+        return np.zeros((0, 2), np.intp)
+    ends = points[segments]  # (m, 2 ends, 2)
+    reach = float(np.linalg.norm(ends[:, 1] - ends[:, 0], axis=1).max())
+    pairs = cKDTree(ends.mean(axis=1)).query_pairs(reach, output_type="ndarray").reshape(-1, 2)
+    pairs = np.sort(pairs, axis=1)
+    pairs = pairs[np.lexsort((pairs[:, 1], pairs[:, 0]))]
+    pairs = pairs[_share_none(segments[pairs[:, 0]], segments[pairs[:, 1]])]
+    first, second = ends[pairs[:, 0]], ends[pairs[:, 1]]
 
     def side(line: np.ndarray, x: np.ndarray) -> np.ndarray:  # > 0 left of the line, < 0 right
         d, r = line[:, 1] - line[:, 0], x - line[:, 0]
         return d[:, 0] * r[:, 1] - d[:, 1] * r[:, 0]
 
-    return ((side(first, second[:, 0]) * side(first, second[:, 1]) < 0.0)
-            & (side(second, first[:, 0]) * side(second, first[:, 1]) < 0.0))
+    hit = ((side(first, second[:, 0]) * side(first, second[:, 1]) < 0.0)
+           & (side(second, first[:, 0]) * side(second, first[:, 1]) < 0.0))
+    return pairs[hit]
+
+
+def _share_none(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Which rows of element arrays ``a`` (k, i) and ``b`` (k, j) share no particle, shape (k,)."""
+    return (a[:, :, None] != b[:, None, :]).all(axis=(1, 2))
 
 
 def piercings(points: np.ndarray, triangles: np.ndarray) -> np.ndarray:
@@ -231,7 +232,7 @@ def piercings(points: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     if len(tri) == 0:
         return np.zeros((0, 2), np.intp)
     ed = np.concatenate([np.asarray(k, np.intp) for k in near])
-    apart = (triangles[tri][:, :, None] != edge[ed][:, None, :]).all(axis=(1, 2))
+    apart = _share_none(triangles[tri], edge[ed])
     tri, ed = tri[apart], ed[apart]
     a, b, c = (corners[tri, k] for k in range(3))
     p, q = ends[ed, 0], ends[ed, 1]
