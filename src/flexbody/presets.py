@@ -46,7 +46,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .surface import boundary, empty, hull, outward, perimeter
+from .surface import boundary, edges, empty, hull, outward, perimeter
 
 Links = list[tuple[int, int]]
 
@@ -192,11 +192,7 @@ def _disc_lattice(count: int, radius: float) -> tuple[np.ndarray, Links, np.ndar
 
 def _edges(cells: np.ndarray) -> Links:
     """The unique edges of polygon or tetrahedron cells ``(m, k)``, as sorted index pairs."""
-    k = cells.shape[1]
-    pairs = np.concatenate([cells[:, [a, b]] for a in range(k) for b in range(a + 1, k)]) if len(cells) else \
-        np.zeros((0, 2), int)
-    pairs = np.unique(np.sort(pairs, axis=1), axis=0)
-    return [(int(i), int(j)) for i, j in pairs]
+    return [(int(i), int(j)) for i, j in edges(cells)]
 
 
 def sphere(count: int, radius: float, center: bool) -> tuple[np.ndarray, Links]:

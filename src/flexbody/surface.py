@@ -203,8 +203,10 @@ def piercings(points: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     """The edges of a 3D surface that pass through one of its triangles they share no particle
     with (a surface that folds through itself; touching does not count): each edge's
     ends strictly on either side of the triangle's plane, and its line strictly inside the
-    triangle's three edges.  Only pairs whose bounding boxes meet are tested (a k-d tree on
-    the edges' midpoints, ``scipy.spatial.cKDTree``), so the cost grows as m log m.
+    triangle's three edges.  Only an edge whose midpoint is within reach of a triangle's
+    centre (its largest corner distance plus half the longest edge) can pass through it, and
+    only those pairs are tested (a k-d tree on the edges' midpoints, ``scipy.spatial.cKDTree``),
+    so the cost grows as m log m.
 
     Parameters
     ----------
@@ -247,11 +249,15 @@ def piercings(points: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     return np.column_stack([tri[hit], ed[hit]])
 
 
-def edges(triangles: np.ndarray) -> np.ndarray:
-    """The distinct edges of triangles ``(m, 3)``, each as its two particles ascending, shape (e, 2)."""
-    triangles = np.asarray(triangles, dtype=np.intp)
-    pairs = np.sort(triangles[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
-    return np.unique(pairs, axis=0) if len(pairs) else np.zeros((0, 2), np.intp)
+def edges(cells: np.ndarray) -> np.ndarray:
+    """The distinct edges of cells ``(m, k)`` (triangles, polygons' fans, tetrahedra): every
+    two particles of a cell, each pair ascending, the pairs ascending, shape (e, 2)."""
+    cells = np.asarray(cells, dtype=np.intp)
+    if len(cells) == 0:
+        return np.zeros((0, 2), np.intp)
+    k = cells.shape[1]
+    pairs = np.concatenate([cells[:, [a, b]] for a in range(k) for b in range(a + 1, k)])
+    return np.unique(np.sort(pairs, axis=1), axis=0)
 
 
 def _rows_in(rows: np.ndarray, table: np.ndarray) -> np.ndarray:
