@@ -182,6 +182,7 @@ def resolve(
     min_rebound: np.ndarray | None = None,
     speed_tolerance: float = 0.0,
     friction: np.ndarray | None = None,
+    zeno_rise: float = 0.0,
 ) -> Resolution:
     """Apply the event fixed point at instant ``t``.
 
@@ -216,6 +217,10 @@ def resolve(
     friction : ndarray, shape (nc,), optional
         Coulomb's mu of each contact's ground (default 0).  In the thesis mode a window also
         pushes against the tangential velocity (:func:`window_friction`).
+    zeno_rise : float
+        The rise (m) below which a rebound is plastic (``min_rebound``'s, against gravity);
+        coupled contacts pulled back harder than by gravity stop at their own pull's speed
+        (:func:`flexbody.coupled.coupled_impact`).
 
     Returns
     -------
@@ -262,7 +267,7 @@ def resolve(
         if instant.any() and model.coupled:
             # Coupled contacts (a rigid body's): one LCP over every touching contact.
             touching_now = instant | phases.on_ground
-            out = coupled_impact(model, y, p, touching_now, np.where(hit & rebounds, e, 0.0), slowest)
+            out = coupled_impact(model, y, p, touching_now, np.where(hit & rebounds, e, 0.0), slowest, zeno_rise)
             y, loss = out.y, loss + out.loss
             gaps = model.gaps(y[: model.nq], p)
             left = out.leaving

@@ -306,6 +306,7 @@ class _Run:
         self.contact_masses = scene.masses[model.contacts[:, 0]]
         self.force_tolerance = 1e-10 * self.contact_masses * max(float(np.linalg.norm(scene.gravity)), 1.0)
         self.restitution, self.min_rebound = _rebound_laws(scene, model, size)
+        self.zeno_rise = ZENO_RISE * size
         # A sliding contact slower than this has come to rest (a stop's root is ~1e-15 s wide).
         self.speed_tolerance = SPEED_TOLERANCE * np.sqrt(max(float(np.linalg.norm(scene.gravity)), 1.0) * max(size, 1.0))
         if model.mu is not None:  # contacts between bodies: the grounds', then the pairs'
@@ -518,7 +519,7 @@ class _Run:
                           gap_tolerance=self.gap_tolerance, force_tolerance=self.force_tolerance,
                           masses=self.contact_masses, impact=s.impact, impact_dt=s.impact_dt,
                           restitution=self.restitution, min_rebound=self.min_rebound,
-                          speed_tolerance=self.speed_tolerance, friction=self.mu)
+                          speed_tolerance=self.speed_tolerance, friction=self.mu, zeno_rise=self.zeno_rise)
             self.y[:] = res.y
             self.phases.assign(res.phases)
             new, not_held, loss = res.events, res.not_held, res.impact_loss
