@@ -189,7 +189,7 @@ def test_a_body_starting_at_the_gimbal_lock_is_refused(models):
 def test_a_body_tumbling_through_the_gimbal_lock_stops_with_blow_up():
     """The 2x2x2 box starts with T's angles (45, 0, 0) deg (T's y-axis is the face diagonal
     (0, 1, 1)/sqrt(2), see the gauge test); spun about that axis, T's z-axis reaches N's x-axis
-    after a quarter turn: M is singular there, and the run stops with blow_up, having
+    after a quarter turn: M is singular there, and the run stops with blow_up naming the lock, having
     matched the particles formulation until then."""
     spin = 2.0
     axis = np.array([0.0, 1.0, 1.0]) / np.sqrt(2.0)
@@ -204,6 +204,7 @@ def test_a_body_tumbling_through_the_gimbal_lock_stops_with_blow_up():
             for f in ("particles", "floating")}
     a, b = runs["particles"], runs["floating"]
     assert a.success
-    assert b.status == "blow_up" and "not positive definite" in b.message
+    # M's factorisation fails or the steps collapse first, by rounding (machine): the same lock
+    assert b.status == "blow_up" and "body 'b' reached its frame T's gimbal lock (beta = 90.0" in b.message
     assert abs(b.t[-1] - np.pi / 2 / spin) <= 1e-3
     assert np.abs(a.positions[: len(b.t)] - b.positions).max() <= 1e-8

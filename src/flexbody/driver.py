@@ -74,6 +74,26 @@ def _non_finite(t: float) -> tuple[str, str]:
     return "blow_up", f"the state became non-finite at t = {t:.9g} s; tighten --rtol/--atol or use an implicit method."
 
 
+#: A step collapse or a singular M with a floating 3D body's angle beta this close to
+#: +-90 deg (its X-Y-Z angles' gimbal lock) is that singularity, reported as such (deg).
+GIMBAL_LOCK_DEG = 1.0
+
+
+def _gimbal_lock(scene: Scene, model: Model, y: np.ndarray, t: float) -> tuple[str, str] | None:
+    """``blow_up`` naming the body whose frame T reached its angles' gimbal lock in state ``y``,
+    or None.  Whether the integrator's trial state there fails the mass matrix's
+    factorisation or its steps shrink first (a step collapse) depends on rounding, so on the
+    machine: both are the same singularity."""
+    names = getattr(model, "q_names", ())
+    for k, name in enumerate(names):
+        if name.startswith("beta") and 90.0 - abs(np.degrees(y[k])) < GIMBAL_LOCK_DEG:
+            body = scene.bodies[int(name[4:])].name
+            return "blow_up", (f"at t = {t:.9g} s body {body!r} reached its frame T's gimbal lock (beta = "
+                               f"{np.degrees(y[k]):.4f} deg), where the mass matrix of its X-Y-Z angles is singular; a body "
+                               "that tumbles freely needs the particles formulation.")
+    return None
+
+
 def _scipy_version() -> str:
     from importlib.metadata import version
 
@@ -396,7 +416,8 @@ class _Run:
         self.keep_samples(start, start + n_new)
         self.min_gap = c.min_gap.value
         if status < 0:
-            raise SimulationFailed(*self.COMPILED_FAILURES[status](s.method, t_stop))
+            lock = _gimbal_lock(self.scene, self.model, self.y, t_stop) if status in (STEP_COLLAPSE, SINGULAR) else None
+            raise SimulationFailed(*(lock or self.COMPILED_FAILURES[status](s.method, t_stop)))
         return _Stop(t_stop, c.touching, c.leaving, status == EVENT)
 
     COMPILED_FAILURES = {
@@ -431,7 +452,8 @@ class _Run:
                 message = solver.step()
                 self.steps += 1
                 if solver.status == "failed":
-                    raise SimulationFailed(
+                    lock = _gimbal_lock(self.scene, model, solver.y, solver.t)
+                    raise SimulationFailed(*lock) if lock else SimulationFailed(
                         "step_size_collapse",
                         f"{s.method} failed at t = {solver.t:.9g} s: {message} The model is too stiff for this "
                         "method or tolerance: try an implicit method (--method Radau or BDF) or a looser --rtol.",
