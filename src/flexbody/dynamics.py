@@ -41,6 +41,12 @@ def contact_solve(A: np.ndarray, b: np.ndarray) -> np.ndarray:
     :data:`REDUNDANT` of the largest diagonal entry: their forces are 0, the others hold
     them), in the order of model.c's ``cholesky`` so both give the same numbers.
 
+    Where that loop meets a pivot below ``-REDUNDANT`` without ``A`` being indefinite it is
+    rounding grown through a small pivot kept just above the threshold (a pile's reverse
+    vertex-to-vertex contacts: two rows nearly equal, and a third along their difference):
+    the solve is then done again by LAPACK's pivoted Cholesky (``dpstrf``, largest pivot
+    first, so nothing grows), dropping the same way (:func:`_pivoted_solve`).
+
     Raises
     ------
     FloatingPointError
@@ -63,7 +69,7 @@ def contact_solve(A: np.ndarray, b: np.ndarray) -> np.ndarray:
     for j in range(n):
         d = A[j, j] - L[j, :j] @ L[j, :j]
         if not d > -REDUNDANT * largest:
-            raise FloatingPointError("mass or contact matrix not positive definite at this state")
+            return _pivoted_solve(A, b, largest)
         if d <= REDUNDANT * largest:
             continue  # dependent: dropped
         L[j, j] = np.sqrt(d)
@@ -73,6 +79,31 @@ def contact_solve(A: np.ndarray, b: np.ndarray) -> np.ndarray:
         x[i] = (x[i] - L[i, :i] @ x[:i]) / L[i, i] if L[i, i] > 0.0 else 0.0
     for i in range(n - 1, -1, -1):
         x[i] = (x[i] - L[i + 1 :, i] @ x[i + 1 :]) / L[i, i] if L[i, i] > 0.0 else 0.0
+    return x
+
+
+#: Past the pivoted factorisation's drop, a remainder (Schur complement) entry above this
+#: share of the largest diagonal entry means ``A`` is indefinite, not rounding.
+INDEFINITE = 1e-9
+
+
+def _pivoted_solve(A: np.ndarray, b: np.ndarray, largest: float) -> np.ndarray:
+    """``x`` (k,) with ``A x = b`` by pivoted Cholesky, contacts whose pivot falls to
+    :data:`REDUNDANT` of ``largest`` dropped (force 0): :func:`contact_solve`'s fallback."""
+    from scipy.linalg import solve_triangular
+    from scipy.linalg.lapack import dpstrf
+
+    c, order, rank, _ = dpstrf(A, tol=REDUNDANT * largest, lower=1)
+    order = order - 1  # LAPACK counts from 1
+    L = np.tril(c)[:, :rank]
+    kept, dropped = order[:rank], order[rank:]
+    remainder = A[np.ix_(dropped, dropped)] - L[rank:] @ L[rank:].T
+    if not (np.all(np.isfinite(c)) and np.all(np.diag(L)[:rank] > 0.0)
+            and np.all(np.abs(remainder) <= INDEFINITE * largest)):
+        raise FloatingPointError("mass or contact matrix not positive definite at this state")
+    x = np.zeros(len(b))
+    head = L[:rank]
+    x[kept] = solve_triangular(head.T, solve_triangular(head, np.asarray(b, float)[kept], lower=True), lower=False)
     return x
 
 
