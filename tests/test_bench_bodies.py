@@ -52,3 +52,14 @@ def test_one_body_alone_is_where_it_is_in_the_full_scene():
 def test_the_radius_keeps_the_thesis_ball_lattice_spacing():
     assert disc_radius(23) == pytest.approx(0.1)
     assert disc_radius(200) ** 2 / 200 == pytest.approx(0.1**2 / 23)  # same area per particle
+
+
+def test_the_stiff_set_changes_the_links_stiffness_only():
+    from flexbody.bench_bodies import STIFF, STIFFNESS
+
+    soft, stiff = bodies_scene(4, 23, 0.3, collide=True), bodies_scene(4, 23, 0.3, collide=True, stiffness=STIFF)
+    assert STIFFNESS == 2000.0 and STIFF == pytest.approx(STIFFNESS * (200 / 23) ** 0.5, rel=0.02)
+    assert all(np.all(b.stiffness == STIFFNESS) for b in soft.bodies)
+    assert all(np.all(b.stiffness == STIFF) for b in stiff.bodies)
+    np.testing.assert_array_equal(soft.initial_positions(), stiff.initial_positions())
+    assert soft.name != stiff.name

@@ -13,6 +13,10 @@ only, so the ratios isolate the cost of contact, not of the stepper):
 * ``separate`` — one body alone, run once per body position and summed: the "20 separate
   drops" of the issue.
 
+The three runs are made twice: with the thesis ball's link stiffness (2000 N/m), on which
+the larger discs are soft (their lattice crushes under the pile), and with it scaled by
+the radius (:data:`STIFF`), so that a disc sags under its own weight as the thesis ball does.
+
 Each run records its wall time (median over ``repeats`` where affordable), RHS
 evaluations, events, maximum penetration, relative energy drift, the broad phase's
 rebuilds and, when it stops early, the time it reached and why.  ``--quick`` runs four
@@ -33,6 +37,10 @@ from .scene import Scene, load_scene
 FULL = {"bodies": 20, "count": 200, "t_end": 0.5}
 #: ``--quick``: four thesis-ball discs (about 23 particles, radius 0.1 m), 0.3 s.
 QUICK = {"bodies": 4, "count": 23, "t_end": 0.3}
+#: The thesis ball's link stiffness (N/m), and the stiff set's: 2000 N/m x sqrt(200 / 23)
+#: (a 2D lattice's modulus is its links' stiffness, while a disc's weight per unit width
+#: grows with its radius), rounded.
+STIFFNESS, STIFF = 2000.0, 6000.0
 #: Gap between neighbouring discs and the height of the lowest point above the ground (m).
 GAP = 0.02
 LIFT = 0.05
@@ -61,25 +69,27 @@ def disc_positions(n_bodies: int, radius: float, gap: float = GAP, lift: float =
 
 
 def bodies_scene_table(n_bodies: int, count: int, t_end: float, collide: bool,
-                       only: int | None = None) -> dict:
+                       only: int | None = None, stiffness: float = STIFFNESS) -> dict:
     """The study's scene as a table: ``n_bodies`` discs of about ``count`` particles, 0.05 kg
-    each, k = 2000 N/m and c = 0.5 N s/m per link (relative dampers), each turned by a
+    each, ``stiffness`` (N/m) and c = 0.5 N s/m per link (relative dampers), each turned by a
     different small angle so no two land alike; ``only``: that body alone, where it is in
     the full scene."""
     radius = disc_radius(count)
     centres = disc_positions(n_bodies, radius)
     keep = range(n_bodies) if only is None else (only,)
     bodies = [{"name": f"disc{k}", "shape": "disc", "count": count, "radius": radius, "mass": 0.05,
-               "stiffness": 2000.0, "damping": 0.5, "damper": "relative", "position": centres[k].tolist(),
+               "stiffness": stiffness, "damping": 0.5, "damper": "relative", "position": centres[k].tolist(),
                "angle": 0.05 + 0.07 * k, "collide": collide} for k in keep]
     # output every 10 ms: the study times the integration, not the sampling
-    return {"name": f"bodies_{n_bodies}x{count}" + ("" if only is None else f"_{only}"), "bodies": bodies,
+    name = f"bodies_{n_bodies}x{count}" + ("" if stiffness == STIFFNESS else f"_k{stiffness:g}")
+    return {"name": name + ("" if only is None else f"_{only}"), "bodies": bodies,
             "simulation": {"t_end": t_end, "output_dt": 1e-2, "method": "RK45", "rtol": 1e-6, "atol": 1e-9}}
 
 
-def bodies_scene(n_bodies: int, count: int, t_end: float, collide: bool, only: int | None = None) -> Scene:
+def bodies_scene(n_bodies: int, count: int, t_end: float, collide: bool, only: int | None = None,
+                 stiffness: float = STIFFNESS) -> Scene:
     """:func:`bodies_scene_table`, loaded (validated)."""
-    return load_scene(bodies_scene_table(n_bodies, count, t_end, collide, only))
+    return load_scene(bodies_scene_table(n_bodies, count, t_end, collide, only, stiffness))
 
 
 #: Wall-time cap of one run (s): a run stopped by it reports the time it reached.
@@ -119,9 +129,23 @@ def bodies_study(out: Path, quick: bool, repeats: int = 3) -> dict:
     n, count, t_end = case["bodies"], case["count"], case["t_end"]
     contact_repeats = 1 if not quick else repeats  # the full drop takes minutes: once
     print(f"bodies: {n} discs of about {count} particles dropped for {t_end:g} s, SciPy RK45 rtol 1e-6")
-    runs = {"collide": _measure(bodies_scene(n, count, t_end, True), contact_repeats),
-            "pass_through": _measure(bodies_scene(n, count, t_end, False), repeats)}
-    alone = [_measure(bodies_scene(n, count, t_end, False, only=k), repeats) for k in range(n)]
+    sets = {}
+    for label, stiffness in (("soft", STIFFNESS), ("stiff", STIFF)):
+        print(f" links {stiffness:g} N/m ({label})")
+        sets[label] = _three_runs(n, count, t_end, stiffness, repeats, contact_repeats)
+    data = {"bodies": n, "count": count, "t_end_s": t_end, "method": "RK45", "rtol": 1e-6,
+            "stiffness_N_per_m": STIFFNESS, **sets["soft"],
+            "stiff": {"stiffness_N_per_m": STIFF, **sets["stiff"]}, "environment": _environment()}
+    _save(out, "bodies", data, plot_bodies(data))
+    return data
+
+
+def _three_runs(n: int, count: int, t_end: float, stiffness: float, repeats: int, contact_repeats: int) -> dict:
+    """``collide``, ``pass_through`` and ``separate`` at one link stiffness, printed as a
+    table: ``{"runs": ..., "ratio_to_separate": ...}``."""
+    runs = {"collide": _measure(bodies_scene(n, count, t_end, True, stiffness=stiffness), contact_repeats),
+            "pass_through": _measure(bodies_scene(n, count, t_end, False, stiffness=stiffness), repeats)}
+    alone = [_measure(bodies_scene(n, count, t_end, False, only=k, stiffness=stiffness), repeats) for k in range(n)]
     runs["separate"] = {"particles": sum(r["particles"] for r in alone),
                         "status": "success" if all(r["status"] == "success" for r in alone) else "failed",
                         "t_reached_s": min(r["t_reached_s"] for r in alone),
@@ -141,33 +165,40 @@ def bodies_study(out: Path, quick: bool, repeats: int = 3) -> dict:
               f"{r['energy_drift_relative']:8.1e} {rebuilds:>8s}")
         if r["status"] != "success" and r.get("message"):
             print(f"    stopped: {r['message']}")
-    data = {"bodies": n, "count": count, "t_end_s": t_end, "method": "RK45", "rtol": 1e-6, "runs": runs,
-            "ratio_to_separate": ratios, "environment": _environment()}
-    _save(out, "bodies", data, plot_bodies(data))
-    return data
+    return {"runs": runs, "ratio_to_separate": ratios}
 
 
 def plot_bodies(data: dict):
-    """Wall time and RHS evaluations of the three runs, side by side (log axes), from the JSON."""
+    """Wall time and RHS evaluations of the three runs, side by side (log axes), for each link
+    stiffness the JSON holds (the soft set; the stiff one where it was run)."""
     from matplotlib.figure import Figure
 
-    runs = data["runs"]
-    labels = {"separate": f"{data['bodies']} separate drops\n(one body each, summed)",
-              "pass_through": "all bodies,\ncollide = false", "collide": "all bodies,\ncollide = true"}
-    order = [k for k in ("separate", "pass_through", "collide") if k in runs]
-    fig = Figure(figsize=(10, 4.5), layout="constrained")
+    sets = [(f"{data.get('stiffness_N_per_m', STIFFNESS):g} N/m", data["runs"])]
+    if "stiff" in data:
+        sets.append((f"{data['stiff']['stiffness_N_per_m']:g} N/m", data["stiff"]["runs"]))
+    labels = {"separate": f"{data['bodies']} alone\n(summed)", "pass_through": "together,\ncollide\nfalse",
+              "collide": "together,\ncollide\ntrue"}
+    order = ("separate", "pass_through", "collide")
+    fig = Figure(figsize=(12, 5), layout="constrained")
     for ax, key, title in zip(fig.subplots(1, 2), ("wall_s", "rhs_evaluations"),
                               ("wall time of the integration (s)", "RHS evaluations")):
-        bars = ax.bar(range(len(order)), [runs[k][key] for k in order], color=["C0", "C2", "C3"][: len(order)])
+        ticks, names = [], []
+        for s, (stiffness, runs) in enumerate(sets):
+            keys = [k for k in order if k in runs]
+            at = [4 * s + i for i in range(len(keys))]
+            bars = ax.bar(at, [runs[k][key] for k in keys], color=["C0", "C2", "C3"][: len(keys)],
+                          alpha=1.0 if s == 0 else 0.6)
+            ticks += at
+            names += [f"{labels[k]}\n{stiffness}" for k in keys]
+            for bar, k in zip(bars, keys):
+                r = runs[k]
+                note = f"{r[key]:.3g}" + ("" if r["status"] == "success" else f"\n{r['status']}\nat {r['t_reached_s']:.2f} s")
+                ax.annotate(note, (bar.get_x() + bar.get_width() / 2, bar.get_height()), ha="center", va="bottom",
+                            fontsize=7)
         ax.set_yscale("log")
-        ax.set_xticks(range(len(order)), [labels[k] for k in order], fontsize=8)
+        ax.set_xticks(ticks, names, fontsize=7)
         ax.set_title(title, fontsize=10)
-        for bar, k in zip(bars, order):
-            r = runs[k]
-            note = f"{r[key]:.3g}" + ("" if r["status"] == "success" else f"\nstopped at {r['t_reached_s']:.3f} s")
-            ax.annotate(note, (bar.get_x() + bar.get_width() / 2, bar.get_height()), ha="center", va="bottom",
-                        fontsize=7)
         ax.grid(True, axis="y", which="both", alpha=0.3)
     fig.suptitle(f"{data['bodies']} discs x about {data['count']} particles dropped for {data['t_end_s']:g} s "
-                 f"(SciPy RK45, rtol {data['rtol']:g})", fontsize=10)
+                 f"(SciPy RK45, rtol {data['rtol']:g}); links soft, then stiff", fontsize=10)
     return fig
