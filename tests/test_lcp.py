@@ -757,3 +757,27 @@ def test_contact_solve_survives_rounding_grown_through_a_small_kept_pivot(monkey
     assert rescued >= 20  # these cases took the fallback (measured: 25 of 60)
     with pytest.raises(FloatingPointError, match="not positive definite"):
         dynamics.contact_solve(np.array([[1.0, 2.0], [2.0, 1.0]]), np.ones(2))
+
+
+def test_the_pivoted_fallback_drops_a_dependent_row_anywhere_and_refuses_an_indefinite_remainder():
+    """_pivoted_solve directly, on a 90 x 90 W (LAPACK's blocked dpstrf) whose row 40 is a
+    combination of three others: one of those four rows is dropped (force 0), the others
+    solve W x = b to rounding and equal the solve of W without the dropped row.  A matrix that is positive definite but
+    for a block of -1e-3 of its size is refused."""
+    import flexbody.dynamics as dynamics
+
+    rng = np.random.default_rng(3)
+    J = rng.normal(size=(90, 200))
+    J[40] = J[3] - 2.0 * J[17] + 0.5 * J[88]
+    W = J @ J.T
+    b = W @ rng.normal(size=90)  # in W's range
+    x = dynamics._pivoted_solve(W, b, float(W.diagonal().max()))
+    dropped = np.flatnonzero(x == 0.0)  # one of the four rows tied by the combination
+    assert len(dropped) == 1 and dropped[0] in (3, 17, 40, 88)
+    np.testing.assert_allclose(W @ x, b, rtol=0, atol=1e-10 * np.abs(b).max())
+    rest = np.delete(np.arange(90), dropped)
+    np.testing.assert_allclose(x[rest], np.linalg.solve(W[np.ix_(rest, rest)], b[rest]), rtol=1e-8, atol=1e-10)
+    indefinite = np.diag(np.r_[np.ones(5), 1.0, 1.0])
+    indefinite[5:, 5:] = [[1.0, 1.001], [1.001, 1.0]]  # eigenvalues 2.001 and -0.001
+    with pytest.raises(FloatingPointError, match="not positive definite"):
+        dynamics._pivoted_solve(indefinite, np.ones(7), 1.0)

@@ -15,7 +15,8 @@ only, so the ratios isolate the cost of contact, not of the stepper):
 
 The three runs are made twice: with the thesis ball's link stiffness (2000 N/m), on which
 the larger discs are soft (their lattice crushes under the pile), and with it scaled by
-the radius (:data:`STIFF`), so that a disc sags under its own weight as the thesis ball does.
+the full study's radius (:data:`STIFF`), so that its discs sag under their own weight as
+the thesis ball does (``--quick``'s thesis-ball discs run at the same two stiffnesses).
 
 Each run records its wall time (median over ``repeats`` where affordable), RHS
 evaluations, events, maximum penetration, relative energy drift, the broad phase's

@@ -217,8 +217,8 @@ def resolve(
     friction : ndarray, shape (nc,), optional
         Coulomb's mu of each contact's ground (default 0).  In the thesis mode a window also
         pushes against the tangential velocity (:func:`window_friction`).
-    zeno_rise : float
-        The rise (m) below which a rebound is plastic (``min_rebound``'s, against gravity);
+    zeno_rise : float, optional
+        The rise (m) below which a rebound is plastic (``min_rebound``'s, against its pull);
         coupled contacts pulled back harder than by gravity stop at their own pull's speed
         (:func:`flexbody.coupled.coupled_impact`).
 

@@ -133,10 +133,11 @@ def coupled_impact(model, y: np.ndarray, p: np.ndarray, touching: np.ndarray, re
         as for rebounds.  Without it a block rocking on two corners would lift each off the
         other's plastic impact, ever faster (an accumulation of impacts, Zeno).  The kinetic
         energy this takes is at most that of those speeds.
-    zeno_rise : float
-        The rise (m) ``slowest`` stands for, against gravity.  A contact pulled back harder
-        than that (``a``: minus its gap's acceleration after the impulses with every contact
-        set free) is also stopped when it leaves slower than ``sqrt(2 a zeno_rise)``:
+    zeno_rise : float, optional
+        The rise (m) ``slowest`` stands for, against its pull (gravity along a ground's
+        normal; between bodies |g|, at least 1 m/s^2).  A contact that would leave faster
+        but is pulled back harder (``a``: minus its gap's acceleration after the impulses
+        with every contact set free) is also stopped when it leaves slower than ``sqrt(2 a zeno_rise)``:
         it would not rise that far either.  Without it a particle pressed into a notch
         far harder than by its weight (a pile's) was handed flank to flank more than 25
         times within 1 ms on its way to the Zeno threshold (``chattering``).
@@ -170,9 +171,10 @@ def coupled_impact(model, y: np.ndarray, p: np.ndarray, touching: np.ndarray, re
     u_new = u + response(P)
     impulses[rows] = solution.normal
     floor = np.maximum(slowest[rows], 1e-12)
-    if zeno_rise > 0.0:
-        floor = np.maximum(floor, _held_back(model, np.concatenate([q, u_new, y[nq + nu :]]), p, rows) ** 0.5
-                           * np.sqrt(2.0 * zeno_rise))
+    leaving_now = solution.normal_rate > floor
+    if zeno_rise > 0.0 and leaving_now.any():  # only those that would leave: is their own pull harder?
+        pull = _held_back(model, np.concatenate([q, u_new, y[nq + nu :]]), p, rows[leaving_now])
+        floor[leaving_now] = np.maximum(floor[leaving_now], np.sqrt(2.0 * pull * zeno_rise))
     leaves = solution.normal_rate > floor
     if (~leaves).any():  # what stays is stopped exactly (v+ = 0 up to round-off, or too slow to leave)
         stopped = np.flatnonzero(~leaves)

@@ -84,9 +84,10 @@ def _gimbal_lock(scene: Scene, model: Model, y: np.ndarray, t: float) -> tuple[s
     or None.  Whether the integrator's trial state there fails the mass matrix's
     factorisation or its steps shrink first (a step collapse) depends on rounding, so on the
     machine: both are the same singularity."""
-    names = getattr(model, "q_names", ())
+    names = getattr(getattr(model, "inner", model), "q_names", ())  # a body-contact model wraps it
     for k, name in enumerate(names):
-        if name.startswith("beta") and 90.0 - abs(np.degrees(y[k])) < GIMBAL_LOCK_DEG:
+        # |cos beta| small: within GIMBAL_LOCK_DEG of +-90 deg (or of any odd multiple of it)
+        if name.startswith("beta") and abs(np.cos(y[k])) < np.sin(np.radians(GIMBAL_LOCK_DEG)):
             body = scene.bodies[int(name[4:])].name
             return "blow_up", (f"at t = {t:.9g} s body {body!r} reached its frame T's gimbal lock (beta = "
                                f"{np.degrees(y[k]):.4f} deg), where the mass matrix of its X-Y-Z angles is singular; a body "
@@ -452,12 +453,11 @@ class _Run:
                 message = solver.step()
                 self.steps += 1
                 if solver.status == "failed":
-                    lock = _gimbal_lock(self.scene, model, solver.y, solver.t)
-                    raise SimulationFailed(*lock) if lock else SimulationFailed(
+                    failure = _gimbal_lock(self.scene, model, solver.y, solver.t) or (
                         "step_size_collapse",
                         f"{s.method} failed at t = {solver.t:.9g} s: {message} The model is too stiff for this "
-                        "method or tolerance: try an implicit method (--method Radau or BDF) or a looser --rtol.",
-                    )
+                        "method or tolerance: try an implicit method (--method Radau or BDF) or a looser --rtol.")
+                    raise SimulationFailed(*failure)
                 if not np.all(np.isfinite(solver.y)):
                     raise SimulationFailed(*_non_finite(solver.t))
                 dense = solver.dense_output()
@@ -493,7 +493,8 @@ class _Run:
                     self.progress(solver.t, s.t_end, len(self.events))
                 self.check_deadline(solver.t)
         except FloatingPointError as exc:
-            raise SimulationFailed("blow_up", f"at t = {solver.t:.9g} s: {exc}") from None
+            failure = _gimbal_lock(self.scene, model, solver.y, solver.t) or ("blow_up", f"at t = {solver.t:.9g} s: {exc}")
+            raise SimulationFailed(*failure) from None
         finally:
             self.nfev += solver.nfev
             self.njev += getattr(solver, "njev", 0)

@@ -39,18 +39,24 @@ def contact_solve(A: np.ndarray, b: np.ndarray) -> np.ndarray:
 
     A Cholesky factorisation that drops the columns of redundant contacts (pivot at or below
     :data:`REDUNDANT` of the largest diagonal entry: their forces are 0, the others hold
-    them), in the order of model.c's ``cholesky`` so both give the same numbers.
+    them), in the order of model.c's ``cholesky`` so both give the same numbers wherever that
+    one succeeds.
 
     Where that loop meets a pivot below ``-REDUNDANT`` without ``A`` being indefinite it is
     rounding grown through a small pivot kept just above the threshold (a pile's reverse
     vertex-to-vertex contacts: two rows nearly equal, and a third along their difference):
     the solve is then done again by LAPACK's pivoted Cholesky (``dpstrf``, largest pivot
-    first, so nothing grows), dropping the same way (:func:`_pivoted_solve`).
+    first, so nothing grows), dropping the same way (:func:`_pivoted_solve`).  model.c has
+    no such fallback: a whole-scene C model still reports that matrix as not positive
+    definite (status ``blow_up``); contacts between bodies are solved here only.
 
     Raises
     ------
     FloatingPointError
-        If ``A`` is not positive semidefinite (as the C models report it).
+        If ``A`` is not positive semidefinite: the ordered loop meets a pivot below
+        ``-REDUNDANT`` and the pivoted one leaves a remainder above :data:`INDEFINITE` of
+        the largest diagonal entry (rounding grown through small pivots reaches ~1e-8 of
+        it; an indefinite matrix's remainder is of its own size).
     """
     n = len(b)
     largest = float(np.max(np.diag(A))) if n else 0.0
