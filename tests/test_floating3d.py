@@ -212,3 +212,25 @@ def test_a_body_tumbling_through_the_gimbal_lock_stops_with_blow_up():
     assert abs(abs(beta) - 90.0) < GIMBAL_LOCK_DEG
     assert abs(b.t[-1] - np.pi / 2 / spin) <= 1e-3
     assert np.abs(a.positions[: len(b.t)] - b.positions).max() <= 1e-8
+
+
+@pytest.mark.parametrize("beta_deg, locked", [(89.5, True), (-90.4, True), (269.5, True), (88.0, False),
+                                              (95.0, False), (30.0, False)])
+def test_only_a_beta_within_a_degree_of_the_lock_is_reported_as_the_lock(beta_deg, locked):
+    """_gimbal_lock names the body whose beta is within GIMBAL_LOCK_DEG of +-90 deg (mod 180),
+    and leaves any other failure as it was (a body past the lock at 95 deg is not at it)."""
+    from types import SimpleNamespace
+
+    from flexbody.driver import _gimbal_lock
+
+    model = SimpleNamespace(q_names=("X0", "Y0", "Z0", "alpha0", "beta0", "gamma0", "alpha1", "beta1", "gamma1"))
+    scene = SimpleNamespace(bodies=[SimpleNamespace(name="first"), SimpleNamespace(name="second")])
+    y = np.zeros(len(model.q_names))
+    y[7] = np.radians(beta_deg)
+    wrapped = SimpleNamespace(inner=model)  # as the body-contact model wraps a derived one
+    for m in (model, wrapped):
+        found = _gimbal_lock(scene, m, y, 1.25)
+        assert (found is not None) == locked
+        if locked:
+            assert found[0] == "blow_up" and "body 'second' reached its frame T's gimbal lock" in found[1]
+            assert "t = 1.25 s" in found[1]
