@@ -22,7 +22,7 @@ from flexbody.contact_problems import (
     solve_impact_friction,
     velocity_change,
 )
-from flexbody.lcp import solve_lcp
+from flexbody.lcp import solve_lcp, solve_pd_lcp
 
 
 def brute_force(M, q):
@@ -91,6 +91,44 @@ def test_p_matrix_unique_solution_equals_brute_force(n):
         found = brute_force(M, q)
         assert len(found) == 1  # a P-matrix: exactly one solution (checks the reference too)
         np.testing.assert_allclose(sol.z, found[0][0], rtol=1e-9, atol=1e-10)
+
+
+@pytest.mark.parametrize("n", range(1, 9))
+def test_principal_pivoting_equals_brute_force_on_positive_definite_matrices(n):
+    """Murty's method on symmetric positive definite W (Delassus matrices) against every
+    complementary basis, with every row order giving the same (permuted) answer; the starts
+    are often wrong (q random), so its pivots are exercised, not only the first solve."""
+    rng = np.random.default_rng(300 + n)
+    pivoted = 0
+    for _ in range(25 if n <= 6 else 6):
+        A = rng.normal(size=(n, n + 1))
+        M, q = A @ A.T + 0.01 * np.eye(n), rng.normal(size=n)
+        sol = solve_pd_lcp(M, q)
+        assert_solves(sol, M, q)
+        np.testing.assert_allclose(sol.z, brute_force(M, q)[0][0], rtol=1e-9, atol=1e-10)
+        order = rng.permutation(n)
+        again = solve_pd_lcp(M[np.ix_(order, order)], q[order])
+        np.testing.assert_allclose(again.z, sol.z[order], rtol=1e-12, atol=1e-14)
+        pivoted += sol.pivots > 0
+    assert n == 1 or pivoted  # some start was wrong and was pivoted out of
+
+
+def test_principal_pivoting_leaves_a_contact_that_would_pull_by_hand():
+    """W = [[2, 1], [1, 2]], q = [-1, -0.1]: holding both needs z = W^-1 (1, 0.1) = (0.633,
+    -0.267), a pull; one pivot frees the second: z = (0.5, 0), w_2 = 0.5 - 0.1 = 0.4."""
+    sol = solve_pd_lcp(np.array([[2.0, 1.0], [1.0, 2.0]]), np.array([-1.0, -0.1]))
+    assert sol.solved and sol.pivots == 1
+    np.testing.assert_allclose(sol.z, [0.5, 0.0], rtol=0, atol=1e-15)
+    np.testing.assert_allclose(sol.w, [0.0, 0.4], rtol=0, atol=1e-15)
+
+
+@pytest.mark.parametrize("M", [
+    [[1.0, 1.0], [1.0, 1.0]],  # redundant contacts: semidefinite, Lemke's method decides
+    [[1.0, 2.0], [0.0, 1.0]],  # a P-matrix, but not symmetric
+    [[1.0, 2.0], [2.0, 1.0]],  # indefinite
+])
+def test_principal_pivoting_refuses_what_it_does_not_cover(M):
+    assert solve_pd_lcp(np.array(M), np.array([-1.0, -1.0])) is None
 
 
 def test_trivial_q_nonnegative_needs_no_pivot():

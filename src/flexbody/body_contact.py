@@ -179,7 +179,7 @@ class BodyContactModel(Model):
         if self.dim == 3 and (self.mu > 0.0).any():  # the driver refuses such scenes with the reason
             raise ValueError("Coulomb friction on coupled contacts is simulated in 2D only")
         self._slip = np.zeros((self.n_contacts, self.dim))
-        self._last: tuple[bytes, _Solved] | None = None  # the last state's answer (see _dynamics)
+        self._last: tuple[tuple[np.ndarray, ...], _Solved] | None = None  # the last state's answer (see _dynamics)
         self._element = ElementKernels(self.dim, self.backend)
         text = f"{inner.digest}|{self.slot_particle.tolist()}|{self.slot_body.tolist()}"
         self.digest = hashlib.sha256(f"bodies|{text}".encode()).hexdigest()[:16]
@@ -273,11 +273,11 @@ class BodyContactModel(Model):
         same state (a third of a stack's evaluations)."""
         y = np.asarray(y, float)
         held, push = np.asarray(held, np.intc), np.asarray(push, float)
-        key = b"|".join(np.ascontiguousarray(a).tobytes() for a in (y, p, held, push, self.element_of, self._slip))
-        if self._last is not None and self._last[0] == key:
+        key = (y, np.asarray(p), held, push, self.element_of, self._slip)
+        if self._last is not None and all(map(np.array_equal, self._last[0], key)):
             return self._last[1]
         solved = self._solve(y, p, held, push)
-        self._last = (key, solved)
+        self._last = (tuple(a.copy() for a in key), solved)
         return solved
 
     def _solve(self, y, p, held, push) -> _Solved:
@@ -697,19 +697,26 @@ class BodyContactModel(Model):
 
     def _sparse_gram(self, entries, particles: IntArray, shape: tuple[int, int]) -> FloatArray:
         """``J M^-1 J^T`` (m, m) of particle rows given as their terms (a pile's held rows:
-        each moves a few particles), through sparse matrices built from the terms directly
-        (not by scanning the dense rows, which costs more than the product)."""
-        from scipy.sparse import csr_matrix
-
-        d = self.dim
+        each moves a few particles): ``W_ab`` sums ``c . c' / m_p`` over the pairs of terms
+        of rows a and b on the same particle p, found as neighbours in the terms sorted by
+        particle (a particle is in a few terms), never through the dense rows."""
+        m = shape[0]
         rows = np.concatenate([r for r, _, _ in entries])
         at = np.concatenate([a for _, a, _ in entries])
         coefficients = np.concatenate([c for _, _, c in entries])
-        columns = (at[:, None] * d + np.arange(d)).ravel()
-        rows = np.repeat(rows, d)
-        J = csr_matrix((coefficients.ravel(), (rows, columns)), shape=shape)
-        scaled = csr_matrix(((coefficients / self.masses[particles[at]][:, None]).ravel(), (rows, columns)), shape=shape)
-        return (scaled @ J.T).toarray()
+        order = np.argsort(at, kind="stable")
+        rows, at, coefficients = rows[order], at[order], coefficients[order]
+        scaled = coefficients / self.masses[particles[at]][:, None]
+        index, weight = [], []
+        for offset in range(len(at)):  # pairs `offset` apart in the sorted terms
+            same = np.flatnonzero(at[offset:] == at[: len(at) - offset])
+            if not same.size:
+                break
+            a, b = rows[same], rows[same + offset]
+            w = np.einsum("kd,kd->k", scaled[same], coefficients[same + offset])
+            index += [a * m + b] + ([b * m + a] if offset else [])
+            weight += [w] + ([w] if offset else [])
+        return np.bincount(np.concatenate(index), np.concatenate(weight), minlength=m * m).reshape(m, m)
 
 
 class _Rows(NamedTuple):

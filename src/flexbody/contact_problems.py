@@ -58,7 +58,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .lcp import solve_lcp
+from .lcp import solve_lcp, solve_pd_lcp
 
 __all__ = ["ContactSolution", "delassus", "is_decoupled", "solve_forces", "solve_forces_friction",
            "solve_impact", "solve_impact_friction", "velocity_change"]
@@ -340,7 +340,10 @@ def _normal_lcp(W: np.ndarray, q: np.ndarray, on: np.ndarray, fast: bool
     x[alone] = np.maximum(-q[alone], 0.0) / np.diag(W)[alone]  # a contact on its own: closed form
     for block in (b for b in blocks if len(b) > 1):
         rows = idx[block]
-        sol = solve_lcp(W[np.ix_(rows, rows)], q[rows])
+        block_W, block_q = W[np.ix_(rows, rows)], q[rows]
+        sol = solve_pd_lcp(block_W, block_q)  # W is symmetric; positive definite unless redundant
+        if sol is None or not sol.solved:
+            sol = solve_lcp(block_W, block_q)
         x[rows] = sol.z
         pivots += sol.pivots
         if status == "solved":  # the first block that fails says why

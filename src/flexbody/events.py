@@ -88,8 +88,13 @@ class EventFunctions:
         return g
 
     def __call__(self, y: np.ndarray) -> np.ndarray:
+        return np.minimum(self.free_gaps(y), self.held_functions(y))
+
+    def held_functions(self, y: np.ndarray) -> np.ndarray:
+        """The held contacts' event functions at ``y``, ``inf`` for the others, shape (nc,):
+        all that locating a lift-off, slip or hand-over needs (no gaps)."""
         m = self.model
-        g = self.free_gaps(y)
+        g = np.full(m.n_contacts, np.inf)
         if self.held_mask.any():
             _, lam = m.rhs(y, self.p, self.held, self.phases.push)
             g[self.held_mask] = lam[self.held_mask] + self.force_tolerance[self.held_mask]
@@ -104,10 +109,11 @@ class EventFunctions:
 
     def one(self, y: np.ndarray, c: int) -> float:
         """Event function ``c`` alone at ``y``, equal to ``self(y)[c]``: a free contact's needs
-        only the gaps, not the right-hand side (what locating an impact costs)."""
+        only the gaps, not the right-hand side (what locating an impact costs), and a held
+        one's no gaps (what locating a lift-off costs)."""
         if self.free[c]:
             return self.model.gap(y[: self.model.nq], self.p, c) - float(self.phases.floor[c])
-        return float(self(y)[c])
+        return float(self.held_functions(y)[c])
 
 
 @dataclass
@@ -208,7 +214,9 @@ def _earliest(events: EventFunctions, dense: Callable[[float], np.ndarray], fire
     instant costs one root search, not one per fired contact.  A contact belongs to the
     instant if its function has fired ``GROUP_TIME`` after the earliest root.
     """
-    evaluate = events.free_gaps if events.free[fired].all() else events  # impacts alone need no forces
+    # impacts alone need no forces, lift-offs alone no gaps
+    evaluate = events.free_gaps if events.free[fired].all() else \
+        events.held_functions if not events.free[fired].any() else events
     hi, g_hi = tb, gb
     rooted = np.zeros(len(ga), bool)
     candidates = fired

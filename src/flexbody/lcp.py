@@ -23,6 +23,9 @@ Problem*, 1992, ch. 4):
   for two solutions, ``(z1 - z2) . (w1 - w2) = -z1 . w2 - z2 . w1 <= 0`` and also
   ``= (z1 - z2)^T M (z1 - z2) >= 0``, so ``M (z1 - z2) = 0``.  For contacts this means the
   impulses may be indeterminate but the velocities they produce are not.
+* **symmetric positive definite** (a P-matrix): :func:`solve_pd_lcp` solves it by Murty's
+  least-index principal pivoting, a few small linear solves instead of Lemke's tableau (a
+  pile's many two- and three-contact blocks); it returns None for any other ``M``.
 * other matrices (friction, :mod:`flexbody.contact_problems`): a secondary ray says that the
   method found no solution; for the frictional force problem that is Painlevé's paradox.
 """
@@ -33,7 +36,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["STATUSES", "LcpSolution", "solve_lcp"]
+__all__ = ["STATUSES", "LcpSolution", "solve_lcp", "solve_pd_lcp"]
 
 #: Status values of :class:`LcpSolution` and what each means.
 STATUSES = {
@@ -254,6 +257,13 @@ def _finish(M: np.ndarray, q: np.ndarray, T: np.ndarray, basis: np.ndarray, stat
         if polished is not None and np.all(polished >= 0.0):
             z = np.zeros(n)
             z[S] = polished
+    return _checked_solution(M, q, z, pivots, check_tol, floor, message)
+
+
+def _checked_solution(M: np.ndarray, q: np.ndarray, z: np.ndarray, pivots: int, check_tol: float,
+                      floor: float, message: str) -> LcpSolution:
+    """``z`` (n,) checked for feasibility and complementarity (see :func:`solve_lcp`'s
+    ``check_tol``; ``floor``: the problem's rounding level) and wrapped up."""
     w = M @ z + q
     scale = check_tol * (np.abs(M) @ z + np.abs(q)) + floor
     infeasible = np.maximum(-w - scale, 0.0).max()
@@ -263,3 +273,60 @@ def _finish(M: np.ndarray, q: np.ndarray, T: np.ndarray, basis: np.ndarray, stat
                            f"{message[:-1]}, but the check fails: w below 0 by {infeasible:.3g} "
                            f"beyond tolerance, complementarity off by {gap:.3g}.")
     return LcpSolution(z, w, "solved", pivots, message)
+
+
+#: Largest problem :func:`solve_pd_lcp` takes: its pivot bound 2^n is then still small, and
+#: a larger block is rare enough for Lemke's method.
+PD_LARGEST = 12
+#: ... and the smallest eigenvalue it takes, relative to the largest: a nearly redundant
+#: contact (a nearly singular M) is left to Lemke's method.
+PD_CONDITION = 1e-8
+
+
+def solve_pd_lcp(M: np.ndarray, q: np.ndarray, *, check_tol: float = CHECK_TOL) -> LcpSolution | None:
+    """Solve ``LCP(M, q)`` for a symmetric positive definite ``M`` by Murty's least-index
+    principal pivoting; None when ``M`` is not one, is nearly singular (:data:`PD_CONDITION`)
+    or ``n >`` :data:`PD_LARGEST`, for :func:`solve_lcp` to take.
+
+    Each complementary basis is a set ``S`` of positive unknowns: ``z_S`` solves ``M_SS z_S
+    = -q_S``, ``z = 0`` elsewhere.  While some ``i`` is infeasible (``z_i < 0`` in ``S``, or
+    ``w_i < 0`` outside it), the *least* such ``i`` changes side.  For a P-matrix this visits
+    no basis twice and ends on the unique solution (Murty, "Note on a Bard-type scheme for
+    solving the complementarity problem", Opsearch 11, 1974; Cottle, Pang & Stone, §4.2), so
+    within ``2^n`` pivots; the start is ``S = {i : q_i < 0}``, right at once when every
+    pressed contact stays pressed (most of a pile's blocks).  Infeasibility below the
+    rounding level does not count; the answer passes the same check as Lemke's.
+
+    Parameters
+    ----------
+    M : array_like, shape (n, n)
+    q : array_like, shape (n,)
+
+    Returns
+    -------
+    LcpSolution or None
+        ``pivots`` counts the side changes.
+    """
+    M, q, _ = _checked(M, q, None)
+    n = q.size
+    if np.all(q >= 0.0):
+        return LcpSolution(np.zeros(n), q.copy(), "solved", 0, "q >= 0: z = 0 with no pivots.")
+    if n > PD_LARGEST or not np.allclose(M, M.T, rtol=0.0, atol=TIE_TOL * np.abs(M).max()):
+        return None
+    eigenvalues = np.linalg.eigvalsh(M)  # every M_SS's smallest is at least M's (interlacing)
+    if eigenvalues[0] <= PD_CONDITION * eigenvalues[-1]:
+        return None
+    S = q < 0.0
+    level = 16 * n * np.finfo(float).eps
+    for pivots in range(2**n):
+        z = np.zeros(n)
+        z[S] = np.linalg.solve(M[np.ix_(S, S)], -q[S])
+        w = M @ z + q
+        floor = level * (np.abs(M).max() * np.abs(z).max() + np.abs(q).max())
+        infeasible = np.flatnonzero(np.where(S, z, w) < -floor)
+        if not infeasible.size:
+            z = np.maximum(z, 0.0)
+            return _checked_solution(M, q, z, pivots, check_tol, floor,
+                                     f"solved by principal pivoting in {pivots} pivots.")
+        S[infeasible[0]] = ~S[infeasible[0]]
+    return None  # rounding broke the P-matrix bound: Lemke's method decides
