@@ -321,8 +321,8 @@ def test_the_reported_contact_forces_obey_newtons_second_law_across_element_hand
 
 @pytest.mark.parametrize("backend", ["numpy", "c"])
 def test_one_contacts_gap_equals_its_entry_of_all_gaps(backend):
-    """Locating an impact evaluates one contact's gap (``model.gap``): it must be exactly the
-    entry of the whole vector, for ground contacts and for slots near, on and far from the
+    """Locating an impact evaluates one contact's gap (``model.gap``), checking just released
+    ones a few (``model.gaps_of``): each must be exactly the entry of the whole vector, for ground contacts and for slots near, on and far from the
     other body's surface, inside it too."""
     scene = _scene(TRIANGLES)
     model = load_model(scene, backend=backend)
@@ -335,6 +335,8 @@ def test_one_contacts_gap_equals_its_entry_of_all_gaps(backend):
         q = x.ravel()
         gaps = model.gaps(q, p)
         assert [model.gap(q, p, c) for c in range(model.n_contacts)] == gaps.tolist()
+        some = rng.permutation(model.n_contacts)[: model.n_contacts // 3]  # a pile's just released ones
+        assert model.gaps_of(q, p, some).tolist() == gaps[some].tolist()
     assert (gaps[model.n_ground_contacts:] < 0).any()  # the last shift put a particle inside
 
 

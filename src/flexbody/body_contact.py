@@ -210,16 +210,22 @@ class BodyContactModel(Model):
         x = self._coordinates.particles(q, None, p)[0]
         return np.concatenate([self.inner.gaps(q, p), self._surface_gaps(x)[0]])
 
-    def gap(self, q, p, c: int) -> float:
-        """Gap of contact ``c`` alone, equal to ``gaps(q, p)[c]``: a slot's from its own
-        particle's candidates only (an impact between bodies is located at O(1) per evaluation)."""
-        ng = self.n_ground_contacts
-        if c < ng:
-            return self.inner.gap(q, p, c)
-        if c - ng >= self.n_primary:
-            return self.margin  # a corner twin has no gap of its own
-        x = self._coordinates.particles(q, None, p)[0]
-        return float(self._surface_gaps(x, slot=c - ng)[0][c - ng])
+    def gaps_of(self, q, p, contacts: IntArray) -> FloatArray:
+        """Gaps of ``contacts (k,)`` alone, equal to ``gaps(q, p)[contacts]``: a slot's from its
+        own particle's candidates only (an impact between bodies is located at O(1) per
+        evaluation; a corner twin has no gap of its own: ``margin``)."""
+        contacts, ng = np.asarray(contacts, np.intp), self.n_ground_contacts
+        out = np.full(len(contacts), self.margin)
+        grounds = contacts < ng
+        if grounds.any():
+            out[grounds] = self.inner.gaps_of(q, p, contacts[grounds])
+        slots = contacts[~grounds] - ng
+        slots = slots[slots < self.n_primary]
+        if len(slots):
+            x = self._coordinates.particles(q, None, p)[0]
+            gaps = self._surface_gaps(x, slots)[0]
+            out[~grounds] = gaps[contacts[~grounds] - ng]
+        return out
 
     def held_gaps(self, q, p, rows) -> FloatArray:
         """Gaps of the held contacts ``rows (k,)``: a slot's to the element it is held on."""
@@ -588,13 +594,13 @@ class BodyContactModel(Model):
         e = self.elements[self.element_of[slots]]
         return np.linalg.norm(x[e[:, 1]] - x[e[:, 0]], axis=1)
 
-    def _surface_gaps(self, x, slot: int | None = None) -> tuple[FloatArray, np.ndarray]:
+    def _surface_gaps(self, x, slots: IntArray | None = None) -> tuple[FloatArray, np.ndarray]:
         """Each slot's signed distance to its body's surface (``margin`` where it is farther
-        than that), and whether it is within ``margin``, shape (ns,) each; with ``slot``, that
-        slot's entries only (the others read ``margin``, not near)."""
+        than that), and whether it is within ``margin``, shape (ns,) each; with ``slots``
+        (primary slots), their entries only (the others read ``margin``, not near)."""
         gaps = np.full(self.n_slots, self.margin)
         near = np.zeros(self.n_slots, bool)
-        contact = self._closest(x, slot) if self.n_slots else None
+        contact = self._closest(x, slots) if self.n_slots else None
         if contact is not None:
             slots, found = self._slots_of(contact.particle, self.element_body[contact.element])
             # Farther than `margin` the nearest candidate need not be the nearest element, and
@@ -604,11 +610,14 @@ class BodyContactModel(Model):
             near[slots[found]] = True
         return gaps, near
 
-    def _closest(self, x, slot: int | None = None):
-        pairs = self._candidates.pairs(x, None if slot is None else self.slot_particle[slot])
+    def _closest(self, x, slots: IntArray | None = None):
+        pairs = self._candidates.pairs(x, None if slots is None else np.unique(self.slot_particle[slots]))
         keep = self.allowed[self.particle_body[pairs[:, 0]], self.element_body[pairs[:, 1]]]
-        if slot is not None:
-            keep &= self.element_body[pairs[:, 1]] == self.slot_body[slot]
+        if slots is not None:  # only the asked slots' bodies
+            wanted = np.zeros(self.n_slots, bool)
+            wanted[slots] = True
+            slot, found = self._slots_of(pairs[:, 0], self.element_body[pairs[:, 1]])
+            keep &= found & wanted[slot]
         pairs = pairs[keep]
         if not len(pairs):
             return None

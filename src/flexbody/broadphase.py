@@ -277,9 +277,9 @@ class CandidateList:
         self._pairs = np.zeros((0, 2), dtype=np.int64)
         self._first = np.zeros(1, dtype=np.intp)  # particle i's pairs: _pairs[_first[i] : _first[i + 1]]
 
-    def pairs(self, x: FloatArray, particle: int | None = None) -> IntArray:
+    def pairs(self, x: FloatArray, particles: IntArray | int | None = None) -> IntArray:
         """The candidate pairs at positions x (n, d): equal to ``candidate_pairs(x, ..., margin)``;
-        with ``particle``, that particle's only."""
+        with ``particles`` (an index or distinct indices), theirs only."""
         x = np.asarray(x, float)
         moved = np.inf if self._built_at is None else np.max(np.abs(x - self._built_at), initial=0.0)
         if moved > self.skin / 2:
@@ -290,7 +290,15 @@ class CandidateList:
             self._first = np.searchsorted(self._pairs[:, 0], np.arange(len(x) + 1))
             self._built_at = x.copy()
             self.rebuilds += 1
-        kept = self._pairs if particle is None else self._pairs[self._first[particle] : self._first[particle + 1]]
+        if particles is None:
+            kept = self._pairs
+        elif np.ndim(particles) == 0:
+            kept = self._pairs[self._first[particles] : self._first[particles + 1]]
+        else:  # the particles' slices, end to end
+            start, stop = self._first[particles], self._first[np.asarray(particles) + 1]
+            counts = stop - start
+            at = np.repeat(start - np.cumsum(counts) + counts, counts) + np.arange(counts.sum())
+            kept = self._pairs[at]
         return kept[self._inside(x, kept)]
 
     def _inside(self, x: FloatArray, pairs: IntArray) -> np.ndarray:

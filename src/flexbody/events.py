@@ -77,12 +77,16 @@ class EventFunctions:
         g_new[lifted] += floor[lifted]
         floor[lifted] = 0.0
 
-    def free_gaps(self, y: np.ndarray) -> np.ndarray:
+    def free_gaps(self, y: np.ndarray, only: np.ndarray | None = None) -> np.ndarray:
         """The free contacts' event functions at ``y`` (their gaps above their floors), ``inf``
-        for the others, shape (nc,): all that locating impacts needs (no right-hand side)."""
+        for the others, shape (nc,): all that locating impacts needs (no right-hand side);
+        with ``only`` (bool (nc,)), those of these contacts alone."""
         m = self.model
         g = np.full(m.n_contacts, np.inf)
-        if self.free.any():
+        if only is not None:
+            watched = np.flatnonzero(self.free & only)
+            g[watched] = m.gaps_of(y[: m.nq], self.p, watched) - self.phases.floor[watched]
+        elif self.free.any():
             gaps = m.gaps(y[: m.nq], self.p)
             g[self.free] = gaps[self.free] - self.phases.floor[self.free]
         return g
@@ -179,7 +183,7 @@ def _first_dip(events: EventFunctions, dense: Callable[[float], np.ndarray], t_o
     t_prev, g_prev = t_old, g_old
     for k in range(1, DIP_SAMPLES):
         t = t_old + (t_new - t_old) * k / DIP_SAMPLES
-        g = events.free_gaps(dense(t))  # only free contacts are watched here
+        g = events.free_gaps(dense(t), fresh)  # only these are watched here
         fired = np.flatnonzero(fresh & (g_prev > 0.0) & (g <= 0.0))
         if fired.size:
             return _earliest(events, dense, fired, t_prev, t, g_prev, g)

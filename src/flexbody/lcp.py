@@ -311,7 +311,7 @@ def solve_pd_lcp(M: np.ndarray, q: np.ndarray, *, check_tol: float = CHECK_TOL) 
     n = q.size
     if np.all(q >= 0.0):
         return LcpSolution(np.zeros(n), q.copy(), "solved", 0, "q >= 0: z = 0 with no pivots.")
-    if n > PD_LARGEST or not np.allclose(M, M.T, rtol=0.0, atol=TIE_TOL * np.abs(M).max()):
+    if n > PD_LARGEST or np.abs(M - M.T).max() > TIE_TOL * np.abs(M).max():
         return None
     eigenvalues = np.linalg.eigvalsh(M)  # every M_SS's smallest is at least M's (interlacing)
     if eigenvalues[0] <= PD_CONDITION * eigenvalues[-1]:

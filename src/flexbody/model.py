@@ -98,7 +98,11 @@ class Model:
 
     def gap(self, q, p, c: int) -> float:
         """Gap of contact ``c`` alone, equal to ``gaps(q, p)[c]`` (locating an impact needs no other)."""
-        return float(self.gaps(q, p)[c])
+        return float(self.gaps_of(q, p, np.array([c]))[0])
+
+    def gaps_of(self, q, p, contacts: IntArray) -> FloatArray:
+        """Gaps of ``contacts (k,)`` alone, equal to ``gaps(q, p)[contacts]``, shape (k,)."""
+        return self.gaps(q, p)[contacts]
 
     def rhs(self, y, p, held, push) -> tuple[FloatArray, FloatArray]:  # pragma: no cover - abstract
         """Contact-constrained right-hand side.
