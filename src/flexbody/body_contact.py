@@ -372,6 +372,49 @@ class BodyContactModel(Model):
         lam_t[stick] = x[k:]
         return x[:k], lam_t, G.T @ x
 
+    def coupled_with(self, q, p, seeds: np.ndarray, among: np.ndarray, jumped: np.ndarray | None = None) -> np.ndarray:
+        """As :meth:`flexbody.model.Model.coupled_with`: on particle coordinates (M diagonal)
+        two contacts' rows act on each other only through a particle both move (a slot's:
+        its own and its element's), so the answer is the seeds' connected components in
+        the graph of contacts and the particles they move (a pile's instant: a few
+        contacts, not every held one); the particles of ``jumped`` coordinates are seeds."""
+        seeds, among = np.asarray(seeds, bool), np.asarray(among, bool)
+        if jumped is not None and jumped.any():
+            touched = np.zeros(self.n_particles, bool)
+            touched[np.flatnonzero(jumped) // self.dim] = True
+            seeds = seeds | (among & self._moves(touched))
+        if not isinstance(self._coordinates, _ParticleCoordinates) or not seeds.any():
+            return super().coupled_with(q, p, seeds, among)
+        from scipy.sparse import csr_matrix
+        from scipy.sparse.csgraph import connected_components
+
+        ng = self.n_ground_contacts
+        nodes = np.flatnonzero(seeds | among)
+        grounds, slots = nodes[nodes < ng], nodes[nodes >= ng] - ng
+        self._constrain_elements(slots, self._coordinates.particles(q, None, p)[0])  # a seed just hit
+        moved = [self.inner.contacts[grounds, :1], self.slot_particle[slots, None],
+                 self.elements[self.element_of[slots]]]
+        node = np.concatenate([np.arange(len(grounds))] +
+                              [len(grounds) + np.repeat(np.arange(len(slots)), m.shape[1]) for m in moved[1:]])
+        particle = np.concatenate([m.ravel() for m in moved])
+        # contacts and particles, one graph: a contact's edges go to the particles it moves
+        graph = csr_matrix((np.ones(len(node)), (node, len(nodes) + particle)),
+                           shape=(len(nodes) + self.n_particles,) * 2)
+        label = connected_components(graph, directed=False)[1][: len(nodes)]
+        order = np.concatenate([grounds, ng + slots])
+        out = np.zeros(self.n_contacts, bool)
+        out[order] = np.isin(label, label[np.isin(order, np.flatnonzero(seeds))])
+        return out
+
+    def _moves(self, particles: np.ndarray) -> np.ndarray:
+        """Which contacts (bool (nc,)) move one of ``particles`` (bool (n,)): a ground
+        contact its particle, a slot its particle and (if chosen) its element's."""
+        ng = self.n_ground_contacts
+        out = particles[self.contacts[:, 0]].copy()
+        chosen = np.flatnonzero(self.element_of >= 0)
+        out[ng + chosen] |= particles[self.elements[self.element_of[chosen]]].any(axis=1)
+        return out
+
     def contact_state(self, y, p, held, push):
         y = np.asarray(y, float)
         x, v = self._state(y, p)

@@ -164,6 +164,12 @@ def window_friction(model: Model, y: np.ndarray, p: np.ndarray, phases: Phases, 
     model.tangential_pushes(p)[started] = force
 
 
+def _free_accelerations(model: Model, y: np.ndarray, p: np.ndarray, push: np.ndarray) -> np.ndarray:
+    """``u'`` (nu,) at ``y`` with every contact free (pushes kept)."""
+    ydot, _ = model.rhs(y, p, np.zeros(model.n_contacts, np.intc), push)
+    return ydot[model.nq : model.nq + model.nu]
+
+
 def resolve(
     model: Model,
     t: float,
@@ -183,6 +189,7 @@ def resolve(
     speed_tolerance: float = 0.0,
     friction: np.ndarray | None = None,
     zeno_rise: float = 0.0,
+    renewed: np.ndarray | None = None,
 ) -> Resolution:
     """Apply the event fixed point at instant ``t``.
 
@@ -221,6 +228,16 @@ def resolve(
         The rise (m) below which a rebound is plastic (``min_rebound``'s, against its pull);
         coupled contacts pulled back harder than by gravity stop at their own pull's speed
         (:func:`flexbody.coupled.coupled_impact`).
+    renewed : ndarray of bool, shape (nc,), optional
+        Held contacts whose constraint changed at ``t`` without an event of their own (handed
+        onto another element): checked with the instant's contacts.
+
+    Coupled contacts are solved over the instant's own: those coupled
+    (:meth:`flexbody.model.Model.coupled_with`) to the contacts that fired, were renewed or
+    were hit, or that move a particle whose free acceleration an impact changed (its
+    dampers' neighbours).  The other held contacts' rows are separate blocks of the whole
+    problem, which nothing at this instant changed: each keeps its force, and its own event
+    finds its lift-off.
 
     Returns
     -------
@@ -237,6 +254,10 @@ def resolve(
     loss = 0.0
     impacted, settled, not_held = np.zeros(nc, bool), np.zeros(nc, bool), np.zeros(nc, bool)
     was_held = phases.on_ground.copy()  # on the ground before this instant, so v_n = 0
+    # coupled contacts: the instant's own (its seeds), and the coordinates an impact's velocity
+    # jump gave another free acceleration
+    seeds = touching | leaving | (np.zeros(nc, bool) if renewed is None else np.asarray(renewed, bool))
+    jumped = np.zeros(model.nu, bool)
     for iterations in range(1, 2 * nc + 3):
         gaps, vn, lam = model.contact_state(y, p, phases.held, phases.push)
         near = (phases.phase == FREE) & (touching | (gaps <= phases.floor + gap_tolerance))
@@ -266,9 +287,12 @@ def resolve(
         instant = hit | (ending & (vn < 0.0))
         if instant.any() and model.coupled:
             # Coupled contacts (a rigid body's): one LCP over every touching contact.
-            touching_now = instant | phases.on_ground
+            touching_now = instant | (phases.on_ground & model.coupled_with(y[: model.nq], p, instant, phases.on_ground))
+            before = _free_accelerations(model, y, p, phases.push)
             out = coupled_impact(model, y, p, touching_now, np.where(hit & rebounds, e, 0.0), slowest, zeno_rise)
             y, loss = out.y, loss + out.loss
+            seeds |= touching_now
+            jumped |= _free_accelerations(model, y, p, phases.push) != before
             gaps = model.gaps(y[: model.nq], p)
             left = out.leaving
             events += [Event(t, int(c), "liftoff") for c in np.flatnonzero(left & phases.on_ground & ~settled)]
@@ -298,7 +322,8 @@ def resolve(
         if (started | instant | away).any():
             continue  # the dampers saw the velocity jump: recompute the forces before holding anyone
         if model.coupled:  # Signorini's law over all held contacts at once
-            pulling, implied = coupled_release(model, y, p, phases.on_ground, phases.push, leaving,
+            checked = phases.on_ground & model.coupled_with(y[: model.nq], p, seeds, phases.on_ground, jumped)
+            pulling, implied = coupled_release(model, y, p, checked, phases.push, leaving,
                                                force_tolerance, phases.held, notes, speed_tolerance)
             phases.phase[implied] = FREE  # redundant and unloaded: the others hold it at gap 0
             # armed a band lower than a lift-off: it stays at its gap (the others imply it),

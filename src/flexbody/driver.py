@@ -443,6 +443,8 @@ class _Run:
         import scipy.integrate
 
         model.forget_free(phases.phase == FREE)  # a free contact between bodies picks its element at its next instant
+        # also at a segment's start: a pile's segments are often one step long, each ending at an event
+        self.put_back()
         stepper, rhs = getattr(scipy.integrate, s.method), model.rhs_function(self.p, phases.held, phases.push)
         solver = stepper(rhs, t0, self.y.copy(), t_bound, **options)
         events = EventFunctions(model, self.p, phases, self.force_tolerance, self.gap_tolerance)
@@ -479,9 +481,7 @@ class _Run:
                     if above.any():
                         phases.floor[above] = 0.0
                         g_new = events(solver.y)
-                if self.drifted():  # held contacts put back on their surfaces: the stepper restarts there
-                    self.y[:] = project_held(model, self.y, self.p, np.flatnonzero(phases.on_ground))
-                    self.projections += 1
+                if self.put_back():  # held contacts put back on their surfaces: the stepper restarts there
                     self.nfev += solver.nfev
                     if s.method not in IMPLICIT:
                         options["first_step"] = min(solver.h_abs, t_bound - solver.t)
@@ -500,6 +500,22 @@ class _Run:
             self.njev += getattr(solver, "njev", 0)
             if s.method not in IMPLICIT:
                 self.h_next = solver.h_abs
+
+    def put_back(self) -> bool:
+        """Put the held contacts back on their surfaces where they :meth:`drifted` (the
+        state ``y`` changes); whether they had."""
+        if not self.drifted():
+            return False
+        model, phases = self.model, self.phases
+        self.y[:] = project_held(model, self.y, self.p, np.flatnonzero(phases.on_ground))
+        self.projections += 1
+        # A free contact the move left at or below its floor (one just released against a
+        # surface that moved) would start its segment unarmed, its next approach missed: a
+        # floor a hair below where it is now, as after an instant.
+        gaps = model.gaps(self.y[: model.nq], self.p)
+        unarmed = (phases.phase == FREE) & (gaps - phases.floor <= self.gap_tolerance)
+        phases.floor[unarmed] = np.minimum(0.0, gaps[unarmed]) - self.gap_tolerance
+        return True
 
     def drifted(self) -> bool:
         """Whether a held contact of a coupled model has drifted off its surface by more than
@@ -536,13 +552,15 @@ class _Run:
             found, not_held, loss = self.compiled.resolve(t, touching, leaving, s.impact == "thesis", s.impact_dt)
             new = [Event(t, c, EVENT_KINDS[kind], speed) for c, kind, speed in found]
         else:
+            renewed = None
             if self.model.n_slots:
-                touching, leaving = self.switch_elements(t, touching, leaving)
+                touching, leaving, renewed = self.switch_elements(t, touching, leaving)
             res = resolve(self.model, t, self.y, self.p, self.phases, touching, leaving,
                           gap_tolerance=self.gap_tolerance, force_tolerance=self.force_tolerance,
                           masses=self.contact_masses, impact=s.impact, impact_dt=s.impact_dt,
                           restitution=self.restitution, min_rebound=self.min_rebound,
-                          speed_tolerance=self.speed_tolerance, friction=self.mu, zeno_rise=self.zeno_rise)
+                          speed_tolerance=self.speed_tolerance, friction=self.mu, zeno_rise=self.zeno_rise,
+                          renewed=renewed)
             self.y[:] = res.y
             self.phases.assign(res.phases)
             new, not_held, loss = res.events, res.not_held, res.impact_loss
@@ -567,11 +585,13 @@ class _Run:
             self.losses.append((t, loss))
         return new
 
-    def switch_elements(self, t: float, touching: np.ndarray, leaving: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def switch_elements(self, t: float, touching: np.ndarray, leaving: np.ndarray
+                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Contacts held on another body's element whose particle passed onto the neighbour
         (:meth:`flexbody.body_contact.BodyContactModel.switch_elements`): held on it if they
         meet it tangentially, else freed at the instant (an approach is then an impact, a
-        separation a lift-off)."""
+        separation a lift-off).  Returns ``touching, leaving`` and the contacts handed over
+        without an event of their own (bool (nc,) each)."""
         phases = self.phases
         stay, approach, leave, corners = self.model.switch_elements(self.y, self.p, phases.held, self.gap_tolerance,
                                                                     self.speed_tolerance)
@@ -586,7 +606,9 @@ class _Run:
             phases.floor[c] = -self.gap_tolerance
         touching[approach] = True
         self.events += [Event(t, int(c), "liftoff") for c in leave]
-        return touching, leaving
+        renewed = np.zeros(len(touching), bool)
+        renewed[np.concatenate([stay, corners, leave])] = True  # the released one's force is gone
+        return touching, leaving, renewed
 
     def settle_corners(self, new: list[Event]) -> None:
         """Keep a held corner twin's slot held: where the slot was released and its twin

@@ -96,6 +96,15 @@ class Model:
         """Let free contacts between bodies pick their element afresh (``free`` (nc,) bool);
         nothing to forget without them."""
 
+    def coupled_with(self, q, p, seeds: np.ndarray, among: np.ndarray, jumped: np.ndarray | None = None) -> np.ndarray:
+        """The contacts of ``seeds | among`` (bool (nc,) each) whose impulses and forces can
+        act on a seed's, directly or through others of them, bool (nc,): here all of them
+        (a frame moves every particle).  An instant's problem over these alone has the
+        whole problem's answer on them: the others' rows are a separate block of it.
+        ``jumped`` (bool (nu,)): coordinates whose free acceleration jumped at the instant
+        (a damper's, beside an impact); the contacts moving them are seeds too."""
+        return np.asarray(seeds, bool) | np.asarray(among, bool)
+
     def gap(self, q, p, c: int) -> float:
         """Gap of contact ``c`` alone, equal to ``gaps(q, p)[c]`` (locating an impact needs no other)."""
         return float(self.gaps_of(q, p, np.array([c]))[0])
