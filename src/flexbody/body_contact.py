@@ -416,6 +416,9 @@ class BodyContactModel(Model):
         return out
 
     def contact_state(self, y, p, held, push):
+        return *self.gap_rates(y, p, held), self.rhs(y, p, held, push)[1]
+
+    def gap_rates(self, y, p, held) -> tuple[FloatArray, FloatArray]:
         y = np.asarray(y, float)
         x, v = self._state(y, p)
         ng = self.n_ground_contacts
@@ -427,7 +430,7 @@ class BodyContactModel(Model):
         if len(rated):
             self._constrain_elements(rated, x)
             vn_s[rated] = self._element_terms(rated, x, v).rate
-        return np.concatenate([gaps_g, gaps_s]), np.concatenate([vn_g, vn_s]), self.rhs(y, p, held, push)[1]
+        return np.concatenate([gaps_g, gaps_s]), np.concatenate([vn_g, vn_s])
 
     def contact_coupling(self, q, u, p, rows: IntArray, tangents: bool = False):
         """The contact rows ``rows`` (contact indices) as :mod:`flexbody.coupled` needs them;
@@ -699,9 +702,9 @@ class BodyContactModel(Model):
 
     def _pairs_with_body(self, slots) -> IntArray:
         """Every (particle, element) pair of these slots with their bodies' whole surfaces."""
-        rows = [np.column_stack([np.full(k.size, self.slot_particle[s]), k])
-                for s in slots for k in [self._body_elements[self.slot_body[s]]]]
-        return np.vstack(rows)
+        surfaces = [self._body_elements[b] for b in self.slot_body[slots]]
+        counts = [len(k) for k in surfaces]
+        return np.column_stack([np.repeat(self.slot_particle[slots], counts), np.concatenate(surfaces)])
 
     def _element_terms(self, slots, x, v):
         """Each slot's particle against its element (:class:`ElementTerms`)."""

@@ -259,7 +259,10 @@ def resolve(
     seeds = touching | leaving | (np.zeros(nc, bool) if renewed is None else np.asarray(renewed, bool))
     jumped = np.zeros(model.nu, bool)
     for iterations in range(1, 2 * nc + 3):
-        gaps, vn, lam = model.contact_state(y, p, phases.held, phases.push)
+        if model.coupled:  # its held contacts' forces come from coupled_release's LCP
+            (gaps, vn), lam = model.gap_rates(y, p, phases.held), None
+        else:
+            gaps, vn, lam = model.contact_state(y, p, phases.held, phases.push)
         near = (phases.phase == FREE) & (touching | (gaps <= phases.floor + gap_tolerance))
         # Strictly approaching (<= 0 would flip-flop forever); a contact stopped or released
         # at this instant has v_n = 0 up to round-off (1e-16 m/s) and is not hit again.

@@ -52,6 +52,7 @@ class EventFunctions:
         self.direction = model.slip_directions(p) if self.friction else np.zeros((model.n_contacts, model.dim))
         if self.friction:
             self.direction[phases.phase == SLIDING] = 0.0
+        self._coupled: dict[int, np.ndarray] = {}  # each held contact's block (see one)
 
     def renew(self, y: np.ndarray) -> None:
         """Take each sliding contact's slip direction at ``y`` (the start of the next step):
@@ -94,19 +95,23 @@ class EventFunctions:
     def __call__(self, y: np.ndarray) -> np.ndarray:
         return np.minimum(self.free_gaps(y), self.held_functions(y))
 
-    def held_functions(self, y: np.ndarray) -> np.ndarray:
+    def held_functions(self, y: np.ndarray, among: np.ndarray | None = None) -> np.ndarray:
         """The held contacts' event functions at ``y``, ``inf`` for the others, shape (nc,):
-        all that locating a lift-off, slip or hand-over needs (no gaps)."""
+        all that locating a lift-off, slip or hand-over needs (no gaps); with ``among`` (bool
+        (nc,), a block of contacts that couple to no other held one), theirs alone, solved as
+        if no other were held."""
         m = self.model
         g = np.full(m.n_contacts, np.inf)
-        if self.held_mask.any():
-            _, lam = m.rhs(y, self.p, self.held, self.phases.push)
-            g[self.held_mask] = lam[self.held_mask] + self.force_tolerance[self.held_mask]
+        mask = self.held_mask if among is None else self.held_mask & among
+        held = self.held if among is None else np.where(mask, self.held, 0).astype(self.held.dtype)
+        if mask.any():
+            _, lam = m.rhs(y, self.p, held, self.phases.push)
+            g[mask] = lam[mask] + self.force_tolerance[mask]
             if self.margins is not None:  # a contact held on another body's element passes onto the next
-                g[self.held_mask] = np.minimum(g[self.held_mask], self.margins(y, self.p, self.held)[self.held_mask])
+                g[mask] = np.minimum(g[mask], self.margins(y, self.p, held)[mask])
             if self.friction:
-                vt, _, slack = m.friction(y, self.p, self.held, self.phases.push)
-                sticking, sliding = self.phases.phase == HELD, self.phases.phase == SLIDING
+                vt, _, slack = m.friction(y, self.p, held, self.phases.push)
+                sticking, sliding = mask & (self.phases.phase == HELD), mask & (self.phases.phase == SLIDING)
                 g[sticking] = np.minimum(g[sticking], slack[sticking] + self.force_tolerance[sticking])
                 g[sliding] = np.minimum(g[sliding], np.sum(vt * self.direction, axis=1)[sliding])
         return g
@@ -114,10 +119,17 @@ class EventFunctions:
     def one(self, y: np.ndarray, c: int) -> float:
         """Event function ``c`` alone at ``y``, equal to ``self(y)[c]``: a free contact's needs
         only the gaps, not the right-hand side (what locating an impact costs), and a held
-        one's no gaps (what locating a lift-off costs)."""
+        one's no gaps, only the forces of the held contacts coupled to it (what locating a
+        lift-off costs; :meth:`flexbody.model.Model.coupled_with`)."""
         if self.free[c]:
             return self.model.gap(y[: self.model.nq], self.p, c) - float(self.phases.floor[c])
-        return float(self.held_functions(y)[c])
+        if self.friction:  # slips couple through the slip directions the model keeps: all of them
+            return float(self.held_functions(y)[c])
+        if c not in self._coupled:  # the held contacts coupled to c: its force is theirs to solve
+            seed = np.zeros(self.model.n_contacts, bool)
+            seed[c] = True
+            self._coupled[c] = self.model.coupled_with(y[: self.model.nq], self.p, seed, self.held_mask)
+        return float(self.held_functions(y, self._coupled[c])[c])
 
 
 @dataclass

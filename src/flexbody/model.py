@@ -105,6 +105,12 @@ class Model:
         (a damper's, beside an impact); the contacts moving them are seeds too."""
         return np.asarray(seeds, bool) | np.asarray(among, bool)
 
+    def gap_rates(self, y, p, held) -> tuple[FloatArray, FloatArray]:
+        """Gaps and normal velocities, shape (nc,) each: :meth:`contact_state` without the
+        forces (an instant of coupled contacts solves for those itself)."""
+        gaps, vn, _ = self.contact_state(y, p, held, np.zeros(self.n_contacts))
+        return gaps, vn
+
     def gap(self, q, p, c: int) -> float:
         """Gap of contact ``c`` alone, equal to ``gaps(q, p)[c]`` (locating an impact needs no other)."""
         return float(self.gaps_of(q, p, np.array([c]))[0])
