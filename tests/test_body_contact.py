@@ -340,14 +340,16 @@ def test_one_contacts_gap_equals_its_entry_of_all_gaps(backend):
     assert (gaps[model.n_ground_contacts:] < 0).any()  # the last shift put a particle inside
 
 
-def test_dependent_rows_are_found_block_by_block_as_by_one_rank_of_the_whole():
-    """coupled._dependent sums the rank over blocks of rows that share columns: it must say
-    what one SVD of the whole matrix says, for independent rows, for a row that is the sum of
-    two others in its block, and for two identical rows in different places."""
-    from flexbody.coupled import _dependent
+def test_redundant_rows_are_found_block_by_block_as_by_ranks_of_the_whole():
+    """coupled._redundant finds the rows in the span of the others by blocks of rows that
+    share columns: it must say for each row what two ranks of the whole matrix say (the row
+    is redundant when removing it leaves the rank unchanged), for independent rows, for a
+    row that is the sum of two others in its block (all three redundant, no other), and for
+    two identical rows in different places."""
+    from flexbody.coupled import _redundant
 
     rng = np.random.default_rng(3)
-    independent = 0
+    found = 0
     for trial in range(40):
         k, c = 30, 60
         J = np.zeros((k, c))
@@ -357,11 +359,15 @@ def test_dependent_rows_are_found_block_by_block_as_by_one_rank_of_the_whole():
             J[5] = J[2] + J[9]  # dependent, and it links their blocks
         elif trial % 3 == 2:
             J[17] = J[4]
-        whole = np.linalg.matrix_rank(J, tol=1e-9 * max(1.0, float(np.abs(J).max()))) < k
-        assert _dependent(J) == whole, trial
-        assert whole or trial % 3 == 0  # the rows made dependent are
-        independent += not whole
-    assert independent >= 5  # both answers were checked
+        tol = 1e-9 * max(1.0, float(np.abs(J).max()))
+        rank = np.linalg.matrix_rank(J, tol=tol)
+        whole = np.array([np.linalg.matrix_rank(np.delete(J, r, axis=0), tol=tol) == rank for r in range(k)])
+        asked = rng.random(k) < 0.7
+        np.testing.assert_array_equal(_redundant(J, asked), whole & asked, err_msg=f"trial {trial}")
+        assert whole[[2, 5, 9]].all() if trial % 3 == 1 else True
+        assert whole[[4, 17]].all() if trial % 3 == 2 else True
+        found += int(whole.sum())
+    assert found >= 20  # the redundant rows were asked about, not only independent ones
 
 
 def _dart_in_notch(turn_deg: float) -> dict:

@@ -289,7 +289,8 @@ def resolve(
         # After a window, what velocity is left towards the ground is stopped instantly.
         instant = hit | (ending & (vn < 0.0))
         if instant.any() and model.coupled:
-            # Coupled contacts (a rigid body's): one LCP over every touching contact.
+            # Coupled contacts (a rigid body's, between bodies): one LCP over the touching
+            # contacts coupled to the hit ones
             touching_now = instant | (phases.on_ground & model.coupled_with(y[: model.nq], p, instant, phases.on_ground))
             before = _free_accelerations(model, y, p, phases.push)
             out = coupled_impact(model, y, p, touching_now, np.where(hit & rebounds, e, 0.0), slowest, zeno_rise)
@@ -324,7 +325,7 @@ def resolve(
         phases.floor[away] = np.minimum(0.0, gaps[away]) - gap_tolerance
         if (started | instant | away).any():
             continue  # the dampers saw the velocity jump: recompute the forces before holding anyone
-        if model.coupled:  # Signorini's law over all held contacts at once
+        if model.coupled:  # Signorini's law over the held contacts coupled to the instant's, at once
             checked = phases.on_ground & model.coupled_with(y[: model.nq], p, seeds, phases.on_ground, jumped)
             pulling, implied = coupled_release(model, y, p, checked, phases.push, leaving,
                                                force_tolerance, phases.held, notes, speed_tolerance)

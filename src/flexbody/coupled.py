@@ -270,29 +270,42 @@ def coupled_release(model, y: np.ndarray, p: np.ndarray, held: np.ndarray, push:
     lifted = (solution.normal == 0.0) & (solution.normal_rate > floor)
     release[rows] = lifted | (leaving[rows] & (solution.normal <= force_tolerance[rows]))
     unloaded = (solution.normal == 0.0) & ~release[rows]
-    if unloaded.any() and _dependent(J):
-        implied[rows] = unloaded  # redundant: the others carry it
+    if unloaded.any():
+        implied[rows] = unloaded & _redundant(J, unloaded)  # the others carry it
     return release, implied
 
 
-def _dependent(J: np.ndarray) -> bool:
-    """Whether the rows of ``J`` (k, c) are linearly dependent: rank below k, singular values
-    counted above 1e-9 of its largest entry.  Rows that share no coordinate are independent
-    of each other, so the rank is summed over the blocks of rows linked through shared
-    columns (a pile's held contacts fall into many small blocks: one SVD of the whole took
-    a third of a second)."""
+def _redundant(J: np.ndarray, asked: np.ndarray) -> np.ndarray:
+    """Which of the ``asked`` rows (bool (k,)) of ``J`` (k, c) are in the span of the other
+    rows, bool (k,): those with a share in a left null vector (``z^T J = 0``), the rank
+    counting singular values above 1e-9 of ``J``'s largest entry.  Only such a row is held
+    at its constraint by the others when it carries no force; a row without force beside
+    two dependent rows elsewhere is not (set free as implied, it was hit again at every
+    instant of a pile: ``chattering``).  Rows that share no coordinate are independent of
+    each other, so the null space is found per block of rows linked through shared columns
+    (a pile's held contacts fall into many small blocks: one SVD of the whole took a third
+    of a second)."""
+    out = np.zeros(len(J), bool)
     if len(J) < 2:
-        return False
+        return out
     from scipy.sparse import csr_matrix
 
     tol = 1e-9 * max(1.0, float(np.abs(J).max()))
     links = csr_matrix(J != 0.0)
     for block in independent_blocks(links @ links.T):  # rows sharing a column, directly or not
+        if len(block) < 2 or not asked[block].any():
+            continue
         rows = J[block]
         used = rows[:, (rows != 0.0).any(axis=0)]
-        if len(rows) > used.shape[1] or np.linalg.matrix_rank(used, tol=tol) < len(rows):
-            return True
-    return False
+        U, singular, _ = np.linalg.svd(used)
+        rank = int((singular > tol).sum())
+        if rank < len(block):  # left null vectors: U's columns past the rank (unit vectors)
+            out[block] = asked[block] & (np.linalg.norm(U[:, rank:], axis=1) > NULL_SHARE)
+    return out
+
+
+#: A row's share in the left null space above which :func:`_redundant` counts it.
+NULL_SHARE = 1e-6
 
 
 def _sliding_rates(J: np.ndarray, u: np.ndarray, rows: np.ndarray, codes: np.ndarray,
