@@ -570,7 +570,7 @@ def test_a_piles_instants_are_solved_over_their_own_contacts_with_the_whole_prob
     assert len(checks) > 100
     assert not any((required & ~kept).any() for kept, required, _ in checks)
     kept_share = np.mean([kept.sum() / total for kept, _, total in checks])
-    assert kept_share < 0.5  # measured 0.1
+    assert kept_share < 0.5  # measured 0.30 (472 calls, 346 events)
     np.testing.assert_array_equal(island.events_particle, whole.events_particle)
     np.testing.assert_array_equal(island.events_kind, whole.events_kind)
     np.testing.assert_allclose(island.events_time, whole.events_time, rtol=0, atol=1e-9)
