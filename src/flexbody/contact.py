@@ -67,6 +67,13 @@ class Phases:
         """Bool (nc,): held along the normal (sticking, frictionless or sliding)."""
         return (self.phase == HELD) | (self.phase == SLIDING)
 
+    def arm(self, gaps: np.ndarray, gap_tolerance: float) -> None:
+        """Give each free contact too close to its floor to be armed (released on a surface,
+        left at -1e-16 by round-off, or moved there) a floor a hair below its gap ``gaps``
+        (nc,): its next event is then a real approach, not a function that starts at 0."""
+        unarmed = (self.phase == FREE) & (gaps - self.floor <= gap_tolerance)
+        self.floor[unarmed] = np.minimum(0.0, gaps[unarmed]) - gap_tolerance
+
     def copy(self) -> Phases:
         return Phases(self.phase.copy(), self.floor.copy(), self.push.copy(), self.push_until.copy())
 
@@ -362,11 +369,7 @@ def resolve(
                                              speed_tolerance)
         loss += lost
         events += found
-    # A free contact too close to its floor to be armed (released on the ground, or left at
-    # -1e-16 by round-off) gets a floor a hair below: its next event is a real approach.
-    gaps = model.gaps(y[: model.nq], p)
-    unarmed = (phases.phase == FREE) & (gaps - phases.floor <= gap_tolerance)
-    phases.floor[unarmed] = np.minimum(0.0, gaps[unarmed]) - gap_tolerance
+    phases.arm(model.gaps(y[: model.nq], p), gap_tolerance)
     if friction is not None and friction.any():
         model.tangential_pushes(p)[phases.phase != PUSHED] = 0.0
     phases.push[phases.phase != PUSHED] = 0.0

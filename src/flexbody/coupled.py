@@ -280,8 +280,7 @@ def _redundant(J: np.ndarray, asked: np.ndarray) -> np.ndarray:
     rows, bool (k,): those with a share in a left null vector (``z^T J = 0``), the rank
     counting singular values above 1e-9 of ``J``'s largest entry.  Only such a row is held
     at its constraint by the others when it carries no force; a row without force beside
-    two dependent rows elsewhere is not (set free as implied, it was hit again at every
-    instant of a pile: ``chattering``).  Rows that share no coordinate are independent of
+    two dependent rows elsewhere is not.  Rows that share no coordinate are independent of
     each other, so the null space is found per block of rows linked through shared columns
     (a pile's held contacts fall into many small blocks: one SVD of the whole took a third
     of a second)."""

@@ -510,11 +510,8 @@ class _Run:
         self.y[:] = project_held(model, self.y, self.p, np.flatnonzero(phases.on_ground))
         self.projections += 1
         # A free contact the move left at or below its floor (one just released against a
-        # surface that moved) would start its segment unarmed, its next approach missed: a
-        # floor a hair below where it is now, as after an instant.
-        gaps = model.gaps(self.y[: model.nq], self.p)
-        unarmed = (phases.phase == FREE) & (gaps - phases.floor <= self.gap_tolerance)
-        phases.floor[unarmed] = np.minimum(0.0, gaps[unarmed]) - self.gap_tolerance
+        # surface that moved) would start its segment unarmed, its next approach missed.
+        phases.arm(model.gaps(self.y[: model.nq], self.p), self.gap_tolerance)
         return True
 
     def drifted(self) -> bool:
