@@ -301,8 +301,7 @@ class BodyContactModel(Model):
         if len(held_slots):
             x = self._coordinates.particles(q, None, p)[0]
             self._constrain_elements(held_slots, x)
-            moved[self.slot_particle[held_slots]] = True
-            moved[self.elements[self.element_of[held_slots]].ravel()] = True
+            moved[self._slot_points(held_slots).ravel()] = True
         ground_rows = np.flatnonzero(self._coordinates.coupled_grounds(held[:ng] != 0, moved))
         if not len(held_slots) and not (self.mu[ground_rows] > 0.0).any():
             ground_rows = ground_rows[:0]
@@ -392,11 +391,10 @@ class BodyContactModel(Model):
         nodes = np.flatnonzero(seeds | among)
         grounds, slots = nodes[nodes < ng], nodes[nodes >= ng] - ng
         self._constrain_elements(slots, self._coordinates.particles(q, None, p)[0])  # a seed just hit
-        moved = [self.inner.contacts[grounds, :1], self.slot_particle[slots, None],
-                 self.elements[self.element_of[slots]]]
-        node = np.concatenate([np.arange(len(grounds))] +
-                              [len(grounds) + np.repeat(np.arange(len(slots)), m.shape[1]) for m in moved[1:]])
-        particle = np.concatenate([m.ravel() for m in moved])
+        moved = self._slot_points(slots)
+        node = np.concatenate([np.arange(len(grounds)),
+                               len(grounds) + np.repeat(np.arange(len(slots)), moved.shape[1])])
+        particle = np.concatenate([self.inner.contacts[grounds, 0], moved.ravel()])
         # contacts and particles, one graph: a contact's edges go to the particles it moves
         graph = csr_matrix((np.ones(len(node)), (node, len(nodes) + particle)),
                            shape=(len(nodes) + self.n_particles,) * 2)
@@ -412,7 +410,7 @@ class BodyContactModel(Model):
         ng = self.n_ground_contacts
         out = particles[self.contacts[:, 0]].copy()
         chosen = np.flatnonzero(self.element_of >= 0)
-        out[ng + chosen] |= particles[self.elements[self.element_of[chosen]]].any(axis=1)
+        out[ng + chosen] = particles[self._slot_points(chosen)].any(axis=1)
         return out
 
     def contact_state(self, y, p, held, push):
@@ -708,10 +706,12 @@ class BodyContactModel(Model):
 
     def _element_terms(self, slots, x, v):
         """Each slot's particle against its element (:class:`ElementTerms`)."""
-        e = self.elements[self.element_of[slots]]
-        points = [x[self.slot_particle[slots]]] + [x[e[:, k]] for k in range(self.dim)]
-        rates = [v[self.slot_particle[slots]]] + [v[e[:, k]] for k in range(self.dim)]
-        return self._element(points, rates)
+        moved = self._slot_points(slots).T
+        return self._element([x[i] for i in moved], [v[i] for i in moved])
+
+    def _slot_points(self, slots) -> IntArray:
+        """The particles each constrained slot moves, shape (k, 1 + dim): its own, then its element's."""
+        return np.column_stack([self.slot_particle[slots], self.elements[self.element_of[slots]]])
 
     def _rows(self, ground_rows, slots, q, u, p, tangents: bool = False) -> _Rows:
         """Constraint rows (ground rows, then slots) on the coordinates they move: their
@@ -726,7 +726,7 @@ class BodyContactModel(Model):
         if len(slots):
             terms = self._element_terms(slots, x, v)
             bias[k_g:], slip_bias[k_g:] = terms.bias, terms.slip_bias if tangents else 0.0
-            points.append(np.column_stack([self.slot_particle[slots], self.elements[self.element_of[slots]]]))
+            points.append(self._slot_points(slots))
             weights.append(np.column_stack([np.ones(len(slots)), -terms.weights]))
             normals = np.vstack([normals, terms.normal])
         directions = [normals] + ([np.column_stack([-normals[:, 1], normals[:, 0]])] if tangents else [])
