@@ -286,6 +286,55 @@ def test_a_body_sliding_into_a_concave_corner_hits_the_wall_where_the_floor_ends
     assert (X[:, front, 0] - X[:, corner, 0]).max() <= 1e-9
 
 
+L_BLOCK = {
+    "name": "l_block", "gravity": [0.0, 0.0],
+    "bodies": [
+        {"name": "slider", "shape": "polygon", "vertices": [[-0.05, 0.0], [0.05, 0.0], [0.0, 0.05]],
+         "mass": 0.02, "stiffness": 2000.0, "damping": 0.5, "position": [0.0, 0.5], "collide": True},
+        # counter-clockwise: the floor runs from the inner (concave) corner, vertex 4, to vertex 5
+        # (convex), the wall from vertex 3 down to the corner, the left side from 5 down to 0
+        {"name": "block", "shape": "polygon",
+         "vertices": [[-0.2, 0.0], [0.2, 0.0], [0.2, 0.2], [0.1, 0.2], [0.1, 0.1], [-0.2, 0.1]],
+         "mass": 0.1, "stiffness": 5000.0, "damping": 1.0, "position": [0.0, 0.0], "collide": True},
+    ],
+    "simulation": {"t_end": 0.1, "output_dt": 0.01},
+}
+
+
+@pytest.mark.parametrize("corner, past, velocity, twin", [
+    (7, [0.1 + 1e-9, 0.1], [0.0, 0.01], True),     # past the concave corner, moving up the wall
+    (8, [-0.2 - 1e-9, 0.1], [0.0, -0.01], False),  # past the convex one, moving down the side
+])
+def test_a_slot_meeting_the_next_element_tangentially_keeps_the_old_one_only_at_a_concave_vertex(
+        corner, past, velocity, twin):
+    """A slot held on the L block's floor whose particle passes a vertex moving along the
+    next element (normal speed 0 there: it stays held, no impact) is in a corner if the
+    vertex is concave: its twin holds on to the floor, as where it hits the next element,
+    so that it can rest there on both (a particle that slipped onto the flush one of two
+    elements at a dent and off the other was hit again, unheld, each time: "chattering" in
+    a pile).  Past a convex vertex nothing holds it to the floor's line."""
+    scene = flexbody.load_scene(L_BLOCK)
+    model = load_model(scene, backend="numpy")
+    p = model.parameters(scene)
+    ng, front = model.n_ground_contacts, 1  # the slider's front particle; the floor is [7, 8]
+    q = scene.initial_positions().copy()
+    q[front] = past
+    u = np.zeros_like(q)
+    u[front] = velocity
+    y = np.concatenate([q.ravel(), u.ravel(), np.zeros(model.ny - 2 * q.size)])
+    slot = int(model._slots_of(np.array([front]), np.array([1]))[0][0])
+    model.element_of[slot] = next(e for e in range(len(model.elements)) if model.elements[e].tolist() == [7, 8])
+    held = np.zeros(model.n_contacts, np.intc)
+    held[ng + slot] = 1
+    stay, approach, leave, corners = model.switch_elements(y, p, held, gap_tolerance=1e-12, speed_tolerance=1e-7)
+    assert stay.tolist() == [ng + slot] and not len(approach) and not len(leave)
+    assert model.elements[model.element_of[slot]].tolist() != [7, 8]  # handed on, to the wall or the side
+    assert corner in model.elements[model.element_of[slot]]
+    assert corners.tolist() == ([int(model.twin(ng + slot))] if twin else [])
+    if twin:
+        assert model.elements[model.element_of[slot + model.n_primary]].tolist() == [7, 8]
+
+
 def test_the_reported_contact_forces_obey_newtons_second_law_across_element_hand_overs():
     """A triangle sliding over a block whose top is two segments: its particles are handed
     from one to the other.  The reported contact forces on the triangle (each taken on the

@@ -25,11 +25,16 @@ way round.  The slots come after the ground contacts, so the phase machine
   hits it if it approaches (a concave corner) and is freed if it leaves (a convex one).
 * **In a concave corner** a particle can rest on both elements at once.  Each slot has a
   *corner twin*, a second contact of the same particle and body (slot ``s + n_primary``),
-  which only ever holds: where a slot hits the next element at a concave vertex, its twin
-  takes over the element it came from, held, and the impact is one LCP over both.  If the
-  impact leaves the particle moving away from that element faster than a rebound too slow
-  to count (the Zeno threshold, ``min_rebound``), the twin lifts off and the particle slides
-  on; slower, both stay held and the particle rests in the corner.  Without the twin it
+  which only ever holds: where a slot passes onto the next element at a concave vertex, its
+  twin takes over the element it came from, held.  If the slot hits the new element, the
+  impact is one LCP over both; if the impact leaves the particle moving away from that
+  element faster than a rebound too slow to count (the Zeno threshold, ``min_rebound``),
+  the twin lifts off and the particle slides on; slower, both stay held and the particle
+  rests in the corner.  If it meets the new element tangentially, the instant's force LCP
+  decides whether the twin stays (in a pile, a disc's corner particle in a dent of another
+  slipped across the dent's vertex onto the flank lying flush on its own disc, where it is
+  redundant and was freed, and without the twin it hit the bent flank again and again:
+  "chattering").  Without the twin it
   would be handed from one flank to the other ever faster, each hand-over a plastic impact
   keeping ``cos`` of the corner's angle of its speed (Zeno).  Held corner rows have no
   element-boundary event (the particle sits on the boundary); each leaves by its force.  A
@@ -598,8 +603,10 @@ class BodyContactModel(Model):
             Contact indices of those slots that meet their new element tangentially (normal
             speed within ``speed_tolerance``: still held), approach it (an impact) and leave it.
         corners : ndarray of int
-            The corner twins of ``approach``, now on the elements those came from: the
-            caller holds them as their slots were (the impact decides whether they stay).
+            The corner twins of the slots that passed a concave vertex (all of ``approach``,
+            and those of ``stay`` there), now on the elements those came from: the caller
+            holds them as their slots were (the impact or the force LCP decides whether they
+            stay).
         """
         ng = self.n_ground_contacts
         slots = np.flatnonzero(np.asarray(held)[ng:] != 0)
@@ -622,14 +629,28 @@ class BodyContactModel(Model):
         self.margin_floor[out] = np.where(margin < gap_tolerance, margin - gap_tolerance, 0.0)
         rate = terms.rate
         approach = out[rate < -speed_tolerance]
-        twins = self._twin_slots(approach)  # held on the elements they came from, as their slots were
-        self.element_of[twins] = came_from[rate < -speed_tolerance]
+        # At a concave vertex the particle is in a corner, on both elements, whether it hits
+        # the new one or meets it tangentially (it rests there): the slot's twin keeps the old
+        # one, held as the slot was (the next instant's LCP decides whether it stays).
+        cornered = (rate < -speed_tolerance) | ((np.abs(rate) <= speed_tolerance)
+                                                & self._concave(came_from, self.element_of[out], x))
+        twins = self._twin_slots(out[cornered])
+        self.element_of[twins] = came_from[cornered]
         self.margin_floor[twins] = 0.0
-        self._slip[ng + twins] = self._slip[ng + approach]
+        self._slip[ng + twins] = self._slip[ng + out[cornered]]
         return ng + out[np.abs(rate) <= speed_tolerance], ng + approach, ng + out[rate > speed_tolerance], \
             ng + twins
 
     # ------------------------------------------------------------------ geometry
+    def _concave(self, first: IntArray, second: IntArray, x: FloatArray) -> np.ndarray:
+        """Whether neighbouring elements ``first`` and ``second`` (k,) meet at a concave
+        vertex or edge, bool (k,): a vertex of ``second`` off the shared feature lies
+        above ``first``'s line or plane (outside its body)."""
+        a, b = self.elements[first], self.elements[second]
+        off = np.array([row_b[~np.isin(row_b, row_a)][0] for row_a, row_b in zip(a, b)], np.intp)
+        normals = (segment_normals if self.dim == 2 else triangle_normals)(x, a)
+        return np.einsum("ij,ij->i", normals, x[off] - x[a[:, 0]]) > 0.0
+
     def _state(self, y, p) -> tuple[FloatArray, FloatArray]:
         """Particle positions and velocities (n, dim) each at state ``y``."""
         return self._coordinates.particles(y[: self.nq], y[self.nq : self.nq + self.nu], p)

@@ -596,8 +596,9 @@ class _Run:
         moved = np.concatenate([stay, approach, leave])
         leaving[moved] = False
         # At a concave corner the contact on the element left behind goes on as the slot's
-        # twin, held as the slot was: the impact on the new element decides if it stays.
-        phases.phase[corners] = phases.phase[approach]
+        # twin, held as the slot was: the impact on the new element (or, met tangentially,
+        # the instant's force LCP) decides if it stays.
+        phases.phase[corners] = phases.phase[self.model.twin(corners)]
         for c in np.concatenate([approach, leave]).tolist():
             phases.phase[c] = FREE
             phases.floor[c] = -self.gap_tolerance
