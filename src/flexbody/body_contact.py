@@ -628,18 +628,18 @@ class BodyContactModel(Model):
         # below 0 on the new element too: its floor keeps its next pass findable
         self.margin_floor[out] = np.where(margin < gap_tolerance, margin - gap_tolerance, 0.0)
         rate = terms.rate
-        approach = out[rate < -speed_tolerance]
+        approach, tangential = rate < -speed_tolerance, np.abs(rate) <= speed_tolerance
         # At a concave vertex the particle is in a corner, on both elements, whether it hits
-        # the new one or meets it tangentially (it rests there): the slot's twin keeps the old
-        # one, held as the slot was (the next instant's LCP decides whether it stays).
-        cornered = (rate < -speed_tolerance) | ((np.abs(rate) <= speed_tolerance)
-                                                & self._concave(came_from, self.element_of[out], x))
+        # the new one or meets it tangentially (it rests there): the
+        # slot's twin keeps the old one, held as the slot was (the next instant's LCP decides
+        # whether it stays).
+        cornered = approach.copy()
+        cornered[tangential] = self._concave(came_from[tangential], self.element_of[out[tangential]], x)
         twins = self._twin_slots(out[cornered])
         self.element_of[twins] = came_from[cornered]
         self.margin_floor[twins] = 0.0
         self._slip[ng + twins] = self._slip[ng + out[cornered]]
-        return ng + out[np.abs(rate) <= speed_tolerance], ng + approach, ng + out[rate > speed_tolerance], \
-            ng + twins
+        return ng + out[tangential], ng + out[approach], ng + out[rate > speed_tolerance], ng + twins
 
     # ------------------------------------------------------------------ geometry
     def _concave(self, first: IntArray, second: IntArray, x: FloatArray) -> np.ndarray:
