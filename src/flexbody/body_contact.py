@@ -630,9 +630,8 @@ class BodyContactModel(Model):
         rate = terms.rate
         approach, tangential = rate < -speed_tolerance, np.abs(rate) <= speed_tolerance
         # At a concave vertex the particle is in a corner, on both elements, whether it hits
-        # the new one or meets it tangentially (it rests there): the
-        # slot's twin keeps the old one, held as the slot was (the next instant's LCP decides
-        # whether it stays).
+        # the new one or meets it tangentially (it rests there): the slot's twin keeps the old
+        # one, held as the slot was (the next instant's LCP decides whether it stays).
         cornered = approach.copy()
         cornered[tangential] = self._concave(came_from[tangential], self.element_of[out[tangential]], x)
         twins = self._twin_slots(out[cornered])
