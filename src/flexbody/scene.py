@@ -64,7 +64,7 @@ from .choices import (  # noqa: F401  (re-exported: the choices are part of the 
     SPATIAL_SHAPES,
 )
 from .errors import InputError
-from .surface import closure_problem, empty, signed_measure
+from .surface import closure_problem, degenerate, empty, signed_measure
 from .topology import BodyTopology, Topology, gauge_particles
 
 DEFAULT_GRAVITY = (0.0, -9.81)
@@ -1106,6 +1106,14 @@ def _check_contact_surfaces(bodies: list[Body], raw_bodies: list, contacts: list
         why = closure_problem(body.surface)
         if why:
             problems.add(f"bodies[{b}].surface", value, f"is not closed: {why}; {touches}{fix}")
+            continue
+        flat = degenerate(body.points, body.surface)
+        if flat.size:
+            k, what = int(flat[0]), "zero length" if body.dim == 2 else "zero area (collinear corners)"
+            more = f" (and {flat.size - 1} more like it)" if flat.size > 1 else ""
+            problems.add(f"bodies[{b}].surface", value,
+                         f"element {k}, {body.surface[k].tolist()}, has {what}{more}: an element needs a normal; "
+                         f"{touches}")
             continue
         measure = signed_measure(body.points, body.surface)
         if measure <= 0.0:

@@ -89,6 +89,25 @@ def closure_problem(surface: np.ndarray) -> str:
     return ""
 
 
+def degenerate(points: np.ndarray, surface: np.ndarray, relative: float = 1e-9) -> np.ndarray:
+    """The elements without a normal, indices (k,): segments shorter than ``relative`` times
+    the surface's size, triangles whose area is below ``relative`` times their longest edge
+    squared (collinear or coincident corners).
+
+    Parameters
+    ----------
+    points : ndarray, shape (n, d)
+    surface : ndarray of int, shape (m, d)
+    """
+    corners = np.asarray(points, float)[np.asarray(surface, np.intp)]  # (m, d, d)
+    if surface.shape[1] == 2:
+        length = np.linalg.norm(corners[:, 1] - corners[:, 0], axis=1)
+        return np.flatnonzero(length <= relative * np.ptp(corners.reshape(-1, 2), axis=0).max())
+    edges = corners[:, [1, 2, 0]] - corners
+    area2 = np.linalg.norm(np.cross(edges[:, 0], edges[:, 1]), axis=1)
+    return np.flatnonzero(area2 <= relative * np.sum(edges * edges, axis=2).max(axis=1))
+
+
 def outward(points: np.ndarray, surface: np.ndarray) -> np.ndarray:
     """``surface`` with every element reversed if it encloses a negative measure, shape (m, d)."""
     surface = np.asarray(surface, dtype=np.intp)
