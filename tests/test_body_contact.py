@@ -326,11 +326,12 @@ def test_a_slot_meeting_the_next_element_tangentially_keeps_the_old_one_only_at_
     model.element_of[slot] = next(e for e in range(len(model.elements)) if model.elements[e].tolist() == [7, 8])
     held = np.zeros(model.n_contacts, np.intc)
     held[ng + slot] = 1
-    stay, approach, leave, corners = model.switch_elements(y, p, held, gap_tolerance=1e-12, speed_tolerance=1e-7)
-    assert stay.tolist() == [ng + slot] and not len(approach) and not len(leave)
+    moved = model.switch_elements(y, p, held, gap_tolerance=1e-12, speed_tolerance=1e-7)
+    assert moved.stay.tolist() == [ng + slot] and not len(moved.approach) and not len(moved.leave)
     assert model.elements[model.element_of[slot]].tolist() != [7, 8]  # handed on, to the wall or the side
     assert corner in model.elements[model.element_of[slot]]
-    assert corners.tolist() == ([int(model.twin(ng + slot))] if twin else [])
+    assert moved.corners.tolist() == ([ng + slot + model.n_primary] if twin else [])
+    assert moved.sources.tolist() == ([ng + slot] if twin else [])
     if twin:
         assert model.elements[model.element_of[slot + model.n_primary]].tolist() == [7, 8]
 

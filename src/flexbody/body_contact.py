@@ -24,9 +24,9 @@ way round.  The slots come after the ground contacts, so the phase machine
   the neighbour across that boundary: it stays held there if it meets it tangentially,
   hits it if it approaches (a concave corner) and is freed if it leaves (a convex one).
 * **In a concave corner** a particle can rest on both elements at once.  Each slot has a
-  *corner twin*, a second contact of the same particle and body (slot ``s + n_primary``),
-  which only ever holds: where a slot passes onto the next element at a concave vertex, its
-  twin takes over the element it came from, held.  If the slot hits the new element, the
+  *corner twin* (two in 3D: ``s + n_primary``, ``s + 2 n_primary``), another contact of the
+  same particle and body, which only ever holds: where a slot passes onto the next element
+  at a concave vertex (edge), a free twin takes over the element it came from, held.  If the slot hits the new element, the
   impact is one LCP over both; if the impact leaves the particle moving away from that
   element faster than a rebound too slow to count (the Zeno threshold, ``min_rebound``),
   the twin lifts off and the particle slides on; slower, both stay held and the particle
@@ -36,8 +36,10 @@ way round.  The slots come after the ground contacts, so the phase machine
   redundant and was freed, and without the twin it hit the bent flank again and again:
   "chattering").  Without the twin it
   would be handed from one flank to the other ever faster, each hand-over a plastic impact
-  keeping ``cos`` of the corner's angle of its speed (Zeno).  Held corner rows have no
-  element-boundary event (the particle sits on the boundary); each leaves by its force.  A
+  keeping ``cos`` of the corner's angle of its speed (Zeno).  The rows of a corner that
+  pins its particle (two in 2D, three in 3D) have no element-boundary event; each leaves by
+  its force.  A 3D particle held on the two faces of a concave edge slides along the line
+  where their planes meet, and only the ends of the edge bound it (:meth:`_along_edge`).  A
   free twin has no gap (it reads ``margin``), and a held twin always has its slot held too.
 
 **Coulomb friction** (2D; the pairs' ``friction``, and the grounds' where contacts couple):
@@ -95,6 +97,9 @@ DEPENDENT = 1e-12
 SLIP_ROUNDOFF = 1e-13
 #: Contact rows on at most this many coordinates are multiplied densely (:func:`_gram`).
 DENSE_WIDTH = 64
+#: A vertex within this fraction of its face's size of the line where two held faces' planes
+#: meet lies on it (and planes whose unit normals' cross product is shorter meet nowhere definite).
+EDGE_LINE = 1e-6
 
 
 class BodyContactModel(Model):
@@ -142,11 +147,12 @@ class BodyContactModel(Model):
                 particles.append(touching)
                 bodies.append(np.full(len(touching), surface))
                 pairs.append(np.full(len(touching), k))
-        #: Slots (each touching particle against each body it may touch), then their corner twins.
+        #: Slots (each touching particle against each body it may touch), then their corner
+        #: twins: one in 2D (two segments make a corner), two in 3D (three faces do).
         self.n_primary = sum(len(a) for a in particles)
-        self.slot_particle = np.tile(np.concatenate(particles), 2).astype(np.intp)
-        self.slot_body = np.tile(np.concatenate(bodies), 2).astype(np.intp)
-        self.slot_pair = np.tile(np.concatenate(pairs), 2).astype(np.intp)
+        self.slot_particle = np.tile(np.concatenate(particles), self.dim).astype(np.intp)
+        self.slot_body = np.tile(np.concatenate(bodies), self.dim).astype(np.intp)
+        self.slot_pair = np.tile(np.concatenate(pairs), self.dim).astype(np.intp)
         self.allowed = allowed
         self.n_slots = len(self.slot_particle)
         self.n_contacts = self.n_ground_contacts + self.n_slots
@@ -545,100 +551,168 @@ class BodyContactModel(Model):
         self.element_of[free] = -1
         self.margin_floor[free] = 0.0
 
-    def twin(self, c: IntArray) -> IntArray:
-        """The corner twin's contact index of slot contacts ``c`` (and the slot's of twins)."""
+    def primary(self, c: IntArray) -> IntArray:
+        """The slot's contact index of corner twins ``c`` (and of slots: themselves)."""
         ng = self.n_ground_contacts
-        return ng + self._twin_slots(np.asarray(c) - ng)
+        return ng + (np.asarray(c) - ng) % self.n_primary
 
-    def _twin_slots(self, slots: IntArray) -> IntArray:
-        """:meth:`twin` in slot numbering."""
-        k = self.n_primary
-        return np.where(slots < k, slots + k, slots - k)
+    def _group_rows(self, slots: IntArray) -> IntArray:
+        """The rows of each of ``slots``' groups (the slot, then its twins), slot numbering, (k, dim)."""
+        return (np.asarray(slots) % self.n_primary)[:, None] + self.n_primary * np.arange(self.dim)
 
     def hand_to_slots(self, twins: IntArray) -> None:
-        """The held corner twins ``twins`` (contact indices) whose slots were released: each
-        slot takes over its twin's element, margin floor and slip direction; the twin is
-        left without an element (the caller swaps their phases)."""
+        """The held corner twins ``twins`` (contact indices, one per slot) whose slots were
+        released: each slot takes over its twin's element, margin floor and slip direction;
+        the twin is left without an element (the caller swaps their phases)."""
         ng = self.n_ground_contacts
         twin_slots = np.asarray(twins, np.intp) - ng
-        slots = self._twin_slots(twin_slots)
+        slots = twin_slots % self.n_primary
         self.element_of[slots], self.element_of[twin_slots] = self.element_of[twin_slots], -1
         self.margin_floor[slots], self.margin_floor[twin_slots] = self.margin_floor[twin_slots], 0.0
         self._slip[ng + slots] = self._slip[ng + twin_slots]
 
-    def _free_margins(self, held, slots) -> np.ndarray:
-        """Which held ``slots`` have an element-boundary event: not the two rows of a corner."""
+    def _bounded(self, held, slots) -> np.ndarray:
+        """Which held ``slots`` have an element-boundary event: not the rows of a corner that
+        pins its particle (two in 2D, three in 3D)."""
         held = np.asarray(held)[self.n_ground_contacts :] != 0
-        return ~(held[slots] & held[self._twin_slots(slots)])
+        return held[self._group_rows(slots)].sum(axis=1) < self.dim
 
-    def _margins(self, slots, x, v) -> tuple[ElementTerms, FloatArray]:
-        """Held ``slots`` against their elements (:class:`ElementTerms`) and how far inside
-        them their particles project (m, (k,)): the smallest weight times the element's size."""
+    def _margins(self, slots, x, v, held) -> tuple[ElementTerms, FloatArray, FloatArray]:
+        """Held ``slots`` against their elements (:class:`ElementTerms`), how far inside them
+        their particles project (m, (k,): the smallest bounding weight times the element's
+        size) and the bounding weights (k, dim; ``inf`` for the others, see :meth:`_along_edge`)."""
         terms = self._element_terms(slots, x, v)
-        return terms, terms.weights.min(axis=1) * self._sizes(slots, x)
+        weights = self._along_edge(slots, terms.weights, x, held)
+        return terms, weights.min(axis=1) * self._sizes(slots, x), weights
+
+    def _along_edge(self, slots, weights, x, held) -> FloatArray:
+        """``weights`` (k, dim) of held ``slots`` with ``inf`` where they bound nothing: a 3D
+        particle held on two faces of a concave edge moves along the line where their planes
+        meet, and a face with an edge on that line keeps the weight of its third vertex at 0
+        (up to round-off) all along it: only the edge's ends bound the particle there."""
+        if self.dim == 2:
+            return weights
+        on = (np.asarray(held)[self.n_ground_contacts :] != 0)[self._group_rows(slots)]
+        pairs = np.flatnonzero(on.sum(axis=1) == 2)
+        if not len(pairs):
+            return weights
+        rows = np.asarray(slots)[pairs]
+        group = self._group_rows(rows)
+        other = np.where(on[pairs] & (group != rows[:, None]), group, -1).max(axis=1)
+        faces = self.elements[self.element_of[rows]]
+        line = np.cross(triangle_normals(x, faces), triangle_normals(x, self.elements[self.element_of[other]]))
+        length = np.linalg.norm(line, axis=1)
+        line /= np.maximum(length, np.finfo(float).tiny)[:, None]
+        offset = x[faces] - x[self.slot_particle[rows]][:, None, :]
+        distance = np.linalg.norm(np.cross(offset, line[:, None, :]), axis=2)  # of each vertex to the line
+        on_line = distance <= EDGE_LINE * self._sizes(rows, x)[:, None]
+        # nearly parallel planes (a flat crease) meet nowhere definite: all three weights bound
+        edge = (on_line.sum(axis=1) == 2) & (length > EDGE_LINE)
+        weights = weights.copy()
+        weights[pairs[edge]] = np.where(on_line[edge], weights[pairs[edge]], np.inf)
+        return weights
 
     def element_margins(self, y, p, held) -> FloatArray:
         """How far each held slot's particle projects inside its element (m), shape (nc,):
-        its smallest weight times the element's size, above the slot's ``margin_floor``;
-        ``inf`` for the other contacts and the rows of a corner.  It reaches 0 where the
-        particle passes onto a neighbour (an event)."""
+        its smallest bounding weight times the element's size, above the slot's
+        ``margin_floor``; ``inf`` for the other contacts and the rows of a pinning corner.
+        It reaches 0 where the particle passes onto a neighbour (an event)."""
         out = np.full(self.n_contacts, np.inf)
         ng = self.n_ground_contacts
         slots = np.flatnonzero(np.asarray(held)[ng:] != 0)
-        slots = slots[self._free_margins(held, slots)]
+        slots = slots[self._bounded(held, slots)]
         if len(slots):
             x, v = self._state(np.asarray(y, float), p)
             self._constrain_elements(slots, x)
-            out[ng + slots] = self._margins(slots, x, v)[1] - self.margin_floor[slots]
+            out[ng + slots] = self._margins(slots, x, v, held)[1] - self.margin_floor[slots]
         return out
 
-    def switch_elements(self, y, p, held: np.ndarray, gap_tolerance: float, speed_tolerance: float
-                        ) -> tuple[IntArray, IntArray, IntArray, IntArray]:
+    def floor_margins(self, y, p, held: np.ndarray, rows: np.ndarray, gap_tolerance: float) -> None:
+        """Held ``rows`` (bool (nc,): those held at this instant) that start within
+        ``gap_tolerance`` of their element's boundary or a hair past it (a particle that
+        landed on an edge or a vertex): lower their margin floors below where they start,
+        as a hand-over does, so that passing the boundary is an event (a margin that starts
+        below its floor never crosses it, and the particle would slide on along the
+        element's line or plane)."""
+        ng = self.n_ground_contacts
+        slots = np.flatnonzero(np.asarray(rows)[ng:])
+        slots = slots[self._bounded(held, slots)]
+        if not len(slots):
+            return
+        x, v = self._state(np.asarray(y, float), p)
+        self._constrain_elements(slots, x)
+        margin = self._margins(slots, x, v, held)[1]
+        low = margin - self.margin_floor[slots] < gap_tolerance
+        self.margin_floor[slots[low]] = np.minimum(self.margin_floor[slots[low]], margin[low] - gap_tolerance)
+
+    def switch_elements(self, y, p, held: np.ndarray, gap_tolerance: float, speed_tolerance: float) -> HandOvers:
         """Move each held slot whose projection left its element onto the neighbour across
-        that boundary (the rows of a corner stay).
+        that boundary (the rows of a pinning corner stay; of a 3D edge's two rows, the one
+        farther past its boundary: the other follows at its own event).
 
         Returns
         -------
-        stay, approach, leave : ndarray of int
-            Contact indices of those slots that meet their new element tangentially (normal
-            speed within ``speed_tolerance``: still held), approach it (an impact) and leave it.
-        corners : ndarray of int
-            The corner twins of the slots that passed a concave vertex (all of ``approach``,
-            and those of ``stay`` there), now on the elements those came from: the caller
-            holds them as their slots were (the impact or the force LCP decides whether they
-            stay).
+        HandOvers
         """
         ng = self.n_ground_contacts
         slots = np.flatnonzero(np.asarray(held)[ng:] != 0)
-        slots = slots[self._free_margins(held, slots)]
+        slots = slots[self._bounded(held, slots)]
         empty = np.zeros(0, np.intp)
         if not len(slots):
-            return empty, empty, empty, empty
+            return HandOvers(empty, empty, empty, empty, empty, empty.reshape(0, 2))
         x, v = self._state(np.asarray(y, float), p)
-        terms, margins = self._margins(slots, x, v)
-        passed = margins - self.margin_floor[slots] <= gap_tolerance
-        out = slots[passed]
+        terms, margins, weights = self._margins(slots, x, v, held)
+        past = margins - self.margin_floor[slots]
+        passed = np.flatnonzero(past <= gap_tolerance)
+        # one row of a group moves at an instant (a 3D edge's two reach its end together)
+        order = passed[np.lexsort((past[passed], slots[passed] % self.n_primary))]
+        group = slots[order] % self.n_primary
+        first = np.ones(len(group), bool)
+        first[1:] = group[1:] != group[:-1]
+        waiting = slots[order[~first]]
+        self.margin_floor[waiting] = margins[order[~first]] - 2.0 * gap_tolerance
+        moving = np.sort(order[first])
+        out = slots[moving]
         if not len(out):
-            return empty, empty, empty, empty
+            return HandOvers(empty, empty, empty, empty, empty, empty.reshape(0, 2))
+        # The slot is the group's row that moves (only a slot has a gap to hit): a twin that
+        # is to move swaps rows with its slot, which is held too.
+        relabel = out[out >= self.n_primary]
+        if len(relabel):
+            self._swap(relabel % self.n_primary, relabel)
+            out = out % self.n_primary
         came_from = self.element_of[out].copy()
-        corner = np.argmin(terms.weights[passed], axis=1)
+        corner = np.argmin(weights[moving], axis=1)
         self.element_of[out] = self._neighbour[came_from, corner]
-        terms, margin = self._margins(out, x, v)
+        terms, margin, _ = self._margins(out, x, v, held)
         # a hand-over a hair past the boundary (a particle a hair inside a corner) starts
         # below 0 on the new element too: its floor keeps its next pass findable
         self.margin_floor[out] = np.where(margin < gap_tolerance, margin - gap_tolerance, 0.0)
         rate = terms.rate
         approach, tangential = rate < -speed_tolerance, np.abs(rate) <= speed_tolerance
-        # At a concave vertex the particle is in a corner, on both elements, whether it hits
-        # the new one or meets it tangentially (it rests there): the slot's twin keeps the old
+        # At a concave vertex (edge) the particle is in a corner, on both elements, whether it
+        # hits the new one or meets it tangentially (it rests there): a free twin keeps the old
         # one, held as the slot was (the next instant's LCP decides whether it stays).
         cornered = approach.copy()
         cornered[tangential] = self._concave(came_from[tangential], self.element_of[out[tangential]], x)
-        twins = self._twin_slots(out[cornered])
+        rows = self._group_rows(out[cornered])
+        free = np.asarray(held)[ng + rows] == 0
+        has_free = free.any(axis=1)  # always, since a moving group has a row unheld
+        cornered[np.flatnonzero(cornered)[~has_free]] = False
+        twins = rows[has_free][np.arange(has_free.sum()), free[has_free].argmax(axis=1)]
         self.element_of[twins] = came_from[cornered]
         self.margin_floor[twins] = 0.0
         self._slip[ng + twins] = self._slip[ng + out[cornered]]
-        return ng + out[tangential], ng + out[approach], ng + out[rate > speed_tolerance], ng + twins
+        return HandOvers(ng + out[tangential], ng + out[approach], ng + out[rate > speed_tolerance], ng + twins,
+                         ng + out[cornered], ng + np.column_stack([relabel % self.n_primary, relabel]))
+
+    def _swap(self, first: IntArray, second: IntArray) -> None:
+        """Exchange the elements, margin floors and slip directions of rows ``first`` and
+        ``second`` (slot numbering, (k,) each)."""
+        ng = self.n_ground_contacts
+        for a in (self.element_of, self.margin_floor):
+            a[first], a[second] = a[second], a[first].copy()
+        self._slip[ng + first], self._slip[ng + second] = self._slip[ng + second], self._slip[ng + first].copy()
 
     # ------------------------------------------------------------------ geometry
     def _concave(self, first: IntArray, second: IntArray, x: FloatArray) -> np.ndarray:
@@ -707,7 +781,7 @@ class BodyContactModel(Model):
         row_of = dict(zip(slot_rows[found].tolist(), np.flatnonzero(found).tolist()))
         normals = (segment_normals if self.dim == 2 else triangle_normals)(x, self.elements)
         for slot in missing.tolist():
-            r = row_of[min(slot, int(self._twin_slots(slot)))]  # a twin: its slot's answer
+            r = row_of[slot % self.n_primary]  # a twin: its slot's answer
             if contact.kind[r] == FACE:
                 self.element_of[slot] = contact.element[r]
                 continue
@@ -890,6 +964,32 @@ class _FrameCoordinates:
         bias = bias + J @ inner.particle_bias(q, u, p).reshape(-1)[on]
         scaled = np.linalg.solve(inner.mass_matrix(q, p), Jq.T).T  # M symmetric
         return np.arange(inner.nu), Jq, scaled, bias
+
+
+class HandOvers(NamedTuple):
+    """What :meth:`BodyContactModel.switch_elements` did, contact indices.
+
+    Attributes
+    ----------
+    stay, approach, leave : ndarray of int
+        The moved slots that meet their new element tangentially (normal speed within the
+        speed tolerance: still held), approach it (an impact) and leave it.
+    corners, sources : ndarray of int
+        The free corner twins now on the elements that ``sources`` (those of the moved that
+        passed a concave vertex or edge: all of ``approach``, and those of ``stay`` there)
+        came from: the caller holds each as its source was (the impact or the force LCP
+        decides whether they stay).
+    relabelled : ndarray of int, shape (k, 2)
+        Held slots and twins that exchanged rows (a 3D edge's twin that was to move): the
+        caller exchanges their phases.
+    """
+
+    stay: IntArray
+    approach: IntArray
+    leave: IntArray
+    corners: IntArray
+    sources: IntArray
+    relabelled: IntArray
 
 
 class ElementTerms(NamedTuple):

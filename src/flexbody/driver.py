@@ -549,7 +549,7 @@ class _Run:
             found, not_held, loss = self.compiled.resolve(t, touching, leaving, s.impact == "thesis", s.impact_dt)
             new = [Event(t, c, EVENT_KINDS[kind], speed) for c, kind, speed in found]
         else:
-            renewed = None
+            renewed, held_before = None, self.phases.on_ground.copy()
             if self.model.n_slots:
                 touching, leaving, renewed = self.switch_elements(t, touching, leaving)
             res = resolve(self.model, t, self.y, self.p, self.phases, touching, leaving,
@@ -563,6 +563,8 @@ class _Run:
             new, not_held, loss = res.events, res.not_held, res.impact_loss
             if self.model.n_slots:
                 self.settle_corners(new)
+                self.model.floor_margins(self.y, self.p, self.phases.held, self.phases.on_ground & ~held_before,
+                                         self.gap_tolerance)
             self.indeterminate += [(t, note) for note in res.notes]
         self.events += new
         if self.windows is not None:
@@ -590,15 +592,17 @@ class _Run:
         separation a lift-off).  Returns ``touching, leaving`` and the contacts handed over
         without an event of their own (bool (nc,) each)."""
         phases = self.phases
-        stay, approach, leave, corners = self.model.switch_elements(self.y, self.p, phases.held, self.gap_tolerance,
-                                                                    self.speed_tolerance)
+        stay, approach, leave, corners, sources, relabelled = self.model.switch_elements(
+            self.y, self.p, phases.held, self.gap_tolerance, self.speed_tolerance)
+        for state in (phases.phase, phases.floor):
+            state[relabelled] = state[relabelled[:, ::-1]]
         touching, leaving = np.array(touching, bool), np.array(leaving, bool)
         moved = np.concatenate([stay, approach, leave])
         leaving[moved] = False
         # At a concave corner the contact on the element left behind goes on as the slot's
         # twin, held as the slot was: the impact on the new element (or, met tangentially,
         # the instant's force LCP) decides if it stays.
-        phases.phase[corners] = phases.phase[self.model.twin(corners)]
+        phases.phase[corners] = phases.phase[sources]
         for c in np.concatenate([approach, leave]).tolist():
             phases.phase[c] = FREE
             phases.floor[c] = -self.gap_tolerance
@@ -615,10 +619,12 @@ class _Run:
         model, phases = self.model, self.phases
         first_twin = model.n_ground_contacts + model.n_primary
         twins = first_twin + np.flatnonzero(phases.on_ground[first_twin:])
-        orphans = twins[~phases.on_ground[model.twin(twins)]]
+        orphans = twins[~phases.on_ground[model.primary(twins)]]
         if not len(orphans):
             return
-        slots = model.twin(orphans)
+        # one per slot: a second held twin (3D) stays the twin of the slot it now has
+        orphans = orphans[np.sort(np.unique(model.primary(orphans), return_index=True)[1])]
+        slots = model.primary(orphans)
         model.hand_to_slots(orphans)
         phases.phase[slots], phases.phase[orphans] = phases.phase[orphans], FREE
         phases.floor[orphans] = -self.gap_tolerance

@@ -1,0 +1,206 @@
+"""Concave corners between 3D bodies (flexbody.body_contact): a particle held on the two
+faces of a concave edge slides along the edge up to its end, and in an inner corner where
+three faces meet it is held by three rows.
+
+References: statics (at rest in a corner of three orthogonal walls, the normal forces add
+up to the weight's components along the walls' normals), the bodies' surfaces (nothing
+inside another body), and the barycentric weights of a point on a triangle's edge.
+"""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+import pytest
+
+import flexbody
+from flexbody.model import load_model
+
+G = 9.81
+#: A light tetrahedron whose apex carries nearly all its mass: the particle that finds the corner.
+TET_MASSES = [0.05, 0.001, 0.001, 0.001]
+TET_SURFACE = [[0, 2, 1], [0, 3, 2], [0, 1, 3], [1, 2, 3]]
+TET_LINKS = [[0, 1], [0, 2], [0, 3], [1, 2], [1, 3], [2, 3]]
+
+
+def _notched_block(size: float = 0.1):
+    """A cube of side ``2 size`` without the cube ``[size, 2 size]^3``: seven voxels, their
+    outer faces split into triangles (outward), every pair of a voxel's corners linked.  The
+    notch's inner corner, ``(size, size, size)``, is a concave vertex of three faces."""
+    voxels = [c for c in itertools.product((0, 1), repeat=3) if c != (1, 1, 1)]
+    squares = []
+    for voxel, axis, side in itertools.product(voxels, range(3), (0, 1)):
+        beside = list(voxel)
+        beside[axis] += 1 if side else -1
+        if tuple(beside) in voxels:
+            continue
+        u, w = [a for a in range(3) if a != axis]
+        corners = []
+        for du, dw in ((0, 0), (1, 0), (1, 1), (0, 1)):
+            p = list(voxel)
+            p[axis] += side
+            p[u] += du
+            p[w] += dw
+            corners.append(tuple(p))
+        normal = np.zeros(3)
+        normal[axis] = 1.0 if side else -1.0
+        a, b, c = (np.array(p, float) for p in corners[:3])
+        squares.append(corners if np.cross(b - a, c - a) @ normal > 0 else corners[::-1])
+    points = sorted({p for square in squares for p in square})
+    index = {p: i for i, p in enumerate(points)}
+    triangles = []
+    for square in squares:
+        a, b, c, d = (index[p] for p in square)
+        triangles += [[a, b, c], [a, c, d]]
+    links = set()
+    for voxel in voxels:
+        inside = [i for i, p in enumerate(points) if all(voxel[k] <= p[k] <= voxel[k] + 1 for k in range(3))]
+        links |= set(itertools.combinations(inside, 2))
+    return (size * np.array(points, float)).tolist(), sorted(links), triangles, index[(1, 1, 1)]
+
+
+def _tetrahedron(axis: np.ndarray, length: float = 0.03, half_angle_deg: float = 10.0) -> list:
+    """Apex at the origin, its base ``length`` along ``axis``, a narrow cone around it."""
+    axis = axis / np.linalg.norm(axis)
+    e1 = np.cross(axis, [1.0, 0.0, 0.0] if abs(axis[0]) < 0.9 else [0.0, 1.0, 0.0])
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(axis, e1)
+    half = np.radians(half_angle_deg)
+    base = [length * (np.cos(half) * axis + np.sin(half) * (np.cos(a) * e1 + np.sin(a) * e2))
+            for a in (0.0, 2.0 * np.pi / 3.0, 4.0 * np.pi / 3.0)]
+    return [[0.0, 0.0, 0.0]] + [b.tolist() for b in base]
+
+
+def _notch_scene(t_end: float) -> tuple[dict, int, np.ndarray]:
+    """A notched block held by three grounds (x, y, z = 0), gravity towards its notch's inner
+    corner, and a tetrahedron dropped apex first into the notch: the apex lands on the
+    floor, slides into the edge with one wall, along it into the corner."""
+    points, links, triangles, corner = _notched_block()
+    direction = np.array([0.36, 0.48, 0.8])  # a unit vector
+    table = {
+        "name": "notch", "gravity": (-G * direction).tolist(),
+        "grounds": [{"point": [0.0, 0.0, 0.0], "normal": n} for n in ([1, 0, 0], [0, 1, 0], [0, 0, 1])],
+        "bodies": [
+            {"name": "block", "particles": points, "links": [list(k) for k in links], "surface": triangles,
+             "mass": 1.0, "stiffness": 2e4, "damping": 5.0, "position": [0.0, 0.0, 0.0]},
+            {"name": "tet", "particles": _tetrahedron(direction), "links": TET_LINKS, "surface": TET_SURFACE,
+             "masses": TET_MASSES, "stiffness": 500.0, "damping": 0.2, "position": [0.103, 0.102, 0.1005]},
+        ],
+        "contacts": [{"bodies": ["block", "tet"]}],
+        "simulation": {"t_end": t_end, "output_dt": 1e-3},
+    }
+    return table, corner, direction
+
+
+def test_a_particle_in_a_three_face_inner_corner_is_held_by_three_rows():
+    """The apex reaches the notch's inner corner and rests there, against its three walls
+    at once: no wall lets it through (with two rows it went 0.03 m into the third), it ends
+    at the corner's vertex, and the walls' normal forces add up to the tetrahedron's weight
+    along their normals (the walls stay orthogonal to 1e-3 rad; the rest of the
+    tetrahedron touches nothing)."""
+    table, corner, direction = _notch_scene(1.0)
+    result = flexbody.simulate(flexbody.load_scene(table))
+    assert result.status == "success", result.message
+    assert result.stats["max_penetration_m"] <= 1e-9  # measured 1.4e-12
+    apex = len(table["bodies"][0]["particles"])
+    np.testing.assert_allclose(result.positions[-1, apex], result.positions[-1, corner], rtol=0, atol=1e-9)
+    weight = sum(TET_MASSES) * G
+    assert result.contact_force[-1, apex] == pytest.approx(weight * direction.sum(), rel=2e-3)  # measured 5e-4
+    assert not (result.contact_force[-1, apex + 1 :] > 0).any()
+
+
+def _trough(segments: int = 4, length: float = 0.2, half_width: float = 0.05, height: float = 0.04,
+            depth: float = 0.02):
+    """A prism along x whose top is a V groove (its crease at y = 0, z = height - depth),
+    ``segments`` long; its flanks' triangles run the crease from vertex to vertex."""
+    section = [(-half_width, 0.0), (half_width, 0.0), (half_width, height), (0.0, height - depth),
+               (-half_width, height)]  # (y, z), counter-clockwise seen from +x
+    k = len(section)
+    points = [[x, y, z] for x in np.linspace(0.0, length, segments + 1) for y, z in section]
+    triangles = []
+    for i, j in itertools.product(range(segments), range(k)):
+        a, b = i * k + j, i * k + (j + 1) % k
+        triangles += [[a, b + k, a + k], [a, b, b + k]]
+    caps = [[3, 4, 0], [3, 0, 1], [3, 1, 2]]  # fans from the groove's (reflex) vertex
+    triangles += [[a, c, b] for a, b, c in caps] + [[segments * k + v for v in cap] for cap in caps]
+    links = set()
+    for i in range(segments):
+        links |= set(itertools.combinations(range(i * k, (i + 2) * k), 2))
+    return points, sorted(links), triangles, height - depth
+
+
+def _trough_scene(height: float, velocity: float, t_end: float) -> tuple[dict, list, float]:
+    """The trough on the ground and a tetrahedron, apex down, ``height`` above its crease at
+    x = 0.02 m, moving along it at ``velocity``; also the trough's particles and the crease's z."""
+    points, links, triangles, bottom = _trough()
+    table = {
+        "name": "trough", "gravity": [0.0, 0.0, -G],
+        "bodies": [
+            {"name": "block", "particles": points, "links": [list(k) for k in links], "surface": triangles,
+             "mass": 1.0, "stiffness": 2e4, "damping": 5.0, "position": [0.0, 0.0, 0.0]},
+            {"name": "tet", "particles": _tetrahedron(np.array([0.0, 0.0, 1.0]), length=0.02), "links": TET_LINKS,
+             "surface": TET_SURFACE, "masses": TET_MASSES, "stiffness": 500.0, "damping": 0.2,
+             "position": [0.02, 0.0, bottom + height], "velocity": [velocity, 0.0, 0.0]},
+        ],
+        "contacts": [{"bodies": ["block", "tet"]}],
+        "simulation": {"t_end": t_end, "output_dt": 1e-3},
+    }
+    return table, points, bottom
+
+
+def test_a_particle_sliding_along_a_concave_crease_stays_in_it_across_its_vertices():
+    """A tetrahedron dropped apex first onto the crease of a V groove, sliding along it at
+    0.4 m/s: the apex lands on the edge between the flanks (a hair past one face's boundary:
+    that must still be an event, else it slid on along the face's plane, 0.02 m into the
+    other flank), ends up held on both, and goes on along the crease past its vertex."""
+    table, points, bottom = _trough_scene(height=0.0005, velocity=0.4, t_end=0.4)
+    result = flexbody.simulate(flexbody.load_scene(table))
+    assert result.status == "success", result.message
+    assert result.stats["max_penetration_m"] <= 1e-9  # measured 2.1e-12
+    apex = len(points)
+    x = result.positions[:, apex]
+    # past the crease's first inner vertex, at 0.05 m (where its edge met the tetrahedron's
+    # face at its apex, vertex to vertex: an impact that took 70 % of its speed)
+    assert x[-1, 0] > 0.05 + 0.03  # measured 0.0856
+    assert abs(x[-1, 1]) < 1e-6 and abs(x[-1, 2] - bottom) < 1e-3  # in the crease (the block sags 0.8 mm)
+
+
+def test_a_particle_held_on_both_faces_of_a_concave_edge_has_the_edges_ends_for_boundary():
+    """Held on the two crease faces of the first segment, a particle on the crease at x
+    projects onto each face on its edge: the third vertex's weight is 0 all along it, so it
+    bounds nothing (it would make every point of the crease a boundary).  The margin is the
+    crease vertices' smaller weight times the face's size, reaching 0 at the edge's end;
+    there the slot (alone: its twin follows at its own event) is handed on, held, to the
+    next face along the crease."""
+    table, points, bottom = _trough_scene(height=0.01, velocity=0.0, t_end=0.1)
+    scene = flexbody.load_scene(table)
+    model = load_model(scene, backend="numpy")
+    p, ng, apex = model.parameters(scene), model.n_ground_contacts, len(points)
+    crease = [3, 8]  # the crease's first edge: (0, 0, bottom) to (0.05, 0, bottom)
+    faces = [e for e in range(len(model.elements)) if set(crease) <= set(model.elements[e].tolist())]
+    assert len(faces) == 2
+    slot = int(model._slots_of(np.array([apex]), np.array([0]))[0][0])
+    rows = [slot, slot + model.n_primary]
+    held = np.zeros(model.n_contacts, np.intc)
+    held[ng + np.array(rows)] = 1
+
+    def state(x_apex):
+        q = scene.initial_positions().copy()
+        q[apex] = [x_apex, 0.0, bottom]
+        u = np.zeros_like(q)
+        u[apex] = [0.4, 0.0, 0.0]
+        return np.concatenate([q.ravel(), u.ravel(), np.zeros(model.ny - 2 * q.size)])
+
+    for x_apex in (0.01, 0.03, 0.045):
+        model.element_of[rows] = faces
+        margins = model.element_margins(state(x_apex), p, held)[ng + np.array(rows)]
+        for face, margin in zip(faces, margins):
+            e = model.elements[face]
+            size = np.linalg.norm(np.subtract(points[e[1]], points[e[0]]))
+            assert margin == pytest.approx(min(x_apex, 0.05 - x_apex) / 0.05 * size, rel=1e-9)
+    model.element_of[rows] = faces
+    moved = model.switch_elements(state(0.05 + 1e-9), p, held, gap_tolerance=1e-12, speed_tolerance=1e-7)
+    assert moved.stay.tolist() == [ng + slot] and not len(moved.approach) and not len(moved.leave)
+    assert 8 in model.elements[model.element_of[slot]] and model.element_of[slot] not in faces
+    assert model.element_of[rows[1]] in faces  # the twin waits for its own event
