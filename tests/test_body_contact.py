@@ -623,7 +623,10 @@ def test_a_piles_instants_are_solved_over_their_own_contacts_with_the_whole_prob
     assert kept_share < 0.5  # measured 0.30 (472 calls, 346 events)
     np.testing.assert_array_equal(island.events_particle, whole.events_particle)
     np.testing.assert_array_equal(island.events_kind, whole.events_kind)
-    np.testing.assert_allclose(island.events_time, whole.events_time, rtol=0, atol=1e-9)
+    # An event is located to the gap tolerance (1e-12 m here), so its time to that over its
+    # speed: 3.5e-8 s for the slowest impact here (2.9e-5 m/s; the two answers' rounding
+    # moved it 2.2e-9 s).  The states agree far closer.
+    np.testing.assert_allclose(island.events_time, whole.events_time, rtol=0, atol=5e-8)
     np.testing.assert_allclose(island.positions[-1], whole.positions[-1], rtol=0, atol=1e-9)
 
 

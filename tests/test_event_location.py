@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from flexbody.constants import GROUP_TIME
-from flexbody.events import _earliest
+from flexbody.events import _earliest, locate
 
 
 class _Closed:
@@ -73,3 +73,42 @@ def test_one_root_search_per_instant_when_the_chords_order_the_roots():
     assert crossing.t == pytest.approx(0.2, abs=1e-14)
     assert np.flatnonzero(crossing.contacts).tolist() == [49]
     assert events.single < 60 and events.whole <= 4  # ends, the root, its group time
+
+
+class _Step(_Closed):
+    """:class:`_Closed` as :func:`flexbody.events.locate` needs it: free contacts between
+    bodies, armed at their surfaces (floor 0), none just released."""
+
+    def __init__(self, functions):
+        super().__init__(functions)
+        self.between_bodies = np.ones(len(functions), bool)
+        self.phases = type("Phases", (), {"floor": np.zeros(len(functions))})()
+        self.gap_tolerance = 1e-12
+
+    def free_gaps(self, y, only=None):
+        g = super().free_gaps(y)
+        return g if only is None else np.where(only, g, np.inf)
+
+    def held_functions(self, y):
+        return np.where(self.free, np.inf, self(y))
+
+    def rearm(self, g_mid, g_new):
+        pass
+
+
+def test_a_contact_found_inside_at_anothers_crossing_dipped_first_and_is_the_instant():
+    """Contact 0 crosses at 0.62; contact 1 dips through its surface over [0.55, 0.65] and
+    is above it at every point checked (the step's ends and midpoint).  Stopping at 0.62
+    would leave contact 1 0.03 inside, unseen (the next step starts past it): the instant
+    is contact 1's own crossing, at 0.55."""
+    events = _Step([lambda t: 0.62 - t, lambda t: abs(t - 0.6) - 0.05])
+    dense = lambda t: np.array([t])  # noqa: E731
+    g_old, g_new = events(dense(0.0)), events(dense(1.0))
+    crossing = locate(events, dense, 0.0, 1.0, g_old, g_new)
+    assert crossing.t == pytest.approx(0.55, abs=1e-14)
+    assert np.flatnonzero(crossing.contacts).tolist() == [1]
+    # without the dip, contact 0's crossing is the instant
+    events = _Step([lambda t: 0.62 - t, lambda t: abs(t - 0.6) + 0.05])
+    crossing = locate(events, dense, 0.0, 1.0, events(dense(0.0)), events(dense(1.0)))
+    assert crossing.t == pytest.approx(0.62, abs=1e-14)
+    assert np.flatnonzero(crossing.contacts).tolist() == [0]
