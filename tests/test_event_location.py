@@ -112,3 +112,25 @@ def test_a_contact_found_inside_at_anothers_crossing_dipped_first_and_is_the_ins
     crossing = locate(events, dense, 0.0, 1.0, events(dense(0.0)), events(dense(1.0)))
     assert crossing.t == pytest.approx(0.62, abs=1e-14)
     assert np.flatnonzero(crossing.contacts).tolist() == [0]
+
+
+class _Island(_Step):
+    """A held contact whose force from its block alone (``one``) already pulls at the
+    step's start, while the whole problem's (``__call__``) still pushes there."""
+
+    def one(self, y, c):
+        self.single += 1
+        return float(self.functions[c](y[0])) - 0.6
+
+
+def test_a_held_contact_whose_block_alone_disagrees_is_rooted_on_the_whole_problem():
+    """The lift-off of a held contact is where the whole problem's force reaches 0 (0.5),
+    the force the instant's resolve agrees with; the block's alone (rounding apart, a
+    redundant row's share) would put it at the step's start, where resolve keeps the
+    contact held and the next step would find the same event again, without end."""
+    events = _Island([lambda t: 0.5 - t])
+    events.free[:] = False
+    dense = lambda t: np.array([t])  # noqa: E731
+    crossing = locate(events, dense, 0.0, 1.0, events(dense(0.0)), events(dense(1.0)))
+    assert crossing.t == pytest.approx(0.5, abs=1e-14)
+    assert crossing.contacts.tolist() == [True]

@@ -270,7 +270,7 @@ def _earliest(events: EventFunctions, dense: Callable[[float], np.ndarray], fire
     while candidates.size:
         chord = ga[candidates] / (ga[candidates] - g_hi[candidates])  # where each one's chord crosses, in (0, 1]
         earliest = int(candidates[np.argmin(chord)])
-        hi = _root(events, dense, earliest, ta, hi)
+        hi = _root(events, dense, earliest, ta, hi, float(ga[earliest]))
         rooted[earliest] = True
         g_hi = evaluate(dense(hi))
         candidates = fired[(g_hi[fired] <= 0.0) & ~rooted[fired]]  # fired by then: their roots are not later
@@ -282,8 +282,10 @@ def _earliest(events: EventFunctions, dense: Callable[[float], np.ndarray], fire
     return Crossing(hi, group)
 
 
-def _root(events: EventFunctions, dense: Callable[[float], np.ndarray], c: int, ta: float, tb: float) -> float:
-    """Root of event function ``c`` in ``[ta, tb]`` on the dense output.
+def _root(events: EventFunctions, dense: Callable[[float], np.ndarray], c: int, ta: float, tb: float,
+          start: float = np.inf) -> float:
+    """Root of event function ``c`` in ``[ta, tb]`` on the dense output; ``start``: its
+    value at ``ta`` from the whole vector (:meth:`EventFunctions.__call__`), if known.
 
     The bracket is evaluated on the dense output itself: an interpolant need not pass
     exactly through the step's end state (LSODA's does not), so its sign there decides.
@@ -292,6 +294,15 @@ def _root(events: EventFunctions, dense: Callable[[float], np.ndarray], c: int, 
         return events.one(dense(t), c)
 
     fa, fb = g(ta), g(tb)
+    if fa <= 0.0 and start > 0.0 and np.isfinite(start):
+        # A held contact's force from its block alone (:meth:`EventFunctions.one`) pulls
+        # where the whole problem's pushes: redundant rows share a force differently.  The
+        # instant's resolve, which keeps it, agrees with the whole: root the whole's (else
+        # the event fires again at every restart, a stall: measured in a pile, 1e-10 N).
+        def g(t: float) -> float:
+            return float(events(dense(t))[c])
+
+        fa, fb = start, g(tb)
     if fa <= 0.0:
         return ta
     if fb > 0.0:  # the interpolant stays positive: the crossing is at the step's end
