@@ -592,12 +592,12 @@ class BodyContactModel(Model):
         (up to round-off) all along it: only the edge's ends bound the particle there."""
         if self.dim == 2:
             return weights
-        on = (np.asarray(held)[self.n_ground_contacts :] != 0)[self._group_rows(slots)]
+        groups = self._group_rows(slots)
+        on = (np.asarray(held)[self.n_ground_contacts :] != 0)[groups]
         pairs = np.flatnonzero(on.sum(axis=1) == 2)
         if not len(pairs):
             return weights
-        rows = np.asarray(slots)[pairs]
-        group = self._group_rows(rows)
+        rows, group = np.asarray(slots)[pairs], groups[pairs]
         other = np.where(on[pairs] & (group != rows[:, None]), group, -1).max(axis=1)
         faces = self.elements[self.element_of[rows]]
         line = np.cross(triangle_normals(x, faces), triangle_normals(x, self.elements[self.element_of[other]]))
@@ -696,10 +696,8 @@ class BodyContactModel(Model):
         cornered = approach.copy()
         cornered[tangential] = self._concave(came_from[tangential], self.element_of[out[tangential]], x)
         rows = self._group_rows(out[cornered])
-        free = np.asarray(held)[ng + rows] == 0
-        has_free = free.any(axis=1)  # always, since a moving group has a row unheld
-        cornered[np.flatnonzero(cornered)[~has_free]] = False
-        twins = rows[has_free][np.arange(has_free.sum()), free[has_free].argmax(axis=1)]
+        free = np.asarray(held)[ng + rows] == 0  # a moving row's group always has one (it is bounded)
+        twins = rows[np.arange(len(rows)), free.argmax(axis=1)]
         self.element_of[twins] = came_from[cornered]
         self.margin_floor[twins] = 0.0
         self._slip[ng + twins] = self._slip[ng + out[cornered]]

@@ -549,8 +549,9 @@ class _Run:
             found, not_held, loss = self.compiled.resolve(t, touching, leaving, s.impact == "thesis", s.impact_dt)
             new = [Event(t, c, EVENT_KINDS[kind], speed) for c, kind, speed in found]
         else:
-            renewed, held_before = None, self.phases.on_ground.copy()
+            renewed = held_before = None
             if self.model.n_slots:
+                held_before = self.phases.on_ground.copy()
                 touching, leaving, renewed = self.switch_elements(t, touching, leaving)
             res = resolve(self.model, t, self.y, self.p, self.phases, touching, leaving,
                           gap_tolerance=self.gap_tolerance, force_tolerance=self.force_tolerance,

@@ -179,6 +179,7 @@ def _unmissed(events: EventFunctions, dense: Callable[[float], np.ndarray], t_ol
     """``crossing``, or an earlier one of a free contact found below its floor at its time:
     a contact between bodies can dip through a moving surface and back between the points
     checked (measured: 2.9e-9 m deep, a dip shorter than a pile's step / ``DIP_SAMPLES``,
+    at the instant another contact's event ended that step).  Then the state the step stops
     at would start the next one past that contact's surface, unseen.  Inside by more than
     the gap tolerance only: one grazing its surface (a rounding below it) is not a dip."""
     while crossing is not None:
@@ -186,18 +187,11 @@ def _unmissed(events: EventFunctions, dense: Callable[[float], np.ndarray], t_ol
         missed = (g_old > 0.0) & (g_at < -events.gap_tolerance) & ~crossing.contacts
         if not missed.any():
             return crossing
+        g_start = events.free_gaps(dense(t_old), missed)  # a floor re-armed since may leave it below
         # the first of DIP_SAMPLES points where one is inside brackets its first crossing
-        ta, g_a = t_old, events.free_gaps(dense(t_old), missed)  # a floor re-armed since may leave it below
-        missed &= g_a > 0.0
-        for k in range(1, DIP_SAMPLES + 1):
-            if not missed.any():
-                return crossing
-            tb = t_old + (crossing.t - t_old) * k / DIP_SAMPLES
-            g_b = g_at if k == DIP_SAMPLES else events.free_gaps(dense(tb), missed)
-            if (missed & (g_b <= 0.0)).any():
-                break
-            ta, g_a = tb, g_b
-        earlier = _earliest(events, dense, np.flatnonzero(missed & (g_b <= 0.0)), ta, tb, g_a, g_b)
+        earlier = _sampled(events, dense, missed & (g_start > 0.0), t_old, crossing.t, g_start, g_at)
+        if earlier is None:
+            return crossing
         if earlier.t >= crossing.t - GROUP_TIME:
             crossing.contacts |= earlier.contacts
             return crossing
@@ -223,11 +217,21 @@ def _first_dip(events: EventFunctions, dense: Callable[[float], np.ndarray], t_o
     fresh = events.free & events.between_bodies & near
     if not fresh.any():
         return None
-    t_prev, g_prev = t_old, g_old
-    for k in range(1, DIP_SAMPLES):
-        t = t_old + (t_new - t_old) * k / DIP_SAMPLES
-        g = events.free_gaps(dense(t), fresh)  # only these are watched here
-        fired = np.flatnonzero(fresh & (g_prev > 0.0) & (g <= 0.0))
+    return _sampled(events, dense, fresh, t_old, t_new, g_old)
+
+
+def _sampled(events: EventFunctions, dense: Callable[[float], np.ndarray], watched: np.ndarray, ta: float,
+             tb: float, g_a: np.ndarray, g_b: np.ndarray | None = None) -> Crossing | None:
+    """The earliest crossing of the free contacts ``watched`` (bool (nc,)) found on
+    ``DIP_SAMPLES`` points of ``[ta, tb]`` (only these are evaluated there), their values
+    at ``ta`` ``g_a``; the point ``tb`` is checked only with its values ``g_b`` given."""
+    t_prev, g_prev = ta, g_a
+    for k in range(1, DIP_SAMPLES + 1):
+        if k == DIP_SAMPLES and g_b is None:
+            return None
+        t = ta + (tb - ta) * k / DIP_SAMPLES
+        g = g_b if k == DIP_SAMPLES else events.free_gaps(dense(t), watched)
+        fired = np.flatnonzero(watched & (g_prev > 0.0) & (g <= 0.0))
         if fired.size:
             return _earliest(events, dense, fired, t_prev, t, g_prev, g)
         t_prev, g_prev = t, g
