@@ -42,6 +42,14 @@ way round.  The slots come after the ground contacts, so the phase machine
   where their planes meet, and only the ends of the edge bound it (:meth:`_along_edge`).  A
   free twin has no gap (it reads ``margin``), and a held twin always has its slot held too.
 
+**A vertex meeting a vertex** (a box's corner sliding over a floor's vertex, a crease's vertex
+passing under a tetrahedron's apex, two corners colliding) is one contact seen from both
+sides: both slots touch, and the distance between two points has no normal where they
+meet.  Where one of the two is held on an element at the other particle, and the other
+body lies on that element's outer side there, the other slot is carried by it (not hit:
+its rate is read as 0; :meth:`BodyContactModel._made_from_the_other_side`); where both
+are hit at once, the lower-numbered is the contact (:meth:`BodyContactModel.same_contacts`).
+
 **Coulomb friction** (2D; the pairs' ``friction``, and the grounds' where contacts couple):
 a held contact with friction sticks, its slip rate's acceleration kept at 0 too (the tangent
 row ``[t, -w_1 t, ...]``, ``t = (-n_y, n_x)``, and the kernels' ``slip_bias``), or slides,
@@ -97,6 +105,10 @@ DEPENDENT = 1e-12
 SLIP_ROUNDOFF = 1e-13
 #: Contact rows on at most this many coordinates are multiplied densely (:func:`_gram`).
 DENSE_WIDTH = 64
+#: A closest point whose weight on one vertex is within this of 1 is at that vertex (a
+#: vertex-to-vertex touch, :meth:`BodyContactModel._made_from_the_other_side`): where the
+#: event locates a touch (to ~1e-15 s), the points meet to round-off of the element's size.
+AT_VERTEX = 1e-9
 #: A vertex within this fraction of its face's size of the line where two held faces' planes
 #: meet lies on it (and planes whose unit normals' cross product is shorter meet nowhere definite).
 EDGE_LINE = 1e-6
@@ -432,13 +444,15 @@ class BodyContactModel(Model):
         x, v = self._state(y, p)
         ng = self.n_ground_contacts
         gaps_g, vn_g, _ = self.inner.contact_state(y, p, np.zeros(ng, np.intc), np.zeros(ng))
-        gaps_s, near = self._surface_gaps(x)
+        gaps_s, near, found = self._surface_contacts(x)
         vn_s = np.zeros(self.n_slots)
         held = np.asarray(held)
         rated = np.flatnonzero(near | (held[ng:] != 0))
         if len(rated):
             self._constrain_elements(rated, x)
             vn_s[rated] = self._element_terms(rated, x, v).rate
+        if found is not None:  # a vertex-to-vertex touch is one contact: the other side's
+            vn_s[self._made_from_the_other_side(*found, held, x)] = 0.0
         return np.concatenate([gaps_g, gaps_s]), np.concatenate([vn_g, vn_s])
 
     def contact_coupling(self, q, u, p, rows: IntArray, tangents: bool = False):
@@ -734,17 +748,89 @@ class BodyContactModel(Model):
         """Each slot's signed distance to its body's surface (``margin`` where it is farther
         than that), and whether it is within ``margin``, shape (ns,) each; with ``slots``
         (primary slots), their entries only (the others read ``margin``, not near)."""
+        gaps, near, _ = self._surface_contacts(x, slots)
+        return gaps, near
+
+    def _surface_contacts(self, x, slots: IntArray | None = None) \
+            -> tuple[FloatArray, np.ndarray, tuple[SurfaceContact, IntArray] | None]:
+        """:meth:`_surface_gaps`, and the closest features found with the slot of each of
+        their rows (-1: farther than ``margin``), or None where there are none."""
         gaps = np.full(self.n_slots, self.margin)
         near = np.zeros(self.n_slots, bool)
         contact = self._closest(x, slots) if self.n_slots else None
-        if contact is not None:
-            slots, found = self._slots_of(contact.particle, self.element_body[contact.element])
-            # Farther than `margin` the nearest candidate need not be the nearest element, and
-            # its side (the gap's sign) says nothing: such a slot reads `margin`, as one without any.
-            found &= np.abs(contact.gap) <= self.margin
-            gaps[slots[found]] = contact.gap[found]
-            near[slots[found]] = True
-        return gaps, near
+        if contact is None:
+            return gaps, near, None
+        slots, found = self._slots_of(contact.particle, self.element_body[contact.element])
+        # Farther than `margin` the nearest candidate need not be the nearest element, and
+        # its side (the gap's sign) says nothing: such a slot reads `margin`, as one without any.
+        found &= np.abs(contact.gap) <= self.margin
+        gaps[slots[found]] = contact.gap[found]
+        near[slots[found]] = True
+        return gaps, near, (contact, np.where(found, slots, -1))
+
+    def _made_from_the_other_side(self, contact: SurfaceContact, slot_of: IntArray, held: np.ndarray,
+                                  x: FloatArray) -> IntArray:
+        """The slots whose closest point is a vertex of the other body at which that contact
+        is made from the other side, shape (k,).
+
+        A particle ``s`` touching another body ``B`` at its vertex ``w`` is the point where
+        ``w`` touches ``s``'s body ``A``: one contact seen from both sides.  Its distance gap
+        has no normal there (``|x_s - x_w|`` is not differentiable at 0; its rate along the
+        relative motion is no contact normal: a box's corner sliding over a flat floor's
+        vertex was stopped by it).  So ``s``'s slot is *carried* (its rate is read as 0: it
+        is not hit) where ``w``'s slot against ``A`` is held on an element ``e`` with ``s``
+        for a vertex, and ``B`` lies on the outer side of ``e``'s line or plane around ``w``
+        (every surface edge from ``w`` points there, and ``B``'s outward normal at ``w`` away
+        from it): then every motion that takes ``s`` into ``B`` takes ``w`` through ``e``,
+        which its row forbids.  ``held`` (nc,): the held codes; ``x`` (n, dim) the positions.
+        """
+        vertex, at_vertex = _touched_vertex(contact)
+        # touching only (the others' rates decide nothing)
+        rows = np.flatnonzero((slot_of >= 0) & at_vertex & (contact.gap <= AT_VERTEX * self.margin))
+        if not len(rows):
+            return np.zeros(0, np.intp)
+        own, at = contact.particle[rows], vertex[rows]
+        mirror, known = self._slots_of(at, self.particle_body[own])
+        rows, own, at, mirror = rows[known], own[known], at[known], mirror[known]
+        slot_held = np.asarray(held)[self.n_ground_contacts:] != 0
+        carried = np.zeros(len(rows), bool)
+        normals = segment_normals if self.dim == 2 else triangle_normals
+        for i, r in enumerate(self._group_rows(mirror)):  # the mirror's slot and corner twins
+            for element in self.element_of[r[slot_held[r]]]:
+                if own[i] in self.elements[element] and self._beside(at[i], normals(x, self.elements[[element]])[0], x):
+                    carried[i] = True
+        return slot_of[rows[carried]]
+
+    def same_contacts(self, y, p, hit: np.ndarray) -> np.ndarray:
+        """Of the contacts ``hit`` (bool (nc,)), those hit where another of them is, bool
+        (nc,): two particles of two bodies meeting each at the other's vertex fire both
+        slots, one contact, whose distance gaps have no normal there; its lower-numbered
+        slot is the contact (its element and normal as for any touch at a vertex), and the
+        other, left free, is carried by it once it holds (:meth:`_made_from_the_other_side`)."""
+        out = np.zeros(self.n_contacts, bool)
+        ng = self.n_ground_contacts
+        slots = np.flatnonzero(np.asarray(hit)[ng : ng + self.n_primary])
+        if len(slots) < 2:
+            return out
+        contact = self._closest(self._state(np.asarray(y, float), p)[0], slots)
+        slot_of, found = self._slots_of(contact.particle, self.element_body[contact.element])
+        vertex, at_vertex = _touched_vertex(contact)
+        meets = dict(zip(slot_of[found & at_vertex].tolist(), vertex[found & at_vertex].tolist()))
+        for slot, w in meets.items():
+            mirror, known = self._slots_of(np.array([w]), self.particle_body[self.slot_particle[[slot]]])
+            if known[0] and mirror[0] < slot and meets.get(int(mirror[0])) == self.slot_particle[slot]:
+                out[ng + slot] = True
+        return out
+
+    def _beside(self, w: int, normal: FloatArray, x: FloatArray) -> bool:
+        """Whether the body of surface vertex ``w`` lies on the outer side of a plane through
+        ``x[w]`` with unit ``normal`` (dim,), near ``w``: its surface edges from ``w`` all
+        point there (to rounding) and its outward normal there points away from it."""
+        elements = self.elements[self._incident[w]]
+        edges = x[elements[elements != w]] - x[w]
+        rising = edges @ normal >= -AT_VERTEX * np.linalg.norm(edges, axis=1)
+        outward = (segment_normals if self.dim == 2 else triangle_normals)(x, elements).sum(axis=0)
+        return bool(rising.all() and outward @ normal < 0.0)
 
     def _closest(self, x, slots: IntArray | None = None):
         pairs = self._candidates.pairs(x, None if slots is None else np.unique(self.slot_particle[slots]))
@@ -1066,6 +1152,14 @@ def _least_squares(A: FloatArray, b: FloatArray) -> FloatArray:
         return np.linalg.lstsq(A, b, rcond=DEPENDENT)[0]
     except np.linalg.LinAlgError as exc:  # the driver reports a blow-up
         raise FloatingPointError(f"the held contacts' forces: {exc}") from None
+
+
+def _touched_vertex(contact: SurfaceContact) -> tuple[IntArray, np.ndarray]:
+    """Each closest point's vertex of largest weight (k,), and whether the point is at it
+    (a face's or an edge's closest point can be its vertex), bool (k,)."""
+    rows = np.arange(len(contact.particle))
+    corner = np.argmax(contact.weights, axis=1)
+    return contact.feature[rows, corner], contact.weights[rows, corner] >= 1.0 - AT_VERTEX
 
 
 def _incidence(elements: IntArray, n: int) -> list[IntArray]:

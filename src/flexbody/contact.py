@@ -274,6 +274,8 @@ def resolve(
         # Strictly approaching (<= 0 would flip-flop forever); a contact stopped or released
         # at this instant has v_n = 0 up to round-off (1e-16 m/s) and is not hit again.
         hit = near & (vn < 0.0) & ~impacted & ~was_held
+        if model.coupled and np.count_nonzero(hit) > 1:  # two bodies' vertices meeting: one contact
+            hit &= ~model.same_contacts(y, p, hit)
         ending = (phases.phase == PUSHED) & touching  # thesis windows that end now
         touching &= ~(ending | near)  # each touch is handled once
         phases.push[ending] = 0.0  # its force ends with it: a held contact's force is eq. 4.8's

@@ -105,6 +105,11 @@ class Model:
         (a damper's, beside an impact); the contacts moving them are seeds too."""
         return np.asarray(seeds, bool) | np.asarray(among, bool)
 
+    def same_contacts(self, y, p, hit: np.ndarray) -> np.ndarray:
+        """Of the contacts ``hit`` (bool (nc,)), those that are another's contact seen from
+        its other side, bool (nc,): none for particles against grounds."""
+        return np.zeros(self.n_contacts, bool)
+
     def gap_rates(self, y, p, held) -> tuple[FloatArray, FloatArray]:
         """Gaps and normal velocities, shape (nc,) each: :meth:`contact_state` without the
         forces (an instant of coupled contacts solves for those itself)."""

@@ -1,0 +1,100 @@
+"""A vertex of one body meeting a vertex of another is one contact (flexbody.body_contact).
+
+A box's corner sliding along a floor reaches one of the floor's vertices: there the floor's
+vertex also touches the box, at its corner.  That touch has no normal of its own (the
+distance between two points is not differentiable where they meet), and taking the
+direction of their relative motion for one stopped the slide.  The corner's contact with the
+floor already keeps the two apart, so the floor vertex's touch is carried by it.
+
+References: uniform motion (a frictionless slide on a flat floor keeps its velocity and
+height exactly), the bodies' surfaces (nothing inside the other body), energy.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import flexbody
+
+G = 9.81
+
+
+def _slide(t_end: float, speed: float) -> dict:
+    """A rigid box (6 cm x 3 cm) 1 um above a rigid floor whose flat top has a vertex every
+    0.1 m, sliding along it at ``speed``, frictionless; the floor rests on a rough ground."""
+    top = [[x, 0.1] for x in np.linspace(0.5, -0.5, 11)]
+    return {
+        "name": "slide", "gravity": [0.0, -G],
+        "grounds": [{"point": [0.0, 0.0], "normal": [0.0, 1.0], "friction": 1.0}],
+        "bodies": [
+            {"name": "floor", "shape": "polygon", "rigid": True, "vertices": [[-0.5, 0.0], [0.5, 0.0]] + top,
+             "mass": 1.0, "position": [0.0, 0.0]},
+            {"name": "box", "shape": "polygon", "rigid": True,
+             "vertices": [[-0.43, 0.1], [-0.37, 0.1], [-0.37, 0.13], [-0.43, 0.13]],
+             "mass": 0.05, "position": [0.0, 1e-6], "velocity": [speed, 0.0]},
+        ],
+        "contacts": [{"bodies": ["floor", "box"]}],
+        "simulation": {"t_end": t_end, "output_dt": 0.005},
+    }
+
+
+def test_a_box_sliding_over_a_floors_vertices_keeps_its_velocity():
+    """Over 0.4 s at 1 m/s the box's front corner passes the floor vertices at x = -0.3,
+    -0.2, -0.1 and 0, and its rear corner the first three: each a vertex-to-vertex touch.
+    Frictionless and flat, the box keeps 1 m/s (before: 0.095 m/s after the first vertex,
+    the floor's vertex hit along the slide)."""
+    result = flexbody.simulate(flexbody.load_scene(_slide(t_end=0.4, speed=1.0)))
+    assert result.status == "success", result.message
+    box = result.positions[:, -4:]  # the box's corners (the last body's particles)
+    landed = result.t > 1e-3  # after its 1 um drop (0.45 ms)
+    centre = box[landed].mean(axis=1)
+    velocity = np.diff(centre[:, 0]) / np.diff(result.t[landed])
+    np.testing.assert_allclose(velocity, 1.0, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(box[landed][:, :2, 1], 0.1, rtol=0, atol=1e-9)  # its bottom stays on the floor
+    assert box[-1, 1, 0] > 0.0 + 1e-3  # the front corner is past the fourth vertex
+    assert result.stats["max_penetration_m"] <= 1e-9
+    # the landing is the only instant (its three contacts), no impact at any vertex
+    np.testing.assert_allclose(result.events_time, np.sqrt(2e-6 / G), rtol=0, atol=1e-6)
+
+
+def _corner_to_corner(restitution: float) -> dict:
+    """Two rigid squares (10 cm) in free space, whose corners meet head-on at t = 0.01 s
+    (the relative velocity along the line between them)."""
+    def square(cx: float, cy: float, half: float = 0.05) -> list:
+        return [[cx - half, cy - half], [cx + half, cy - half], [cx + half, cy + half], [cx - half, cy + half]]
+
+    return {
+        "name": "corners", "gravity": [0.0, 0.0],
+        "bodies": [
+            {"name": "a", "shape": "polygon", "rigid": True, "vertices": square(0.0, 1.0), "mass": 1.0,
+             "position": [0.0, 0.0], "velocity": [0.5, 0.3]},
+            {"name": "b", "shape": "polygon", "rigid": True, "vertices": square(0.11, 1.106), "mass": 2.0,
+             "position": [0.0, 0.0], "velocity": [-0.5, -0.3]},
+        ],
+        "contacts": [{"bodies": ["a", "b"], "restitution": restitution}],
+        "simulation": {"t_end": 0.03, "output_dt": 0.001},
+    }
+
+
+@pytest.mark.parametrize("restitution", [1.0, 0.5])
+def test_two_corners_meeting_are_one_impact(restitution):
+    """Each square's corner touches the other's surface at its corner: two slots, one
+    contact.  One of them is hit (before: both, two rows with different normals between
+    the same two points); momentum and angular momentum are conserved, and with e = 1 the
+    kinetic energy too (one contact row: Newton's law keeps it)."""
+    result = flexbody.simulate(flexbody.load_scene(_corner_to_corner(restitution)))
+    assert result.status == "success", result.message
+    assert list(result.events_kind) == ["impact"]
+    assert result.events_time[0] == pytest.approx(0.01, abs=1e-12)
+    m, x, v = result.masses, result.positions, result.velocities
+    momentum = np.einsum("n,tnd->td", m, v)
+    angular = np.einsum("n,tn->t", m, x[:, :, 0] * v[:, :, 1] - x[:, :, 1] * v[:, :, 0])
+    np.testing.assert_allclose(momentum[-1], momentum[0], rtol=0, atol=1e-12)
+    assert angular[-1] == pytest.approx(angular[0], rel=1e-12)
+    kinetic = 0.5 * np.einsum("n,tnd->t", m, v * v)
+    if restitution == 1.0:
+        assert kinetic[-1] == pytest.approx(kinetic[0], rel=1e-12)
+    else:
+        assert kinetic[-1] < kinetic[0] - 0.1  # measured 2.04 J -> 1.80 J
+    assert result.stats["max_penetration_m"] <= 1e-9
