@@ -471,6 +471,36 @@ def test_a_particle_sliding_into_a_v_notch_comes_to_rest_in_it_held_on_both_flan
     assert result.contact_force[-1, tip] == pytest.approx(forces.sum(), rel=1e-6)
 
 
+def test_a_corner_row_left_alone_by_its_twin_gets_a_boundary_it_starts_above():
+    """The dart's tip pinned at the notch's bottom vertex by both flanks (no boundary event:
+    each row leaves by its force) is left held on the right flank alone when the left
+    flank's row lifts off, a hair past the flank's end (its margin -1e-13 m, below its floor
+    0).  Its margin floor is lowered below where it starts, so that going on past the vertex
+    (into the block) is an event; a pile's disc particle resting in a dent went 2.3e-7 m
+    through the dent's other flank unseen before (the floor was lowered only for rows newly
+    held)."""
+    scene = flexbody.load_scene(_dart_in_notch(20.0))
+    model = load_model(scene, backend="numpy")
+    p, ng, tol = model.parameters(scene), model.n_ground_contacts, 1e-12
+    tip, bottom, right, left = 5, 3, 2, 4
+    slot = int(model._slots_of(np.array([tip]), np.array([0]))[0][0])
+    twin = slot + model.n_primary
+    flank = {tuple(e): i for i, e in enumerate(model.elements.tolist())}
+    model.element_of[[slot, twin]] = flank[(right, bottom)], flank[(bottom, left)]
+    q = scene.initial_positions().copy()
+    along = q[bottom] - q[right]
+    q[tip] = q[bottom] + 1e-13 * along / np.linalg.norm(along)  # a hair past the right flank's end
+    y = np.concatenate([q.ravel(), np.zeros(q.size), np.zeros(model.ny - 2 * q.size)])
+    held = np.zeros(model.n_contacts, np.intc)
+    held[ng + slot] = 1  # the twin has just lifted off
+    changed = np.zeros(model.n_contacts, bool)
+    changed[ng + twin] = True
+    before = model.element_margins(y, p, held)[ng + slot]
+    assert -2e-13 < before < 0.0  # its event function starts below 0: it would never cross it
+    model.floor_margins(y, p, held, changed, gap_tolerance=tol)
+    assert model.element_margins(y, p, held)[ng + slot] == pytest.approx(tol, rel=1e-6)
+
+
 def test_a_tip_pressed_into_a_notch_far_harder_than_its_weight_rests_at_the_bottom(monkeypatch):
     """A light tip (0.2 g) under a heavy tail (0.2 kg) is pressed into a 34 degree notch by
     its links at ~500 times its weight.  Each hand-over keeps cos 34 deg = 0.83 of its speed,

@@ -641,15 +641,19 @@ class BodyContactModel(Model):
             out[ng + slots] = self._margins(slots, x, v, held)[1] - self.margin_floor[slots]
         return out
 
-    def floor_margins(self, y, p, held: np.ndarray, rows: np.ndarray, gap_tolerance: float) -> None:
-        """Held ``rows`` (bool (nc,): those held at this instant) that start within
-        ``gap_tolerance`` of their element's boundary or a hair past it (a particle that
-        landed on an edge or a vertex): lower their margin floors below where they start,
-        as a hand-over does, so that passing the boundary is an event (a margin that starts
-        below its floor never crosses it, and the particle would slide on along the
-        element's line or plane)."""
+    def floor_margins(self, y, p, held: np.ndarray, changed: np.ndarray, gap_tolerance: float) -> None:
+        """Held rows of the groups of the contacts ``changed`` at this instant (bool (nc,):
+        held or released there) that start within ``gap_tolerance`` of their element's
+        boundary or a hair past it: lower their margin floors below where they start, as a
+        hand-over does, so that passing the boundary is an event (a margin that starts below
+        its floor never crosses it, and the particle would slide on along the element's line
+        or plane).  Such a row is newly held where it landed on an edge or a vertex, or was
+        held before in a corner that pinned its particle (no boundary event: each row leaves
+        by its force) until another row of the corner lifted off (measured: a disc's particle
+        resting in a dent of another went 2.3e-7 m through the dent's other flank)."""
         ng = self.n_ground_contacts
-        slots = np.flatnonzero(np.asarray(rows)[ng:])
+        groups = self._group_rows(np.unique(np.flatnonzero(np.asarray(changed)[ng:]) % self.n_primary)).ravel()
+        slots = groups[np.asarray(held)[ng + groups] != 0]
         slots = slots[self._bounded(held, slots)]
         if not len(slots):
             return

@@ -564,7 +564,7 @@ class _Run:
             new, not_held, loss = res.events, res.not_held, res.impact_loss
             if self.model.n_slots:
                 self.settle_corners(new)
-                self.model.floor_margins(self.y, self.p, self.phases.held, self.phases.on_ground & ~held_before,
+                self.model.floor_margins(self.y, self.p, self.phases.held, self.phases.on_ground ^ held_before,
                                          self.gap_tolerance)
             self.indeterminate += [(t, note) for note in res.notes]
         self.events += new
