@@ -817,6 +817,8 @@ class BodyContactModel(Model):
         if len(slots) < 2:
             return out
         contact = self._closest(self._state(np.asarray(y, float), p)[0], slots)
+        if contact is None:
+            return out
         slot_of, found = self._slots_of(contact.particle, self.element_body[contact.element])
         vertex, at_vertex = _touched_vertex(contact)
         meets = dict(zip(slot_of[found & at_vertex].tolist(), vertex[found & at_vertex].tolist()))
