@@ -788,14 +788,11 @@ class BodyContactModel(Model):
         from it): then every motion that takes ``s`` into ``B`` takes ``w`` through ``e``,
         which its row forbids.  ``held`` (nc,): the held codes; ``x`` (n, dim) the positions.
         """
-        vertex, at_vertex = _touched_vertex(contact)
-        # touching only (the others' rates decide nothing)
-        rows = np.flatnonzero((slot_of >= 0) & at_vertex & (contact.gap <= AT_VERTEX * self.margin))
+        touching = contact.gap <= AT_VERTEX * self.margin  # the others' rates decide nothing
+        rows, at, mirror = self._mirrors(contact, np.where(touching, slot_of, -1))
         if not len(rows):
             return np.zeros(0, np.intp)
-        own, at = contact.particle[rows], vertex[rows]
-        mirror, known = self._slots_of(at, self.particle_body[own])
-        rows, own, at, mirror = rows[known], own[known], at[known], mirror[known]
+        own = contact.particle[rows]
         slot_held = np.asarray(held)[self.n_ground_contacts:] != 0
         carried = np.zeros(len(rows), bool)
         normals = segment_normals if self.dim == 2 else triangle_normals
@@ -820,13 +817,21 @@ class BodyContactModel(Model):
         if contact is None:
             return out
         slot_of, found = self._slots_of(contact.particle, self.element_body[contact.element])
-        vertex, at_vertex = _touched_vertex(contact)
-        meets = dict(zip(slot_of[found & at_vertex].tolist(), vertex[found & at_vertex].tolist()))
-        for slot, w in meets.items():
-            mirror, known = self._slots_of(np.array([w]), self.particle_body[self.slot_particle[[slot]]])
-            if known[0] and mirror[0] < slot and meets.get(int(mirror[0])) == self.slot_particle[slot]:
+        rows, _, mirror = self._mirrors(contact, np.where(found, slot_of, -1))
+        mirror_of = dict(zip(slot_of[rows].tolist(), mirror.tolist()))
+        for slot, other in mirror_of.items():
+            if other < slot and mirror_of.get(other) == slot:  # each at the other's vertex
                 out[ng + slot] = True
         return out
+
+    def _mirrors(self, contact: SurfaceContact, slot_of: IntArray) -> tuple[IntArray, IntArray, IntArray]:
+        """The rows of ``contact`` whose slot (``slot_of`` (k,), -1: none) touches at a
+        vertex ``w`` of the other body, that vertex, and ``w``'s slot against the touching
+        particle's body, shape (r,) each."""
+        vertex, at_vertex = _touched_vertex(contact)
+        rows = np.flatnonzero((slot_of >= 0) & at_vertex)
+        mirror, known = self._slots_of(vertex[rows], self.particle_body[contact.particle[rows]])
+        return rows[known], vertex[rows][known], mirror[known]
 
     def _beside(self, w: int, normal: FloatArray, x: FloatArray) -> bool:
         """Whether the body of surface vertex ``w`` lies on the outer side of a plane through

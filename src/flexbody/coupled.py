@@ -186,15 +186,15 @@ def coupled_impact(model, y: np.ndarray, p: np.ndarray, touching: np.ndarray, re
         if friction:  # and what sticks keeps sticking: else that stop's impulse would slide it
             stuck = ~leaves & (model.mu[rows] > 0.0) & (np.abs(solution.tangent_rate) <= np.maximum(slowest[rows], 1e-12))
             stopped = np.concatenate([stopped, k + np.flatnonzero(stuck)])
-        rates = J[stopped] @ u_new[cols]
+        rates, W_stopped = J[stopped] @ u_new[cols], W[np.ix_(stopped, stopped)]
         extra = np.zeros(len(J))
-        extra[stopped] = contact_solve(W[np.ix_(stopped, stopped)], -rates)
+        extra[stopped] = contact_solve(W_stopped, -rates)
         # A slow leaver stopped with a nearly parallel row (a particle sliding over a
         # crease bent by 1e-4 rad leaves one of its two faces at 3e-5 m/s) is no Zeno
         # rebound: stopping both turns its slide, with impulses far beyond its speed's (the
-        # stop took 3/4 of a 0.4 m/s slide).  Then the slow leavers leave.
-        taken = 0.5 * float(extra[stopped] @ W[np.ix_(stopped, stopped)] @ extra[stopped])
-        own = 0.5 * float(np.sum(rates**2 / np.diag(W)[stopped]))
+        # stop took half the speed of a 0.4 m/s slide).  Then the slow leavers leave.
+        taken = 0.5 * float(extra[stopped] @ W_stopped @ extra[stopped])
+        own = 0.5 * float(np.sum(rates**2 / np.diag(W_stopped)))
         slow = stopped[(stopped < k) & (rates > 0.0)]
         if taken > STOP_ENERGY * own and len(slow):
             leaves[slow] = True
