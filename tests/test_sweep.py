@@ -338,9 +338,10 @@ def test_ctrl_c_stops_the_workers_keeps_finished_rows_and_resume_runs_only_the_r
     deadline = time.monotonic() + 120
     while time.monotonic() < deadline:
         for child in parent.children(recursive=True):
-            if child.pid not in children:
-                with contextlib.suppress(psutil.Error):
-                    children[child.pid] = (child, " ".join(child.cmdline()))
+            # read again at every look: a child caught between fork and exec still shows
+            # its parent's command line (read once, the worker was missed: a flaky failure)
+            with contextlib.suppress(psutil.Error):
+                children[child.pid] = (child, " ".join(child.cmdline()))
         csv = out / "sweep.csv"
         if csv.exists() and len(csv.read_text().splitlines()) >= 4:  # header + 3 rows
             break
