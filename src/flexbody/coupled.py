@@ -27,8 +27,16 @@ from .dynamics import contact_solve
 
 #: Rows too slow to leave are stopped (:func:`coupled_impact`) only where that takes at most
 #: this many times the kinetic energy of their speeds, each row alone (``v^2 / (2 W_ii)``):
-#: far more means nearly parallel rows, whose stop would turn the motion along them.
-STOP_ENERGY = 10.0
+#: far more means nearly parallel rows, whose stop would turn the motion along them.  So a
+#: stop changes the velocities (in the kinetic metric) by at most ten times the stopped
+#: rows' own speeds, each below the Zeno speed; two rows at an angle ``a`` take
+#: ``1 / sin(a)^2`` times it, 100 at 5.7 degrees.  Measured in the bodies study's stiff 2D
+#: pile: of 3 700 such stops 90 % take at most 1.08 times it, 3 take 12-100 and 14 take
+#: 100-2e8 (a crease bent by 1e-4 rad: 1e8).  Two 3D spheres of a pile pressed face to face
+#: (faces 15 degrees apart, each touching near the other's vertex) take up to 16 times it:
+#: with a bound of 10 they rocked on the two rows, each impact of one lifting the other, 26
+#: times within 1 ms ("chattering"; tests/test_zeno_stop.py).
+STOP_ENERGY = 100.0
 
 
 class CoupledImpactError(RuntimeError):
