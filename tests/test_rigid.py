@@ -382,6 +382,22 @@ def test_a_rigid_body_asked_to_run_on_the_particles_formulation_is_refused():
         simulate(scene, formulation="particles")
 
 
+def test_a_rigid_body_beside_a_flexible_body_too_large_for_the_floating_formulation_gets_a_way_out():
+    """The floating formulation, the only one with rigid bodies, is offered up to 40 flexible
+    particles: the error names the rigid body and does not send the user to the particles
+    formulation, which refuses rigid bodies (it did, a loop of two errors)."""
+    table = {"name": "r", "bodies": [
+        {"name": "slab", "rigid": True, "particles": [[-0.5, 0.0], [0.5, 0.0]], "masses": [0.5, 0.5],
+         "links": [[0, 1]], "position": [0.0, 0.1]},
+        {"name": "ring", "shape": "ring", "count": 41, "radius": 0.1, "mass": 0.01, "stiffness": 1000.0,
+         "damping": 0.1, "position": [0.0, 0.5]}], "simulation": {"t_end": 0.1}}
+    with pytest.raises(InputError) as error:
+        simulate(flexbody.load_scene(table))
+    message = str(error.value)
+    assert "['slab']" in message and "41 particles" in message
+    assert "use the particles formulation" not in message
+
+
 def test_a_rigid_body_with_particle_velocities_that_are_not_a_rigid_motion_is_refused():
     table = {"name": "r", "bodies": [{"name": "bar", "rigid": True, "particles": [[-0.5, 0.0], [0.5, 0.0]],
                                       "masses": [0.5, 0.5], "links": [[0, 1]],

@@ -515,9 +515,16 @@ def load_model(scene: Scene | str | Path, backend: str = "c", formulation: str |
                 )
     flexible = sum(b.n_particles for b in scene.bodies if not b.rigid)
     if flexible > FLOATING_MAX_PARTICLES:  # a rigid body costs its frame alone, whatever its particles
+        limit = (f"the floating formulation is derived whole per topology and is offered up to "
+                 f"{FLOATING_MAX_PARTICLES} of them")
+        if scene.rigid_bodies:  # the particles formulation is no way out: it has no rigid bodies
+            raise InputError(
+                f"bodies {scene.rigid_bodies} are rigid, which only the floating formulation has, and the flexible "
+                f"bodies have {flexible} particles: {limit}; make the flexible bodies smaller, or the rigid ones "
+                "flexible and stiff (the particles formulation runs flexible bodies of any size)"
+            )
         raise InputError(
-            f"`formulation` = 'floating' with {flexible} particles in flexible bodies: the floating formulation is "
-            f"derived whole per topology and is offered up to {FLOATING_MAX_PARTICLES} of them; use the particles "
+            f"`formulation` = 'floating' with {flexible} particles in flexible bodies: {limit}; use the particles "
             "formulation (the default), which runs any size at once"
         )
     model = load_derived_model(scene, backend, formulation)
