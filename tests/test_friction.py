@@ -587,3 +587,25 @@ def test_c_and_numpy_contact_laws_agree_at_random_states(dim, rng):
         roundoff = 100 * np.finfo(float).eps * np.abs(a).max() / step  # of the differences, not the law
         np.testing.assert_allclose(fd[rows], 0.0, atol=roundoff)
         np.testing.assert_array_equal(jac[rows], 0.0)
+
+
+def test_cascades_of_rebounds_that_end_held_are_no_chattering():
+    """Four cascades of seven rebounds within 1 ms, each ending held (28 impacts: a flexible
+    sphere landing on another with e = 0.5, released again by its neighbours' impacts) run
+    on; 26 rebounds in a row, none held, and 26 holds each released again are chattering."""
+    from flexbody.contact import Event
+    from flexbody.driver import SimulationFailed, _Run, _settings
+
+    scene = particle_scene([0.0, 0.0], [1.0, 0.0], friction=0.3, restitution=0.5)
+
+    def run_of(helds):
+        run = _Run(scene, assembled_model(scene, "numpy"), _settings(scene, {"backend": "numpy"}), None, 10**6)
+        for k, held in enumerate(helds):
+            t = k * 3e-5  # 26 or more within the window
+            run.check_guards(t, [Event(t, 0, "impact", -1e-3, held)])
+
+    run_of(([False] * 6 + [True]) * 4)
+    for helds, says in (([False] * 26, "26 in a row, none held"), ([True] * 26, "held and released again 26 times")):
+        with pytest.raises(SimulationFailed, match=says) as failure:
+            run_of(helds)
+        assert failure.value.status == "chattering"
