@@ -671,3 +671,21 @@ def test_held_contacts_put_back_on_their_surfaces_leave_no_free_one_unarmed():
     assert result.status == "success", result.message
     assert result.stats["projections"] > 50  # measured 211
     assert result.stats["max_penetration_m"] <= 1e-9  # measured 3.6e-10
+
+
+def test_an_impact_answer_off_by_rounding_is_checked_with_its_restitution():
+    """Lemke's final check can fail by rounding (a stack of 3D boxes, e = 0.5: a contact at
+    rest left approaching at 9e-13 m/s); the answer is taken where Newton's law holds up to
+    the Zeno speed.  The contact the impulse sends off at ``-e v-`` complies: its LCP rate is
+    ``v+ + e v- = 0`` (the check read ``v+`` itself, 0.0117 m/s, and stopped the stack with
+    ``unsupported``).  Left at rest instead, it breaks Newton's law."""
+    from types import SimpleNamespace
+
+    from flexbody.coupled import _within_rounding
+
+    v_minus, e, slowest = np.array([-2.3439e-2, -9.1064e-13]), np.array([0.5, 0.5]), 8.7e-5
+    answer = SimpleNamespace(status="inaccurate", normal=np.array([1.2145e-3, 0.0]),
+                             normal_rate=np.array([0.5 * 2.3439e-2, -9.1064e-13]))
+    assert _within_rounding(answer, v_minus, slowest, e)
+    answer.normal_rate[0] = 0.0
+    assert not _within_rounding(answer, v_minus, slowest, e)

@@ -1,4 +1,4 @@
-"""Accumulations of impacts: the Zeno stop of a coupled impact and the chatter guard.
+"""The Zeno stop of a coupled impact (:func:`flexbody.coupled.coupled_impact`).
 
 A contact the impact (:func:`flexbody.coupled.coupled_impact`) leaves moving away slower
 than a rebound that would rise 1e-9 of the scene is stopped with the held ones, unless that
@@ -6,10 +6,8 @@ stop takes more than ``STOP_ENERGY`` times the kinetic energy of the stopped row
 speeds: then the rows are nearly parallel (a crease bent by 1e-4 rad), and the slow leavers
 leave.  Two rows at an angle ``a`` take ``1 / sin(a)^2`` times it, so the bound is an
 angle: these tests put rows on both sides of it, and at the 15 degrees of two spheres of a
-3D pile pressed face to face.  The chatter guard stops a run where a particle is impacted
-more than 25 times within 1 ms in a row without being held, or is held and released again
-more than 25 times; cascades of rebounds that end held are no chattering (a pile of 3D
-spheres with e = 0.5 between them).
+3D pile pressed face to face.  The piles of 3D spheres where this mattered are in
+``tests/test_piles3d.py``.
 """
 
 from __future__ import annotations
@@ -17,9 +15,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-import flexbody
 from flexbody.coupled import STOP_ENERGY, coupled_impact
-from flexbody.scene import load_scene
 
 SLOWEST = 1e-4  # m/s: the Zeno speed of both contacts
 
@@ -84,49 +80,3 @@ def test_a_slow_leaver_on_a_nearly_parallel_row_leaves():
     rates = model.J @ u_after
     assert leaving.tolist() == [False, True]
     assert rates[1] == pytest.approx(5e-5 * np.cos(1e-3), rel=1e-12)
-
-
-def sphere_pile(t_end: float, count: int = 100, restitution: float | None = None) -> dict:
-    """Five spheres of ``count`` particles (0.1 m, 0.5 kg, 2000 N/m, relative dampers 0.5 N
-    s/m): three in a row 2 cm apart, 5 cm above the ground, two above their gaps, each turned
-    differently; every pair may touch, with ``restitution`` if given."""
-    radius, gap, lift = 0.1, 0.02, 0.05
-    pitch = 2 * radius + gap
-    rise = np.sqrt(pitch**2 - (pitch / 2) ** 2)
-    centres = [[i * pitch, 0.0, radius + lift] for i in range(3)]
-    centres += [[(i + 0.5) * pitch, 0.0, radius + lift + rise] for i in range(2)]
-    bodies = [{"name": f"s{i}", "shape": "sphere", "count": count, "radius": radius, "center": True,
-               "mass_total": 0.5, "stiffness": 2000.0, "damping": 0.5, "damper": "relative", "position": c,
-               "rotation": [0.1 * i, 0.05 * i, 0.0], "collide": True} for i, c in enumerate(centres)]
-    table = {"name": "sphere_pile", "gravity": [0.0, 0.0, -9.81], "bodies": bodies,
-             "simulation": {"t_end": t_end, "output_dt": 0.01, "method": "RK45", "rtol": 1e-6, "atol": 1e-9}}
-    if restitution is not None:
-        table["contacts"] = [{"bodies": [f"s{i}", f"s{j}"], "restitution": restitution}
-                             for i in range(len(bodies)) for j in range(i + 1, len(bodies))]
-    return table
-
-
-@pytest.mark.slow
-def test_a_pile_of_3d_spheres_lands_on_each_other_without_chattering():
-    """The upper spheres land on the lower ones at 0.14 s; at 0.147 s two of them press two
-    faces 15 degrees apart together, each face touching the other sphere near its vertex.
-    With the former bound the pile stopped there, ``chattering`` (26 impacts of one particle
-    within 1 ms).  Now it runs on: no particle inside another body or the ground by more
-    than 1e-9 m, and the energy ledger closed."""
-    r = flexbody.simulate(load_scene(sphere_pile(0.2)))
-    assert r.status == "success", r.message
-    assert r.stats["max_penetration_m"] < 1e-9
-    assert r.stats["energy_drift_relative"] < 1e-6
-
-
-@pytest.mark.slow
-def test_a_pile_of_3d_spheres_with_rebounds_between_them_lands_without_chattering():
-    """With e = 0.5 between five 60-particle spheres, a particle of an upper sphere landing on
-    a lower one rebounds in cascades (0.15, 0.075, ... m/s, the seventh held by the Zeno
-    threshold), and its neighbours' impacts release it again: 4 cascades, 26 impacts within
-    1 ms at 0.140 s, which the guard took for chattering.  Each cascade ends held, so the
-    pile runs on: no penetration above 1e-9 m, the energy ledger closed."""
-    r = flexbody.simulate(load_scene(sphere_pile(0.2, count=60, restitution=0.5)))
-    assert r.status == "success", r.message
-    assert r.stats["max_penetration_m"] < 1e-9
-    assert r.stats["energy_drift_relative"] < 1e-6

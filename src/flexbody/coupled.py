@@ -73,7 +73,8 @@ def _rounded(rates: np.ndarray, J: np.ndarray, x: np.ndarray) -> np.ndarray:
     return np.where(np.abs(rates) <= level, 0.0, rates)
 
 
-def _within_rounding(solution, rates: np.ndarray, slowest: np.ndarray | float = 0.0) -> bool:
+def _within_rounding(solution, rates: np.ndarray, slowest: np.ndarray | float = 0.0,
+                     restitution: np.ndarray | float = 0.0) -> bool:
     """Whether an ``inaccurate`` LCP answer misses Newton's or Signorini's law only by
     rounding: every impulse or force >= 0, and every contact rate >= 0 and complementary to
     it up to 1e-9 of the largest rate before, or up to ``slowest`` (per contact).  Lemke's
@@ -81,11 +82,14 @@ def _within_rounding(solution, rates: np.ndarray, slowest: np.ndarray | float = 
     constrain the same pair of points, a pile) a row can be off by 1e-12 of the others, and
     contacts stopped at an earlier instant keep ~1e-11 m/s of what was stopped.  What such
     an answer leaves approaching is at most that slow, and stays held: it is stopped
-    exactly after the impulses, and the held forces' events watch the rest."""
+    exactly after the impulses, and the held forces' events watch the rest.  With Newton's
+    ``restitution`` e (an impact's), the rate checked is the LCP's own, ``v+ + e v-`` for
+    an approaching contact (``rates``: the velocities before): an impulse leaves its
+    contact at ``-e v-``, not at rest."""
     if solution.status != "inaccurate":
         return False
     level = np.maximum(1e-9 * max(float(np.abs(rates).max(initial=0.0)), 1e-300), slowest)
-    z, w = solution.normal, solution.normal_rate
+    z, w = solution.normal, solution.normal_rate + restitution * np.minimum(rates, 0.0)
     level = np.broadcast_to(level, w.shape)
     return bool(np.all(z >= 0.0) and np.all(w >= -level) and np.all(np.abs(w) <= level, where=z > 0.0))
 
@@ -178,7 +182,7 @@ def coupled_impact(model, y: np.ndarray, p: np.ndarray, touching: np.ndarray, re
         solution = solve_impact(W, v_minus, restitution[rows])
         P = solution.normal
     # left approaching slower than a Zeno rebound, a contact is stopped below anyway
-    if not (solution.solved or _within_rounding(solution, v_minus[:k], slowest[rows])):
+    if not (solution.solved or _within_rounding(solution, v_minus[:k], slowest[rows], restitution[rows])):
         raise CoupledImpactError(f"the impact of contacts {rows.tolist()} has no solution found: {solution.message}")
     out = np.array(y, float)
     u_new = u + response(P)
