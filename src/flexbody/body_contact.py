@@ -74,6 +74,7 @@ slows its Newton iterations, not its answer.
 from __future__ import annotations
 
 import ctypes
+import dataclasses
 import hashlib
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -109,6 +110,8 @@ DENSE_WIDTH = 64
 #: vertex-to-vertex touch, :meth:`BodyContactModel._made_from_the_other_side`): where the
 #: event locates a touch (to ~1e-15 s), the points meet to round-off of the element's size.
 AT_VERTEX = 1e-9
+#: Whole surface sweeps kept, by the positions they were made at (:meth:`BodyContactModel._surface_contacts`).
+SWEEPS_KEPT = 4
 #: A vertex within this fraction of its face's size of the line where two held faces' planes
 #: meet lies on it (and planes whose unit normals' cross product is shorter meet nowhere definite).
 EDGE_LINE = 1e-6
@@ -203,6 +206,7 @@ class BodyContactModel(Model):
             raise ValueError("Coulomb friction on coupled contacts is simulated in 2D only")
         self._slip = np.zeros((self.n_contacts, self.dim))
         self._last: tuple[tuple[np.ndarray, ...], _Solved] | None = None  # the last state's answer (see _dynamics)
+        self._swept: dict[bytes, tuple] = {}  # positions -> the whole surface sweep (see _surface_contacts)
         self._element = ElementKernels(self.dim, self.backend)
         text = f"{inner.digest}|{self.slot_particle.tolist()}|{self.slot_body.tolist()}"
         self.digest = hashlib.sha256(f"bodies|{text}".encode()).hexdigest()[:16]
@@ -232,6 +236,22 @@ class BodyContactModel(Model):
     def gaps(self, q, p) -> FloatArray:
         x = self._coordinates.particles(q, None, p)[0]
         return np.concatenate([self.inner.gaps(q, p), self._surface_gaps(x)[0]])
+
+    def gap(self, q, p, c: int) -> float:
+        """Gap of contact ``c`` alone, equal to ``gaps(q, p)[c]``: a slot's is its particle's
+        closest feature over the broad phase's kept pairs with the slot's body (a superset
+        of the candidates holding its closest element within ``margin``; farther reads
+        ``margin``), what locating an impact between bodies evaluates again and again."""
+        slot = c - self.n_ground_contacts
+        if not 0 <= slot < self.n_primary:
+            return super().gap(q, p, c)
+        x = self._coordinates.particles(q, None, p)[0]
+        pairs = self._candidates.kept(x, int(self.slot_particle[slot]))
+        pairs = pairs[self.element_body[pairs[:, 1]] == self.slot_body[slot]]
+        if not len(pairs):
+            return self.margin
+        gap = float(self._closest_features(x, pairs).gap[0])
+        return gap if abs(gap) <= self.margin else self.margin
 
     def gaps_of(self, q, p, contacts: IntArray) -> FloatArray:
         """Gaps of ``contacts (k,)`` alone, equal to ``gaps(q, p)[contacts]``: a slot's from its
@@ -449,7 +469,7 @@ class BodyContactModel(Model):
         held = np.asarray(held)
         rated = np.flatnonzero(near | (held[ng:] != 0))
         if len(rated):
-            self._constrain_elements(rated, x)
+            self._constrain_elements(rated, x, found)
             vn_s[rated] = self._element_terms(rated, x, v).rate
         if found is not None:  # a vertex-to-vertex touch is one contact: the other side's
             vn_s[self._made_from_the_other_side(*found, held, x)] = 0.0
@@ -759,6 +779,21 @@ class BodyContactModel(Model):
             -> tuple[FloatArray, np.ndarray, tuple[SurfaceContact, IntArray] | None]:
         """:meth:`_surface_gaps`, and the closest features found with the slot of each of
         their rows (-1: farther than ``margin``), or None where there are none."""
+        if slots is not None:
+            return self._sweep(x, slots)
+        # The whole sweep depends on x alone, and an instant asks for it at the same state
+        # several times (the step's end, the instant's resolve, the next segment's start):
+        # the last few answers are kept, read-only.
+        key = np.ascontiguousarray(x).tobytes()
+        if key not in self._swept:
+            if len(self._swept) == SWEEPS_KEPT:
+                del self._swept[next(iter(self._swept))]  # the oldest
+            self._swept[key] = _read_only(self._sweep(x))
+        return self._swept[key]
+
+    def _sweep(self, x, slots: IntArray | None = None) \
+            -> tuple[FloatArray, np.ndarray, tuple[SurfaceContact, IntArray] | None]:
+        """:meth:`_surface_contacts` without the kept answers."""
         gaps = np.full(self.n_slots, self.margin)
         near = np.zeros(self.n_slots, bool)
         contact = self._closest(x, slots) if self.n_slots else None
@@ -866,13 +901,20 @@ class BodyContactModel(Model):
         at = np.minimum(np.searchsorted(self._sorted_key, key), self.n_primary - 1)
         return self._order[at], self._sorted_key[at] == key
 
-    def _constrain_elements(self, slots, x) -> None:
-        """Pick an element for each of ``slots`` that has none (see the module docstring)."""
+    def _constrain_elements(self, slots, x, swept: tuple[SurfaceContact, IntArray] | None = None) -> None:
+        """Pick an element for each of ``slots`` that has none (see the module docstring).
+        ``swept``: the whole sweep's closest features at ``x`` with their slots
+        (:meth:`_surface_contacts`), if at hand: a slot within ``margin`` has its closest
+        feature over the whole surface there (what is not a candidate is farther)."""
         missing = np.asarray(slots)[self.element_of[slots] < 0]
         if not len(missing):
             return
-        contact = self._closest_features(x, self._pairs_with_body(missing))
-        slot_rows, found = self._slots_of(contact.particle, self.element_body[contact.element])
+        if swept is not None and np.isin(missing % self.n_primary, swept[1]).all():
+            contact, slot_rows = swept
+            found = slot_rows >= 0
+        else:
+            contact = self._closest_features(x, self._pairs_with_body(missing))
+            slot_rows, found = self._slots_of(contact.particle, self.element_body[contact.element])
         row_of = dict(zip(slot_rows[found].tolist(), np.flatnonzero(found).tolist()))
         normals = (segment_normals if self.dim == 2 else triangle_normals)(x, self.elements)
         for slot in missing.tolist():
@@ -1144,6 +1186,21 @@ class ElementKernels:
         weights = np.column_stack([1.0 - weight[0], weight[0]]) if d == 2 else weight.T
         slip_terms = (slip[0][0], slip[1][0]) if d == 2 else (None, None)
         return ElementTerms(gap[0], weights, normal.T, rate[0], bias[0], *slip_terms)
+
+
+def _read_only(answer):
+    """``answer`` (arrays in tuples and dataclasses, nested) with every array made
+    read-only, in place: a kept answer handed out again must not be changed by whoever got
+    it first."""
+    if isinstance(answer, np.ndarray):
+        answer.flags.writeable = False
+    elif isinstance(answer, tuple):
+        for part in answer:
+            _read_only(part)
+    elif dataclasses.is_dataclass(answer):
+        for field in dataclasses.fields(answer):
+            _read_only(getattr(answer, field.name))
+    return answer
 
 
 def _gram(A: FloatArray, B: FloatArray) -> FloatArray:

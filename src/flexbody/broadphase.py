@@ -281,15 +281,7 @@ class CandidateList:
         """The candidate pairs at positions x (n, d): equal to ``candidate_pairs(x, ..., margin)``;
         with ``particles`` (an index or distinct indices), theirs only."""
         x = np.asarray(x, float)
-        moved = np.inf if self._built_at is None else np.max(np.abs(x - self._built_at), initial=0.0)
-        if moved > self.skin / 2:
-            found = candidate_pairs(x, self.elements, self.particle_body, self.margin + self.skin,
-                                    self.element_body, self.self_contact, self.method)
-            # by particle, so that one particle's pairs are a slice (event location asks for one)
-            self._pairs = found[np.argsort(found[:, 0], kind="stable")]
-            self._first = np.searchsorted(self._pairs[:, 0], np.arange(len(x) + 1))
-            self._built_at = x.copy()
-            self.rebuilds += 1
+        self._renew(x)
         if particles is None:
             kept = self._pairs
         elif np.ndim(particles) == 0:
@@ -300,6 +292,25 @@ class CandidateList:
             at = np.repeat(start - np.cumsum(counts) + counts, counts) + np.arange(counts.sum())
             kept = self._pairs[at]
         return kept[self._inside(x, kept)]
+
+    def kept(self, x: FloatArray, particle: int) -> IntArray:
+        """Particle ``particle``'s kept pairs at positions x (n, d), shape (k, 2): a superset
+        of its :meth:`pairs` (every element whose ``margin``-grown box holds it is among
+        them), unfiltered; its closest element within ``margin`` is among them."""
+        self._renew(np.asarray(x, float))
+        return self._pairs[self._first[particle] : self._first[particle + 1]]
+
+    def _renew(self, x: FloatArray) -> None:
+        """Rebuild the kept pairs if a particle has moved more than ``skin / 2`` since they were built."""
+        moved = np.inf if self._built_at is None else np.max(np.abs(x - self._built_at), initial=0.0)
+        if moved > self.skin / 2:
+            found = candidate_pairs(x, self.elements, self.particle_body, self.margin + self.skin,
+                                    self.element_body, self.self_contact, self.method)
+            # by particle, so that one particle's pairs are a slice (event location asks for one)
+            self._pairs = found[np.argsort(found[:, 0], kind="stable")]
+            self._first = np.searchsorted(self._pairs[:, 0], np.arange(len(x) + 1))
+            self._built_at = x.copy()
+            self.rebuilds += 1
 
     def _inside(self, x: FloatArray, pairs: IntArray) -> np.ndarray:
         """Which ``pairs`` have the particle inside the element's box grown by ``margin``."""

@@ -83,13 +83,12 @@ class EventFunctions:
         for the others, shape (nc,): all that locating impacts needs (no right-hand side);
         with ``only`` (bool (nc,)), those of these contacts alone."""
         m = self.model
+        if only is None and self.free.any():  # one pass over every contact: no masked copies
+            return np.where(self.free, m.gaps(y[: m.nq], self.p) - self.phases.floor, np.inf)
         g = np.full(m.n_contacts, np.inf)
         if only is not None:
             watched = np.flatnonzero(self.free & only)
             g[watched] = m.gaps_of(y[: m.nq], self.p, watched) - self.phases.floor[watched]
-        elif self.free.any():
-            gaps = m.gaps(y[: m.nq], self.p)
-            g[self.free] = gaps[self.free] - self.phases.floor[self.free]
         return g
 
     def __call__(self, y: np.ndarray) -> np.ndarray:
