@@ -112,6 +112,8 @@ DENSE_WIDTH = 64
 AT_VERTEX = 1e-9
 #: Whole surface sweeps kept, by the positions they were made at (:meth:`BodyContactModel._surface_contacts`).
 SWEEPS_KEPT = 4
+#: Layouts of held rows kept (:meth:`BodyContactModel._layout`).
+LAYOUTS_KEPT = 8
 #: A vertex within this fraction of its face's size of the line where two held faces' planes
 #: meet lies on it (and planes whose unit normals' cross product is shorter meet nowhere definite).
 EDGE_LINE = 1e-6
@@ -178,6 +180,9 @@ class BodyContactModel(Model):
         self._sorted_key = self._key[self._order]
         self._body_count = len(counts)
         self._incident = _incidence(self.elements, self.n_particles)
+        # the same as one array: particle i's elements are _incident_flat[_incident_start[i] : _incident_start[i + 1]]
+        self._incident_start = np.concatenate([[0], np.cumsum([len(e) for e in self._incident])]).astype(np.intp)
+        self._incident_flat = np.concatenate(self._incident + [np.zeros(0, np.intp)]).astype(np.intp)
         self._body_elements = [np.flatnonzero(self.element_body == b) for b in range(len(counts))]
         self._closed: dict[int, bool] = {}  # per body: whether its surface is closed (fold), on first use
         self._neighbour = _neighbours(self.elements)
@@ -207,6 +212,7 @@ class BodyContactModel(Model):
         self._slip = np.zeros((self.n_contacts, self.dim))
         self._last: tuple[tuple[np.ndarray, ...], _Solved] | None = None  # the last state's answer (see _dynamics)
         self._swept: dict[bytes, tuple] = {}  # positions -> the whole surface sweep (see _surface_contacts)
+        self._layouts: dict[tuple, _Layout] = {}  # held rows -> where their terms go (see _rows)
         self._element = ElementKernels(self.dim, self.backend)
         text = f"{inner.digest}|{self.slot_particle.tolist()}|{self.slot_body.tolist()}"
         self.digest = hashlib.sha256(f"bodies|{text}".encode()).hexdigest()[:16]
@@ -827,14 +833,16 @@ class BodyContactModel(Model):
         rows, at, mirror = self._mirrors(contact, np.where(touching, slot_of, -1))
         if not len(rows):
             return np.zeros(0, np.intp)
-        own = contact.particle[rows]
-        slot_held = np.asarray(held)[self.n_ground_contacts:] != 0
+        # each (row, element) where the mirror's slot or a corner twin of it is held on an
+        # element with the row's particle for a vertex
+        groups = self._group_rows(mirror)
+        row, member = np.nonzero(np.asarray(held)[self.n_ground_contacts + groups] != 0)
+        element = self.element_of[groups[row, member]]
+        own = (self.elements[element] == contact.particle[rows][row, None]).any(axis=1)
+        row, element = row[own], element[own]
+        normals = (segment_normals if self.dim == 2 else triangle_normals)(x, self.elements[element])
         carried = np.zeros(len(rows), bool)
-        normals = segment_normals if self.dim == 2 else triangle_normals
-        for i, r in enumerate(self._group_rows(mirror)):  # the mirror's slot and corner twins
-            for element in self.element_of[r[slot_held[r]]]:
-                if own[i] in self.elements[element] and self._beside(at[i], normals(x, self.elements[[element]])[0], x):
-                    carried[i] = True
+        carried[row[self._beside(at[row], normals, x)]] = True
         return slot_of[rows[carried]]
 
     def same_contacts(self, y, p, hit: np.ndarray) -> np.ndarray:
@@ -868,15 +876,22 @@ class BodyContactModel(Model):
         mirror, known = self._slots_of(vertex[rows], self.particle_body[contact.particle[rows]])
         return rows[known], vertex[rows][known], mirror[known]
 
-    def _beside(self, w: int, normal: FloatArray, x: FloatArray) -> bool:
-        """Whether the body of surface vertex ``w`` lies on the outer side of a plane through
-        ``x[w]`` with unit ``normal`` (dim,), near ``w``: its surface edges from ``w`` all
-        point there (to rounding) and its outward normal there points away from it."""
-        elements = self.elements[self._incident[w]]
-        edges = x[elements[elements != w]] - x[w]
-        rising = edges @ normal >= -AT_VERTEX * np.linalg.norm(edges, axis=1)
-        outward = (segment_normals if self.dim == 2 else triangle_normals)(x, elements).sum(axis=0)
-        return bool(rising.all() and outward @ normal < 0.0)
+    def _beside(self, w: IntArray, normal: FloatArray, x: FloatArray) -> np.ndarray:
+        """Whether the body of each surface vertex ``w`` (k,) lies on the outer side of a
+        plane through ``x[w]`` with unit ``normal`` (k, dim), near ``w``, bool (k,): its
+        surface edges from ``w`` all point there (to rounding) and its outward normal there
+        points away from it."""
+        start, count = self._incident_start[w], np.diff(self._incident_start)[w]
+        owner = np.repeat(np.arange(len(w)), count)
+        elements = self.elements[self._incident_flat[np.arange(count.sum()) + np.repeat(start - np.cumsum(count) + count,
+                                                                                         count)]]
+        others = elements != w[owner, None]  # each element's other d - 1 vertices: its edges from w
+        edge_owner = np.repeat(owner, self.dim - 1)
+        edges = x[elements[others]] - x[w[edge_owner]]
+        falling = ~(np.einsum("kd,kd->k", edges, normal[edge_owner]) >= -AT_VERTEX * np.linalg.norm(edges, axis=1))
+        outward = np.zeros((len(w), self.dim))
+        np.add.at(outward, owner, (segment_normals if self.dim == 2 else triangle_normals)(x, elements))
+        return (np.bincount(edge_owner[falling], minlength=len(w)) == 0) & (np.einsum("kd,kd->k", outward, normal) < 0.0)
 
     def _closest(self, x, slots: IntArray | None = None):
         pairs = self._candidates.pairs(x, None if slots is None else np.unique(self.slot_particle[slots]))
@@ -950,59 +965,106 @@ class BodyContactModel(Model):
         d = self.dim
         x, v = self._coordinates.particles(q, u, p)
         k_g, k = len(ground_rows), len(ground_rows) + len(slots)
-        points = [self.inner.contacts[ground_rows, :1]]
+        layout = self._layout(ground_rows, slots, tangents)
         normals = self._coordinates.ground_normals(p)[self.inner.contacts[ground_rows, 1]]
         weights = [np.ones((k_g, 1))]
         bias, slip_bias = np.zeros(k), np.zeros(k)
         if len(slots):
             terms = self._element_terms(slots, x, v)
             bias[k_g:], slip_bias[k_g:] = terms.bias, terms.slip_bias if tangents else 0.0
-            points.append(self._slot_points(slots))
             weights.append(np.column_stack([np.ones(len(slots)), -terms.weights]))
             normals = np.vstack([normals, terms.normal])
         directions = [normals] + ([np.column_stack([-normals[:, 1], normals[:, 0]])] if tangents else [])
-        particles = np.unique(np.concatenate([z.ravel() for z in points]))
-        J = np.zeros((len(directions) * k, len(particles), d))
-        entries = []  # (row, particle position in `particles`, coefficient (d,)) of every term
-        for block, direction in enumerate(directions):
+        # every term (row, particle, coefficient (d,)): ground rows, then slots, per direction
+        coefficients = []
+        for direction in directions:
             offset = 0
-            for z, w in zip(points, weights):
-                rows = block * k + np.repeat(np.arange(offset, offset + len(z)), z.shape[1])
-                coefficients = (w[:, :, None] * direction[offset : offset + len(z), None, :]).reshape(-1, d)
-                at = np.searchsorted(particles, z.ravel())
-                np.add.at(J, (rows, at), coefficients)
-                entries.append((rows, at, coefficients))
-                offset += len(z)
+            for w in weights:
+                coefficients.append((w[:, :, None] * direction[offset : offset + len(w), None, :]).reshape(-1, d))
+                offset += len(w)
+        coefficients = np.concatenate(coefficients)
+        J = np.zeros((len(directions) * k, len(layout.particles), d))
+        np.add.at(J, (layout.rows, layout.at), coefficients)
         bias = np.concatenate([bias, slip_bias]) if tangents else bias
-        columns, J, scaled, bias = self._coordinates.rows(particles, J.reshape(len(J), -1), bias, q, u, p)
+        columns, J, scaled, bias = self._coordinates.rows(layout.particles, J.reshape(len(J), -1), bias, q, u, p)
         if isinstance(self._coordinates, _ParticleCoordinates) and J.shape[1] > DENSE_WIDTH:
-            W = self._sparse_gram(entries, particles, J.shape)
+            W = self._sparse_gram(layout, coefficients, len(J))
         else:
             W = _gram(scaled, J)
         return _Rows(columns, J, scaled, bias, directions[-1] if tangents else np.zeros((k, d)), W)
 
-    def _sparse_gram(self, entries, particles: IntArray, shape: tuple[int, int]) -> FloatArray:
-        """``J M^-1 J^T`` (m, m) of particle rows given as their terms (a pile's held rows:
-        each moves a few particles): ``W_ab`` sums ``c . c' / m_p`` over the pairs of terms
-        of rows a and b on the same particle p, found as neighbours in the terms sorted by
-        particle (a particle is in a few terms), never through the dense rows."""
-        m = shape[0]
-        rows = np.concatenate([r for r, _, _ in entries])
-        at = np.concatenate([a for _, a, _ in entries])
-        coefficients = np.concatenate([c for _, _, c in entries])
+    def _layout(self, ground_rows, slots, tangents: bool) -> _Layout:
+        """Where the terms of :meth:`_rows` go (:class:`_Layout`): fixed by the rows, their
+        elements and ``tangents``, so kept for the last few such sets (a segment's held rows
+        are the same at every evaluation)."""
+        key = (np.asarray(ground_rows).tobytes(), np.asarray(slots).tobytes(),
+               self.element_of[slots].tobytes(), tangents)
+        if key in self._layouts:
+            return self._layouts[key]
+        k = len(ground_rows) + len(slots)
+        points = [self.inner.contacts[ground_rows, :1]] + ([self._slot_points(slots)] if len(slots) else [])
+        particles = np.unique(np.concatenate([z.ravel() for z in points]))
+        rows, at = [], []
+        for block in range(2 if tangents else 1):
+            offset = 0
+            for z in points:
+                rows.append(block * k + np.repeat(np.arange(offset, offset + len(z)), z.shape[1]))
+                at.append(np.searchsorted(particles, z.ravel()))
+                offset += len(z)
+        rows, at = np.concatenate(rows), np.concatenate(at)
+        # W's entries (sparse, see _sparse_gram): pairs of terms on the same particle,
+        # found as neighbours `offset` apart in the terms sorted by particle
         order = np.argsort(at, kind="stable")
-        rows, at, coefficients = rows[order], at[order], coefficients[order]
-        scaled = coefficients / self.masses[particles[at]][:, None]
-        index, weight = [], []
-        for offset in range(len(at)):  # pairs `offset` apart in the sorted terms
-            same = np.flatnonzero(at[offset:] == at[: len(at) - offset])
+        sorted_rows, sorted_at = rows[order], at[order]
+        m = (2 if tangents else 1) * k
+        pairs, index = [], []
+        for offset in range(len(sorted_at)):
+            same = np.flatnonzero(sorted_at[offset:] == sorted_at[: len(sorted_at) - offset])
             if not same.size:
                 break
-            a, b = rows[same], rows[same + offset]
-            w = np.einsum("kd,kd->k", scaled[same], coefficients[same + offset])
+            a, b = sorted_rows[same], sorted_rows[same + offset]
+            pairs.append((same, same + offset, offset > 0))
             index += [a * m + b] + ([b * m + a] if offset else [])
-            weight += [w] + ([w] if offset else [])
-        return np.bincount(np.concatenate(index), np.concatenate(weight), minlength=m * m).reshape(m, m)
+        masses = self.masses[particles[sorted_at]][:, None] if isinstance(self._coordinates, _ParticleCoordinates) \
+            else None
+        layout = _Layout(particles, rows, at, order, masses, pairs, np.concatenate(index))
+        if len(self._layouts) == LAYOUTS_KEPT:
+            del self._layouts[next(iter(self._layouts))]  # the oldest
+        self._layouts[key] = layout
+        return layout
+
+    @staticmethod
+    def _sparse_gram(layout: _Layout, coefficients: FloatArray, m: int) -> FloatArray:
+        """``J M^-1 J^T`` (m, m) of particle rows given as their terms' ``coefficients``
+        (t, d) in ``layout`` (a pile's held rows: each moves a few particles): ``W_ab`` sums
+        ``c . c' / m_p`` over the pairs of terms of rows a and b on the same particle p,
+        never through the dense rows."""
+        coefficients = coefficients[layout.order]
+        scaled = coefficients / layout.masses
+        weight = []
+        for first, second, mirrored in layout.pairs:
+            w = np.einsum("kd,kd->k", scaled[first], coefficients[second])
+            weight += [w] + ([w] if mirrored else [])
+        return np.bincount(layout.index, np.concatenate(weight), minlength=m * m).reshape(m, m)
+
+
+class _Layout(NamedTuple):
+    """Where the terms of :meth:`BodyContactModel._rows` go, for one set of rows.
+
+    ``particles (c,)``: the particles they move, ascending; term t (ground rows, then slots,
+    per direction) adds its coefficient to row ``rows[t]`` on particle ``particles[at[t]]``.
+    For the sparse ``J M^-1 J^T``: ``order`` sorts the terms by particle, ``masses`` (t, 1)
+    are the sorted terms' particles' masses, ``pairs`` the index pairs (first, second,
+    mirrored) of sorted terms on the same particle, and ``index`` their entries' flat
+    positions in W (a pair's, then its mirror's)."""
+
+    particles: IntArray
+    rows: IntArray
+    at: IntArray
+    order: IntArray
+    masses: FloatArray | None
+    pairs: list
+    index: IntArray
 
 
 class _Rows(NamedTuple):
