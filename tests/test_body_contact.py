@@ -390,6 +390,80 @@ def test_one_contacts_gap_equals_its_entry_of_all_gaps(backend):
     assert (gaps[model.n_ground_contacts:] < 0).any()  # the last shift put a particle inside
 
 
+def _squeezed_discs(squeeze: float, count: int = 23, seed: int = 0):
+    """Four discs of the bodies study (two rows; ``count`` 23: 19 particles each) with their
+    centres moved towards their mean by ``squeeze`` (1: as given; for 23, below ~0.85 some
+    particles are within the contact margin of another disc, below ~0.68 inside it), every
+    particle jittered by 1 mm: (model, q, p)."""
+    from flexbody.bench_bodies import bodies_scene
+
+    scene = bodies_scene(4, count, 0.1, True)
+    model = load_model(scene)
+    x = scene.initial_positions().reshape(4, -1, 2)
+    centre = x.mean(axis=(0, 1))
+    x = centre + squeeze * (x - centre) + (1.0 - squeeze) * (x - x.mean(axis=1, keepdims=True))
+    x = x.reshape(-1, 2) + 1e-3 * np.random.default_rng(seed).standard_normal((len(scene.initial_positions()), 2))
+    return model, x.ravel(), model.parameters(scene)
+
+
+def test_a_slots_gap_from_the_kept_pairs_equals_its_entry_of_the_whole_sweep_among_several_bodies():
+    """``model.gap`` (locating an impact) takes a slot's gap from the broad phase's kept pairs
+    of its particle with the slot's body alone, where the whole sweep takes every slot's from
+    the filtered candidates: among four discs, apart, near, touching and overlapping, and
+    after the particles moved past the kept list's skin (a rebuild), they must agree exactly."""
+    model, q0, p = _squeezed_discs(1.0)
+    rebuilds = []
+    for squeeze in (1.0, 0.85, 0.7, 0.64):
+        q = _squeezed_discs(squeeze)[1]
+        gaps = model.gaps(q, p)
+        rebuilds.append(model._candidates.rebuilds)
+        assert [model.gap(q, p, c) for c in range(model.n_contacts)] == gaps.tolist()
+        slots = gaps[model.n_ground_contacts:]
+    assert rebuilds[-1] > rebuilds[0]  # the kept pairs were rebuilt between the states
+    assert (slots < 0).any() and ((slots > 0) & (slots < model.margin)).any()  # inside and near
+
+
+def test_the_kept_whole_sweep_follows_the_positions_and_cannot_be_changed():
+    """The whole sweep is kept by the positions it was made at: asked again at positions
+    changed in place it must give a fresh model's answer, and what it hands out is read-only."""
+    model, q, p = _squeezed_discs(0.7)
+    fresh = _squeezed_discs(0.7)[0]
+    x = q.reshape(-1, 2)
+    gaps, near, _ = model._surface_contacts(x)
+    with pytest.raises(ValueError):
+        gaps[0] = 0.0
+    assert not near.flags.writeable
+    x[:5] -= 0.003  # in place: the same array, other positions
+    x[40:45] += 0.004
+    assert model.gaps(q, p).tolist() == fresh.gaps(q, p).tolist()
+
+
+def test_held_rows_kept_layout_gives_the_rows_of_a_fresh_model_and_W_is_J_M_inv_J_T():
+    """The layout of held rows (where their terms go, the sparse ``J M^-1 J^T``'s pairs) is
+    kept per set of rows and elements: at a second state it must give exactly the rows a
+    fresh model builds there (ground rows and slots, with and without tangent rows), and W
+    must be ``J M^-1 J^T``."""
+    from flexbody.body_contact import DENSE_WIDTH
+
+    model, q, p = _squeezed_discs(0.8, count=60)  # 37 slots within the margin, inside too
+    fresh = _squeezed_discs(0.8, count=60)[0]
+    x = q.reshape(-1, 2)
+    _, near, _ = model._surface_contacts(x)
+    slots = np.flatnonzero(near)
+    model._constrain_elements(slots, x)
+    fresh.element_of[:] = model.element_of
+    u = np.random.default_rng(3).standard_normal(len(q))
+    grounds = np.sort(np.argsort(x[:, 1])[:4])  # the lowest particles' ground contacts, with the slots
+    for tangents in (False, True):
+        model._rows(grounds, slots, q, u, p, tangents)  # the layout is kept here
+        q2 = q + 1e-4 * np.random.default_rng(4).standard_normal(len(q))  # the same rows, moved
+        kept, new = model._rows(grounds, slots, q2, u, p, tangents), fresh._rows(grounds, slots, q2, u, p, tangents)
+        for a, b in zip(kept, new):
+            assert np.array_equal(a, b)
+        assert kept.J.shape[1] > DENSE_WIDTH  # the sparse product
+        np.testing.assert_allclose(kept.W, kept.scaled @ kept.J.T, rtol=1e-13, atol=1e-13 * np.abs(kept.W).max())
+
+
 def test_redundant_rows_are_found_block_by_block_as_by_ranks_of_the_whole():
     """coupled._redundant finds the rows in the span of the others by blocks of rows that
     share columns: it must say for each row what two ranks of the whole matrix say (the row
