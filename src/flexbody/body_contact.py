@@ -1227,22 +1227,37 @@ class ElementKernels:
             self.c = [getattr(lib, f"fb_kb_{self.name}"), getattr(lib, f"fb_kb_{self.name}_velocity")]
             self.c[0].argtypes = [ctypes.c_long] + [ctypes.c_void_p] * (dim + 1 + 4)
             self.c[1].argtypes = [ctypes.c_long] + [ctypes.c_void_p] * (2 * (dim + 1) + self.velocity_outputs)
+            self._grow(16)
+
+    def _grow(self, k: int) -> None:
+        """Buffers for ``k`` contacts, kept between calls with their addresses: a held row's
+        event function calls the kernels with one or two contacts thousands of times, and
+        each array's address costs microseconds to take."""
+        d = self.dim
+        # inputs: the points, then their rates; outputs in the kernel manifest's order: the
+        # gap, s (2D) or the 3 barycentrics (3D), normal, Jacobian; rate, tangential, bias(, slip)
+        self._inputs = np.empty((2 * (d + 1), k, d))
+        widths = (1, 1 if d == 2 else 3, d, (d + 1) * d, 1, d, 1) + (1,) * (self.velocity_outputs - 3)
+        self._outputs = [np.empty((k, n)) for n in widths]
+        self._addresses = ([self._inputs[j].ctypes.data for j in range(2 * (d + 1))],
+                           [z.ctypes.data for z in self._outputs])
 
     def __call__(self, points: list[FloatArray], rates: list[FloatArray]) -> ElementTerms:
         d, k = self.dim, len(points[0])
         if self.c is not None:
-            inputs = [np.ascontiguousarray(z, float) for z in points + rates]
-            # outputs as in the kernel manifest: s (2D) or the 3 barycentrics (3D)
-            gap, weight, normal, jacobian = (np.empty((k, n)) for n in (1, 1 if d == 2 else 3, d, (d + 1) * d))
-            rate, tangential, bias = np.empty((k, 1)), np.empty((k, d)), np.empty((k, 1))
-            slip = [np.empty((k, 1)) for _ in range(self.velocity_outputs - 3)]
-            self.c[0](k, *(z.ctypes.data for z in inputs[: d + 1]), gap.ctypes.data, weight.ctypes.data,
-                      normal.ctypes.data, jacobian.ctypes.data)
-            self.c[1](k, *(z.ctypes.data for z in inputs), rate.ctypes.data, tangential.ctypes.data, bias.ctypes.data,
-                      *(z.ctypes.data for z in slip))
-            weights = np.column_stack([1.0 - weight[:, 0], weight[:, 0]]) if d == 2 else weight
-            slip_terms = (slip[0][:, 0], slip[1][:, 0]) if d == 2 else (None, None)
-            return ElementTerms(gap[:, 0], weights, normal, rate[:, 0], bias[:, 0], *slip_terms)
+            if k > self._inputs.shape[1]:
+                self._grow(max(k, 2 * self._inputs.shape[1]))
+            for buffer, z in zip(self._inputs, points + rates):
+                buffer[:k] = z
+            # each buffer's first k rows are contiguous: the addresses stand for any k up to its size
+            inputs, outputs = self._addresses
+            self.c[0](k, *inputs[: d + 1], *outputs[:4])
+            self.c[1](k, *inputs, *outputs[4:])
+            gap, weight, normal, _, rate, _, bias, *slip = (z[:k] for z in self._outputs)
+            weights = np.column_stack([1.0 - weight[:, 0], weight[:, 0]]) if d == 2 else weight.copy()
+            slip_terms = (slip[0][:, 0].copy(), slip[1][:, 0].copy()) if d == 2 else (None, None)
+            return ElementTerms(gap[:, 0].copy(), weights, normal.copy(), rate[:, 0].copy(), bias[:, 0].copy(),
+                                *slip_terms)
         gap, weight, normal, _ = getattr(self.numpy, self.name)(*(z.T for z in points))
         rate, _, bias, *slip = getattr(self.numpy, f"{self.name}_velocity")(*(z.T for z in points + rates))
         weights = np.column_stack([1.0 - weight[0], weight[0]]) if d == 2 else weight.T
