@@ -207,6 +207,7 @@ class BodyContactModel(Model):
         self.laws = np.array(ground_laws + pair_laws, float).reshape(-1, 2)
         self.mu = np.concatenate([np.array(ground_laws, float).reshape(-1, 2)[inner.contacts[:, 1], 0],
                                   np.array(pair_laws, float).reshape(-1, 2)[self.slot_pair, 0]])
+        self._ground_friction = bool((self.mu[: self.n_ground_contacts] > 0.0).any())
         if self.dim == 3 and (self.mu > 0.0).any():  # the driver refuses such scenes with the reason
             raise ValueError("Coulomb friction on coupled contacts is simulated in 2D only")
         self._slip = np.zeros((self.n_contacts, self.dim))
@@ -317,8 +318,9 @@ class BodyContactModel(Model):
         return vt, ft, slack
 
     def _share_slips(self, p) -> None:
-        """The inner model's ground contacts slide along this model's slip directions."""
-        if isinstance(self._coordinates, _ParticleCoordinates) and self.n_grounds:
+        """The inner model's ground contacts slide along this model's slip directions (only
+        friction reads them)."""
+        if isinstance(self._coordinates, _ParticleCoordinates) and self._ground_friction:
             self.inner.slip_directions(p)[:] = self._slip[: self.n_ground_contacts]
 
     def _dynamics(self, y, p, held, push) -> _Solved:

@@ -70,7 +70,8 @@ def contact_solve(A: np.ndarray, b: np.ndarray) -> np.ndarray:
         if factor is not None and np.min(np.diag(factor)) ** 2 > CLEAR_PIVOTS * REDUNDANT * largest:
             from scipy.linalg import cho_solve
 
-            return cho_solve((factor, True), np.asarray(b, float))
+            # finite: A was factorised, and a non-finite b gives a non-finite answer the driver reports
+            return cho_solve((factor, True), np.asarray(b, float), check_finite=False)
     L = np.zeros((n, n))
     for j in range(n):
         d = A[j, j] - L[j, :j] @ L[j, :j]
