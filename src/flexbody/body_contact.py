@@ -84,7 +84,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .assembly import AssembledModel, _kernels_module
-from .broadphase import CandidateList
+from .broadphase import CandidateList, slices
 from .constants import HELD, SLIDING
 from .dynamics import contact_solve
 from .model import GeneratedModel, Model
@@ -883,10 +883,9 @@ class BodyContactModel(Model):
         plane through ``x[w]`` with unit ``normal`` (k, dim), near ``w``, bool (k,): its
         surface edges from ``w`` all point there (to rounding) and its outward normal there
         points away from it."""
-        start, count = self._incident_start[w], np.diff(self._incident_start)[w]
-        owner = np.repeat(np.arange(len(w)), count)
-        elements = self.elements[self._incident_flat[np.arange(count.sum()) + np.repeat(start - np.cumsum(count) + count,
-                                                                                         count)]]
+        start, stop = self._incident_start[w], self._incident_start[w + 1]
+        owner = np.repeat(np.arange(len(w)), stop - start)
+        elements = self.elements[self._incident_flat[slices(start, stop)]]  # each w's, end to end
         others = elements != w[owner, None]  # each element's other d - 1 vertices: its edges from w
         edge_owner = np.repeat(owner, self.dim - 1)
         edges = x[elements[others]] - x[w[edge_owner]]

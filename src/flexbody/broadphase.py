@@ -240,6 +240,13 @@ def brute_force_pairs(x: FloatArray, elements: IntArray, particle_body: IntArray
     return _keep(every, x, elements, lo, hi, particle_body, element_body, self_contact)
 
 
+def slices(start: IntArray, stop: IntArray) -> IntArray:
+    """The indices of the slices ``start[i]:stop[i]`` (k,) each, end to end, shape (sum of
+    their lengths,): one array's slices by their bounds (as in a CSR layout)."""
+    counts = np.asarray(stop) - np.asarray(start)
+    return np.repeat(start - np.cumsum(counts) + counts, counts) + np.arange(counts.sum())
+
+
 class CandidateList:
     """Candidate pairs kept between steps (a Verlet list): rebuilt only when a particle has moved.
 
@@ -287,10 +294,7 @@ class CandidateList:
         elif np.ndim(particles) == 0:
             kept = self._pairs[self._first[particles] : self._first[particles + 1]]
         else:  # the particles' slices, end to end
-            start, stop = self._first[particles], self._first[np.asarray(particles) + 1]
-            counts = stop - start
-            at = np.repeat(start - np.cumsum(counts) + counts, counts) + np.arange(counts.sum())
-            kept = self._pairs[at]
+            kept = self._pairs[slices(self._first[particles], self._first[np.asarray(particles) + 1])]
         return kept[self._inside(x, kept)]
 
     def kept(self, x: FloatArray, particle: int) -> IntArray:
