@@ -91,7 +91,7 @@ from .model import GeneratedModel, Model
 from .scene import Scene
 from .surface import closure_problem, crossings, edges, piercings, signed_measure
 from .surface_contact import (FACE, CompiledClosestFeatures, SurfaceContact, closest_features, segment_normals,
-                              triangle_normals)
+                              triangle_normals, vertex_elements)
 
 FloatArray = np.ndarray
 IntArray = np.ndarray
@@ -179,10 +179,8 @@ class BodyContactModel(Model):
         self._order = np.argsort(self._key)
         self._sorted_key = self._key[self._order]
         self._body_count = len(counts)
-        self._incident = _incidence(self.elements, self.n_particles)
-        # the same as one array: particle i's elements are _incident_flat[_incident_start[i] : _incident_start[i + 1]]
-        self._incident_start = np.concatenate([[0], np.cumsum([len(e) for e in self._incident])]).astype(np.intp)
-        self._incident_flat = np.concatenate(self._incident + [np.zeros(0, np.intp)]).astype(np.intp)
+        # particle i's elements: _incident_flat[_incident_start[i] : _incident_start[i + 1]]
+        self._incident_start, self._incident_flat = vertex_elements(self.elements, self.n_particles)
         self._body_elements = [np.flatnonzero(self.element_body == b) for b in range(len(counts))]
         self._closed: dict[int, bool] = {}  # per body: whether its surface is closed (fold), on first use
         self._neighbour = _neighbours(self.elements)
@@ -792,12 +790,7 @@ class BodyContactModel(Model):
         # The whole sweep depends on x alone, and an instant asks for it at the same state
         # several times (the step's end, the instant's resolve, the next segment's start):
         # the last few answers are kept, read-only.
-        key = np.ascontiguousarray(x).tobytes()
-        if key not in self._swept:
-            if len(self._swept) == SWEEPS_KEPT:
-                del self._swept[next(iter(self._swept))]  # the oldest
-            self._swept[key] = _read_only(self._sweep(x))
-        return self._swept[key]
+        return _kept(self._swept, np.ascontiguousarray(x).tobytes(), lambda: _read_only(self._sweep(x)), SWEEPS_KEPT)
 
     def _sweep(self, x, slots: IntArray | None = None) \
             -> tuple[FloatArray, np.ndarray, tuple[SurfaceContact, IntArray] | None]:
@@ -939,11 +932,15 @@ class BodyContactModel(Model):
                 self.element_of[slot] = contact.element[r]
                 continue
             feature = contact.feature[r][contact.feature[r] >= 0]
-            around = self._incident[feature[0]]
+            around = self._elements_at(feature[0])
             for other in feature[1:]:
-                around = np.intersect1d(around, self._incident[other])
+                around = np.intersect1d(around, self._elements_at(other))
             around = around[self.element_body[around] == self.slot_body[slot]]
             self.element_of[slot] = around[np.argmax(normals[around] @ contact.normal[r])]
+
+    def _elements_at(self, vertex: int) -> IntArray:
+        """The elements ``vertex`` is a corner of, ascending."""
+        return self._incident_flat[self._incident_start[vertex] : self._incident_start[vertex + 1]]
 
     def _pairs_with_body(self, slots) -> IntArray:
         """Every (particle, element) pair of these slots with their bodies' whole surfaces."""
@@ -1000,8 +997,10 @@ class BodyContactModel(Model):
         are the same at every evaluation)."""
         key = (np.asarray(ground_rows).tobytes(), np.asarray(slots).tobytes(),
                self.element_of[slots].tobytes(), tangents)
-        if key in self._layouts:
-            return self._layouts[key]
+        return _kept(self._layouts, key, lambda: self._new_layout(ground_rows, slots, tangents), LAYOUTS_KEPT)
+
+    def _new_layout(self, ground_rows, slots, tangents: bool) -> _Layout:
+        """:meth:`_layout` without the kept ones."""
         k = len(ground_rows) + len(slots)
         points = [self.inner.contacts[ground_rows, :1]] + ([self._slot_points(slots)] if len(slots) else [])
         particles = np.unique(np.concatenate([z.ravel() for z in points]))
@@ -1028,11 +1027,7 @@ class BodyContactModel(Model):
             index += [a * m + b] + ([b * m + a] if offset else [])
         masses = self.masses[particles[sorted_at]][:, None] if isinstance(self._coordinates, _ParticleCoordinates) \
             else None
-        layout = _Layout(particles, rows, at, order, masses, pairs, np.concatenate(index))
-        if len(self._layouts) == LAYOUTS_KEPT:
-            del self._layouts[next(iter(self._layouts))]  # the oldest
-        self._layouts[key] = layout
-        return layout
+        return _Layout(particles, rows, at, order, masses, pairs, np.concatenate(index))
 
     @staticmethod
     def _sparse_gram(layout: _Layout, coefficients: FloatArray, m: int) -> FloatArray:
@@ -1266,6 +1261,16 @@ class ElementKernels:
         return ElementTerms(gap[0], weights, normal.T, rate[0], bias[0], *slip_terms)
 
 
+def _kept(store: dict, key, make, size: int):
+    """``store[key]``, made by ``make()`` if missing; ``store`` keeps the last ``size`` made
+    (the oldest goes first)."""
+    if key not in store:
+        if len(store) == size:
+            del store[next(iter(store))]
+        store[key] = make()
+    return store[key]
+
+
 def _read_only(answer):
     """``answer`` (arrays in tuples and dataclasses, nested) with every array made
     read-only, in place: a kept answer handed out again must not be changed by whoever got
@@ -1306,15 +1311,6 @@ def _touched_vertex(contact: SurfaceContact) -> tuple[IntArray, np.ndarray]:
     rows = np.arange(len(contact.particle))
     corner = np.argmax(contact.weights, axis=1)
     return contact.feature[rows, corner], contact.weights[rows, corner] >= 1.0 - AT_VERTEX
-
-
-def _incidence(elements: IntArray, n: int) -> list[IntArray]:
-    """The elements each particle is a vertex of, ascending."""
-    out: list[list[int]] = [[] for _ in range(n)]
-    for e, vertices in enumerate(elements.tolist()):
-        for i in vertices:
-            out[i].append(e)
-    return [np.array(sorted(set(x)), np.intp) for x in out]
 
 
 def _neighbours(elements: IntArray) -> IntArray:

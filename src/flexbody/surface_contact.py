@@ -328,6 +328,26 @@ def jacobian_entries(contact: SurfaceContact, dim: int) -> tuple[IntArray, IntAr
     return rows[used], columns[used], values[used]
 
 
+def vertex_elements(elements: IntArray, n_vertices: int) -> tuple[IntArray, IntArray]:
+    """The elements each vertex is a corner of, ascending, as one array (CSR): vertex i's
+    are ``flat[start[i] : start[i + 1]]``.
+
+    Parameters
+    ----------
+    elements : ndarray of int, shape (m, d)
+    n_vertices : int
+
+    Returns
+    -------
+    start : ndarray of int, shape (n_vertices + 1,)
+    flat : ndarray of int, shape (m d,)
+    """
+    corners = np.asarray(elements).ravel()
+    start = np.zeros(n_vertices + 1, np.intp)
+    np.cumsum(np.bincount(corners, minlength=n_vertices), out=start[1:])
+    return start, np.argsort(corners, kind="stable") // np.shape(elements)[1]
+
+
 class CompiledClosestFeatures:
     """:func:`closest_features` in C (``fb_closest_features`` of the runtime library) for
     one surface: its elements, their bodies and each vertex's elements are converted once.
@@ -349,11 +369,9 @@ class CompiledClosestFeatures:
         self.elements = np.ascontiguousarray(elements, dtype=np.intc)
         self.dim = self.elements.shape[1]
         self.element_body = None if element_body is None else np.ascontiguousarray(element_body, dtype=np.intc)
-        corners = self.elements.ravel()
-        # Each vertex's elements, ascending (CSR): the pseudo-normals of vertices and edges.
-        self.incident = np.ascontiguousarray(np.argsort(corners, kind="stable") // self.dim, dtype=np.intc)
-        self.incident_start = np.zeros(n_vertices + 1, np.intc)
-        np.cumsum(np.bincount(corners, minlength=n_vertices), out=self.incident_start[1:])
+        # Each vertex's elements (CSR): the pseudo-normals of vertices and edges.
+        self.incident_start, self.incident = (np.ascontiguousarray(a, dtype=np.intc)
+                                              for a in vertex_elements(self.elements, n_vertices))
         # Addresses taken once (each costs microseconds, and event location calls this with
         # a pair or two thousands of times); the answers land in buffers kept between calls.
         self._surface = (self.elements.ctypes.data,
