@@ -134,3 +134,27 @@ def test_a_held_contact_whose_block_alone_disagrees_is_rooted_on_the_whole_probl
     crossing = locate(events, dense, 0.0, 1.0, events(dense(0.0)), events(dense(1.0)))
     assert crossing.t == pytest.approx(0.5, abs=1e-14)
     assert crossing.contacts.tolist() == [True]
+
+
+@pytest.mark.parametrize("g, root, most", [
+    (lambda t: 0.3 - t, 0.3, 12),
+    (lambda t: 0.3 - t**3, 0.3 ** (1 / 3), 12),
+    (lambda t: np.cos(3 * t), np.pi / 6, 12),
+    (lambda t: 1e-8 - 1e7 * (t - 0.7), 0.7 + 1e-15, 12),  # a contact force falling at 1e7 N/s
+    (lambda t: 1.0 if t < 0.61 else -1.0, 0.61, 55),  # a jump: bisection halves [0, 1] to 1e-15 in 50
+])
+def test_first_fired_is_on_the_fired_side_within_the_tolerance(g, root, most):
+    from flexbody.events import first_fired
+
+    seen = []
+
+    def counted(t):
+        seen.append(t)
+        return g(t)
+
+    xtol = 1e-15
+    t = first_fired(counted, 0.0, 1.0, g(0.0), g(1.0), xtol)
+    assert g(t) <= 0.0  # a restart from t must not find the same event again
+    assert root - 4 * np.spacing(root) <= t <= root + xtol + 8 * np.spacing(root)
+    assert 0.0 not in seen and 1.0 not in seen  # the ends' values are reused
+    assert len(seen) <= most  # Brent's method and a bisection to the fired side took 16-20 in a pile

@@ -310,19 +310,42 @@ def _root(events: EventFunctions, dense: Callable[[float], np.ndarray], c: int, 
         return ta
     if fb > 0.0:  # the interpolant stays positive: the crossing is at the step's end
         return tb
-    xtol = 1e-15
-    from scipy.optimize import brentq  # imported on first use: the compiled path never needs it
+    return first_fired(g, ta, tb, fa, fb, xtol=1e-15)
 
-    t = brentq(g, ta, tb, xtol=xtol, rtol=4 * np.finfo(float).eps)
-    if g(t) <= 0.0:
-        return t
-    # Brent's estimate can sit on the side where nothing has happened yet (a contact force
-    # changing at 1e7 N/s moves 1e-8 N in 1e-15 s): report the first time where it has, or
-    # the restart would find the same event again.
-    lo, hi = t, min(tb, t + 4 * (xtol + 4 * np.finfo(float).eps * abs(t)))
-    if g(hi) > 0.0:
-        lo, hi = hi, tb
-    while hi - lo > 2 * np.spacing(hi):
-        mid = 0.5 * (lo + hi)
-        lo, hi = (mid, hi) if g(mid) > 0.0 else (lo, mid)
-    return hi
+
+def first_fired(g: Callable[[float], float], lo: float, hi: float, g_lo: float, g_hi: float,
+                xtol: float) -> float:
+    """The first time where ``g`` has fired (``g <= 0``), within ``xtol`` plus 4 ulp of it,
+    given ``g(lo) = g_lo > 0`` and ``g(hi) = g_hi <= 0``: Chandrupatla's bracketing method
+    (inverse quadratic interpolation where it is safe, else bisection).
+
+    The bracket's fired end is returned, never an estimate on the side where nothing has
+    happened yet (a contact force changing at 1e7 N/s moves 1e-8 N in 1e-15 s): a restart
+    there would find the same event again.  The ends' values are reused, not evaluated
+    again, and the search stops when the bracket is within the tolerance, not below the
+    noise of ``g``'s round-off (measured in a pile: a third of Brent's evaluations were
+    spent there, and a bisection after it to pick the fired side).
+    """
+    a, g_a = hi, g_hi  # the newest point
+    b, g_b = lo, g_lo  # the bracket's other end
+    c, g_c = lo, g_lo  # the point dropped last (for the interpolation)
+    t = 0.5
+    while True:
+        width = abs(b - a)
+        limit = (xtol + 4 * np.finfo(float).eps * max(abs(a), abs(b))) / width
+        if limit >= 0.5 or g_a == 0.0 or g_b == 0.0:
+            return a if g_a <= 0.0 else b
+        x = a + min(1.0 - limit, max(limit, t)) * (b - a)
+        g_x = g(x)
+        if (g_x > 0.0) == (g_a > 0.0):  # x replaces a: the bracket is [x, b]
+            c, g_c = a, g_a
+        else:  # x and a bracket: b is dropped
+            c, g_c = b, g_b
+            b, g_b = a, g_a
+        a, g_a = x, g_x
+        # inverse quadratic interpolation through a, b, c where it stays monotone
+        xi, phi = (a - b) / (c - b), (g_a - g_b) / (g_c - g_b)
+        if phi * phi < xi and (1.0 - phi) ** 2 < 1.0 - xi:
+            t = g_a / (g_b - g_a) * g_c / (g_b - g_c) + (c - a) / (b - a) * g_a / (g_c - g_a) * g_b / (g_c - g_b)
+        else:
+            t = 0.5
