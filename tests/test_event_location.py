@@ -24,8 +24,8 @@ class _Closed:
         self.whole += 1
         return np.array([f(y[0]) for f in self.functions])
 
-    def free_gaps(self, y):  # the free contacts' functions, inf for the others
-        return np.where(self.free, self(y), np.inf)
+    def free_gaps(self, y, only=None):  # the free contacts' functions (those ``only``), inf for the others
+        return np.where(self.free & (True if only is None else only), self(y), np.inf)
 
     def one(self, y, c):
         self.single += 1
@@ -84,10 +84,6 @@ class _Step(_Closed):
         self.between_bodies = np.ones(len(functions), bool)
         self.phases = type("Phases", (), {"floor": np.zeros(len(functions))})()
         self.gap_tolerance = 1e-12
-
-    def free_gaps(self, y, only=None):
-        g = super().free_gaps(y)
-        return g if only is None else np.where(only, g, np.inf)
 
     def held_functions(self, y):
         return np.where(self.free, np.inf, self(y))

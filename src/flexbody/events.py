@@ -264,9 +264,15 @@ def _earliest(events: EventFunctions, dense: Callable[[float], np.ndarray], fire
     instant costs one root search, not one per fired contact.  A contact belongs to the
     instant if its function has fired ``GROUP_TIME`` after the earliest root.
     """
-    # impacts alone need no forces, lift-offs alone no gaps
-    evaluate = events.free_gaps if events.free[fired].all() else \
-        events.held_functions if not events.free[fired].any() else events
+    # impacts alone need no forces, and only the fired contacts' gaps; lift-offs alone no gaps
+    if events.free[fired].all():
+        among = np.zeros(len(ga), bool)
+        among[fired] = True
+
+        def evaluate(y: np.ndarray) -> np.ndarray:
+            return events.free_gaps(y, among)
+    else:
+        evaluate = events.held_functions if not events.free[fired].any() else events
     hi, g_hi = tb, gb
     rooted = np.zeros(len(ga), bool)
     candidates = fired
