@@ -15,8 +15,9 @@ One event function per contact, positive while nothing happens:
 
 SciPy's ``solve_ivp`` keeps only the first of several terminal events falling at the same
 time, so events are located here: every function that changed sign in a step (checked
-at the step's end and midpoint) gets its root by Brent's method on the dense output, the
-earliest root wins, and every root within ``GROUP_TIME`` of it belongs to the same
+at the step's end and midpoint) gets its root on the dense output by Chandrupatla's
+bracketing method (:func:`first_fired`; the compiled loop's is Brent's, which it keeps
+bracketed the same way), the earliest root wins, and every root within ``GROUP_TIME`` of it belongs to the same
 instant.  The result does not depend on the order of the contacts.
 """
 
@@ -321,16 +322,18 @@ def _root(events: EventFunctions, dense: Callable[[float], np.ndarray], c: int, 
 
 def first_fired(g: Callable[[float], float], lo: float, hi: float, g_lo: float, g_hi: float,
                 xtol: float) -> float:
-    """The first time where ``g`` has fired (``g <= 0``), within ``xtol`` plus 4 ulp of it,
-    given ``g(lo) = g_lo > 0`` and ``g(hi) = g_hi <= 0``: Chandrupatla's bracketing method
-    (inverse quadratic interpolation where it is safe, else bisection).
+    """The first time where ``g`` has fired (``g <= 0``), given ``g(lo) = g_lo > 0`` and
+    ``g(hi) = g_hi <= 0``, within ``2 (xtol + 4 eps |t|)`` after the crossing (eps: the
+    machine epsilon): Chandrupatla's bracketing method (inverse quadratic interpolation
+    where it is safe, else bisection).
 
     The bracket's fired end is returned, never an estimate on the side where nothing has
     happened yet (a contact force changing at 1e7 N/s moves 1e-8 N in 1e-15 s): a restart
     there would find the same event again.  The ends' values are reused, not evaluated
     again, and the search stops when the bracket is within the tolerance, not below the
-    noise of ``g``'s round-off (measured in a pile: a third of Brent's evaluations were
-    spent there, and a bisection after it to pick the fired side).
+    noise of ``g``'s round-off (measured in a pile: SciPy's ``brentq`` took 19.7 evaluations
+    per impact root, with its ends evaluated again and a bisection after its estimate to
+    reach the fired side; this takes 9.9).
     """
     a, g_a = hi, g_hi  # the newest point
     b, g_b = lo, g_lo  # the bracket's other end
