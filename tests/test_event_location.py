@@ -133,11 +133,14 @@ def test_a_held_contact_whose_block_alone_disagrees_is_rooted_on_the_whole_probl
 
 
 @pytest.mark.parametrize("g, root, most", [
-    (lambda t: 0.3 - t, 0.3, 12),
-    (lambda t: 0.3 - t**3, 0.3 ** (1 / 3), 12),
-    (lambda t: np.cos(3 * t), np.pi / 6, 12),
-    (lambda t: 1e-8 - 1e7 * (t - 0.7), 0.7 + 1e-15, 12),  # a contact force falling at 1e7 N/s
-    (lambda t: 1.0 if t < 0.61 else -1.0, 0.61, 55),  # a jump: bisection halves [0, 1] to 1e-15 in 50
+    (lambda t: 0.3 - t, 0.3, 4),
+    (lambda t: 0.3 - t**3, 0.3 ** (1 / 3), 9),
+    (lambda t: np.cos(3 * t), np.pi / 6, 9),
+    (lambda t: 1e-8 - 1e7 * (t - 0.7), 0.7 + 1e-15, 5),  # a contact force falling at 1e7 N/s
+    (lambda t: 1.0 - np.exp(100 * (t - 0.9)), 0.9, 14),  # flat, then steep
+    (lambda t: -np.tanh(1e6 * (t - 0.123)), 0.123, 28),  # a step smoothed over 1e-6
+    (lambda t: np.sign(0.37 - t) * abs(0.37 - t) ** 0.5, 0.37, 45),  # infinite slope at the root
+    (lambda t: 1.0 if t < 0.61 else -1.0, 0.61, 52),  # a jump: bisection halves [0, 1] to 1e-15 in 49
 ])
 def test_first_fired_is_on_the_fired_side_within_the_tolerance(g, root, most):
     from flexbody.events import first_fired
@@ -153,4 +156,15 @@ def test_first_fired_is_on_the_fired_side_within_the_tolerance(g, root, most):
     assert g(t) <= 0.0  # a restart from t must not find the same event again
     assert root - 4 * np.spacing(root) <= t <= root + 2 * (xtol + 4 * np.finfo(float).eps)  # |t| <= 1
     assert 0.0 not in seen and 1.0 not in seen  # the ends' values are reused
-    assert len(seen) <= most  # Brent's method and a bisection to the fired side took 16-20 in a pile
+    assert len(seen) <= most  # SciPy's brentq and a bisection to the fired side took 16-20 in a pile
+
+
+def test_first_fired_counts_a_nan_as_fired_and_takes_an_empty_bracket():
+    from flexbody.events import first_fired
+
+    def g(t):  # a state that stops being finite between the bracket's ends
+        return 1.0 if t < 0.4 else np.nan if t < 0.6 else -1.0
+
+    t = first_fired(g, 0.0, 1.0, 1.0, -1.0, 1e-15)
+    assert not g(t) > 0.0 and t == pytest.approx(0.4, abs=1e-14)
+    assert first_fired(g, 0.7, 0.7, 1.0, -1.0, 1e-15) == 0.7
