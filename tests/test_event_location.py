@@ -140,6 +140,7 @@ def test_a_held_contact_whose_block_alone_disagrees_is_rooted_on_the_whole_probl
     (lambda t: 1.0 - np.exp(100 * (t - 0.9)), 0.9, 14),  # flat, then steep
     (lambda t: -np.tanh(1e6 * (t - 0.123)), 0.123, 28),  # a step smoothed over 1e-6
     (lambda t: np.sign(0.37 - t) * abs(0.37 - t) ** 0.5, 0.37, 45),  # infinite slope at the root
+    (lambda t: np.sign(0.437 - t) * abs(0.437 - t) ** 9, 0.437, 55),  # flat at the root: interpolation helps little
     (lambda t: 1.0 if t < 0.61 else -1.0, 0.61, 52),  # a jump: bisection halves [0, 1] to 1e-15 in 49
 ])
 def test_first_fired_is_on_the_fired_side_within_the_tolerance(g, root, most):
@@ -168,3 +169,14 @@ def test_first_fired_counts_a_nan_as_fired_and_takes_an_empty_bracket():
     t = first_fired(g, 0.0, 1.0, 1.0, -1.0, 1e-15)
     assert not g(t) > 0.0 and t == pytest.approx(0.4, abs=1e-14)
     assert first_fired(g, 0.7, 0.7, 1.0, -1.0, 1e-15) == 0.7
+
+
+def test_first_fired_returns_within_its_tolerance_wherever_a_jump_lies():
+    """A jump's bisection ends with brackets of every width up to the tolerance: the fired
+    end is within 2 (xtol + 4 eps t) after the jump at each of 401 positions."""
+    from flexbody.events import first_fired
+
+    xtol, eps = 1e-15, np.finfo(float).eps
+    for root in np.linspace(0.05, 0.95, 401):
+        t = first_fired(lambda t: 1.0 if t < root else -1.0, 0.0, 1.0, 1.0, -1.0, xtol)
+        assert root <= t <= root + 2 * (xtol + 4 * eps)  # |t| <= 1

@@ -326,8 +326,10 @@ def first_fired(g: Callable[[float], float], lo: float, hi: float, g_lo: float, 
     ``g(lo) = g_lo > 0`` and ``g(hi) = g_hi <= 0``, within ``2 (xtol + 4 eps |t|)`` after
     the crossing (eps: the machine epsilon; the first one, if ``g`` crosses once):
     Chandrupatla's bracketing method (inverse quadratic interpolation where it is safe,
-    else bisection, and bisection wherever the bracket has not halved in two steps, as in
-    Brent's method).
+    else bisection).  Each new point lies at least the tolerance inside the bracket, so the
+    search ends; the interpolation's acceptance test keeps it from creeping (a guard that
+    bisects where the bracket has not halved in two steps, as Brent's, changed no count on
+    random roots of ``|t - r|^q``, q = 0.25 to 9, and added evaluations in a pile).
 
     The bracket's fired end is returned, never an estimate on the side where nothing has
     happened yet (a contact force changing at 1e7 N/s moves 1e-8 N in 1e-15 s): a restart
@@ -335,20 +337,17 @@ def first_fired(g: Callable[[float], float], lo: float, hi: float, g_lo: float, 
     again, and the search stops when the bracket is within the tolerance, not below the
     noise of ``g``'s round-off (measured in a pile: SciPy's ``brentq`` took 19.7 evaluations
     per impact root, with its ends evaluated again and a bisection after its estimate to
-    reach the fired side; this takes 10.1).
+    reach the fired side; this takes 9.9).
     """
     eps = float(np.finfo(float).eps)
     a, g_a = float(hi), float(g_hi)  # the newest point
     b, g_b = float(lo), float(g_lo)  # the bracket's other end
     c, g_c = b, g_b  # the point dropped last (for the interpolation)
-    t, widths = 0.5, [abs(b - a)] * 2
+    t = 0.5
     while True:
         width, tol = abs(b - a), xtol + 4 * eps * max(abs(a), abs(b))
         if width <= 2 * tol or g_a == 0.0 or g_b == 0.0:
             return b if g_a > 0.0 else a  # the fired end (a NaN counts as fired, as below)
-        if width > 0.5 * widths[-2]:  # not halved in two steps (an interpolation creeping): bisect
-            t = 0.5
-        widths.append(width)
         limit = tol / width  # at least tol from either end
         x = a + min(1.0 - limit, max(limit, t)) * (b - a)
         if x == a or x == b:  # the bracket holds no float between its ends (a tolerance of 0)
