@@ -347,11 +347,11 @@ def first_fired(g: Callable[[float], float], lo: float, hi: float, g_lo: float, 
     while True:
         width, tol = abs(b - a), xtol + 4 * eps * max(abs(a), abs(b))
         if width <= 2 * tol or g_a == 0.0 or g_b == 0.0:
-            return b if g_a > 0.0 else a  # the fired end (a NaN counts as fired, as below)
+            break
         limit = tol / width  # at least tol from either end
         x = a + min(1.0 - limit, max(limit, t)) * (b - a)
         if x == a or x == b:  # the bracket holds no float between its ends (a tolerance of 0)
-            return b if g_a > 0.0 else a
+            break
         g_x = g(x)
         if (g_x > 0.0) == (g_a > 0.0):  # x replaces a: the bracket is [x, b]
             c, g_c = a, g_a
@@ -365,3 +365,4 @@ def first_fired(g: Callable[[float], float], lo: float, hi: float, g_lo: float, 
             t = g_a / (g_b - g_a) * g_c / (g_b - g_c) + (c - a) / (b - a) * g_a / (g_c - g_a) * g_b / (g_c - g_b)
         else:
             t = 0.5
+    return b if g_a > 0.0 else a  # the fired end (a NaN counts as fired, as in the bookkeeping)
