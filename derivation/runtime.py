@@ -24,6 +24,7 @@ FILES = {
     "phases.c.jinja": "phases.c",
     "assembly.c.jinja": "assembly.c",
     "narrowphase.c.jinja": "narrowphase.c",
+    "held_rows.c.jinja": "held_rows.c",
 }
 COMMAND = "flexbody derive --runtime"
 

@@ -87,6 +87,7 @@ from .assembly import AssembledModel, _kernels_module
 from .broadphase import CandidateList, slices
 from .constants import HELD, SLIDING
 from .dynamics import contact_solve
+from .held_rows import CompiledHeldRows
 from .model import GeneratedModel, Model
 from .scene import Scene
 from .surface import closure_problem, crossings, edges, piercings, signed_measure
@@ -209,10 +210,14 @@ class BodyContactModel(Model):
         if self.dim == 3 and (self.mu > 0.0).any():  # the driver refuses such scenes with the reason
             raise ValueError("Coulomb friction on coupled contacts is simulated in 2D only")
         self._slip = np.zeros((self.n_contacts, self.dim))
+        self._frictional = bool((self.mu > 0.0).any())  # else the slip directions change no answer
         self._last: tuple[tuple[np.ndarray, ...], _Solved] | None = None  # the last state's answer (see _dynamics)
         self._swept: dict[bytes, tuple] = {}  # positions -> the whole surface sweep (see _surface_contacts)
         self._layouts: dict[tuple, _Layout] = {}  # held rows -> where their terms go (see _rows)
         self._element = ElementKernels(self.dim, self.backend)
+        # frictionless held rows on particles, solved in C with a C model (see _solve)
+        self._held_rows = (CompiledHeldRows(self.masses, self.dim)
+                           if self.backend == "c" and isinstance(self._coordinates, _ParticleCoordinates) else None)
         text = f"{inner.digest}|{self.slot_particle.tolist()}|{self.slot_body.tolist()}"
         self.digest = hashlib.sha256(f"bodies|{text}".encode()).hexdigest()[:16]
 
@@ -328,7 +333,7 @@ class BodyContactModel(Model):
         same state (a third of a stack's evaluations)."""
         y = np.asarray(y, float)
         held, push = np.asarray(held, np.intc), np.asarray(push, float)
-        key = (y, np.asarray(p), held, push, self.element_of, self._slip)
+        key = (y, np.asarray(p), held, push, self.element_of) + ((self._slip,) if self._frictional else ())
         if self._last is not None and all(map(np.array_equal, self._last[0], key)):
             return self._last[1]
         solved = self._solve(y, p, held, push)
@@ -366,6 +371,14 @@ class BodyContactModel(Model):
         k, mu, codes = len(rows), self.mu[rows], held[rows]
         stick = (mu > 0.0) & (codes == HELD)
         sliding = (mu > 0.0) & (codes == SLIDING)
+        if self._held_rows is not None and not (mu > 0.0).any():
+            x, v = self._coordinates.particles(q, u, p)
+            normals = self._coordinates.ground_normals(p)[self.inner.contacts[ground_rows, 1]]
+            force = self._held_rows(x, v, acc, self.inner.contacts[ground_rows, 0], normals,
+                                    self._slot_points(held_slots))
+            if force is not None:  # else a pivot fell below the drop threshold: contact_solve's fallback below
+                lam[rows] = force
+                return _Solved(ydot, lam, fast, rows, np.zeros(k), np.zeros(k), np.zeros((k, self.dim)), stick)
         r = self._rows(ground_rows, held_slots, q, u, p, tangents=bool((mu > 0.0).any()))
         if not (stick | sliding).any():  # frictionless: no tangent rows, a symmetric system
             force = contact_solve(r.W, -(r.J @ acc[r.columns] + r.bias))

@@ -1,0 +1,74 @@
+"""The forces of held contacts between bodies on particle coordinates, in C.
+
+:class:`CompiledHeldRows` calls ``fb_held_rows`` of the runtime library
+(``generated/runtime/held_rows.c``): the frictionless rows of
+:meth:`flexbody.body_contact.BodyContactModel._solve` (the held slots and the ground rows
+of the particles they move), their ``J M^-1 J^T`` in the independent blocks of rows that
+share particles, each solved by the ordered Cholesky of
+:func:`flexbody.dynamics.contact_solve`.  A pile's right-hand side solves such rows at every
+evaluation; in NumPy their assembly cost three times the whole C right-hand side.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .dynamics import REDUNDANT
+
+FloatArray = np.ndarray
+IntArray = np.ndarray
+
+
+class CompiledHeldRows:
+    """``fb_held_rows`` for the particles of one model.
+
+    Parameters
+    ----------
+    masses : ndarray, shape (n,)
+        The particles' masses (kg), all positive.
+    dim : int
+        2 or 3.
+    """
+
+    def __init__(self, masses: FloatArray, dim: int) -> None:
+        from . import runtime
+
+        self._call = runtime.library().fb_held_rows
+        self.dim = dim
+        self.inverse_mass = np.ascontiguousarray(1.0 / np.asarray(masses, float))
+        self._inverse_mass = self.inverse_mass.ctypes.data  # taken once: each address costs microseconds
+
+    def __call__(self, x: FloatArray, v: FloatArray, acc: FloatArray, ground_particles: IntArray,
+                 ground_normals: FloatArray, slot_points: IntArray) -> FloatArray | None:
+        """The rows' forces, adding their accelerations to ``acc`` in place.
+
+        Parameters
+        ----------
+        x, v : ndarray, shape (n, dim)
+            Positions and velocities.
+        acc : ndarray, shape (n * dim,)
+            The free accelerations, C-contiguous (a slice of the right-hand side).
+        ground_particles : ndarray of int, shape (k_g,)
+        ground_normals : ndarray, shape (k_g, dim)
+            The held ground rows: each one's particle and its ground's unit normal.
+        slot_points : ndarray of int, shape (k_s, dim + 1)
+            The held slots: each one's particle, then its element's vertices.
+
+        Returns
+        -------
+        lam : ndarray, shape (k_g + k_s,) or None
+            The forces (N), ground rows first; None, with ``acc`` unchanged, where a pivot
+            falls below ``-REDUNDANT`` of the largest diagonal entry (the caller solves with
+            :func:`flexbody.dynamics.contact_solve`, whose pivoted fallback copes).
+        """
+        x, v = np.ascontiguousarray(x, float), np.ascontiguousarray(v, float)
+        ground_particles = np.ascontiguousarray(ground_particles, np.intc)
+        ground_normals = np.ascontiguousarray(ground_normals, float)
+        slot_points = np.ascontiguousarray(slot_points, np.intc)
+        lam = np.empty(len(ground_particles) + len(slot_points))
+        status = self._call(self.dim, len(x), x.ctypes.data, v.ctypes.data, self._inverse_mass,
+                            len(ground_particles), ground_particles.ctypes.data, ground_normals.ctypes.data,
+                            len(slot_points), slot_points.ctypes.data, REDUNDANT, acc.ctypes.data, lam.ctypes.data)
+        if status < 0:
+            raise MemoryError(f"cannot allocate the held rows' work buffers ({len(lam)} rows)")
+        return None if status else lam

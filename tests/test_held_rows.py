@@ -1,0 +1,165 @@
+"""The held contacts' forces between bodies in C (flexbody.held_rows, generated/runtime/held_rows.c).
+
+References: a particle resting on a segment (the force by hand), the dense ``J M^-1 J^T``
+of rows built from the NumPy twins of the element kernels solved by
+:func:`flexbody.dynamics.contact_solve`, and the NumPy branch of
+``BodyContactModel._solve`` at the states a pile of discs and two spheres pass through.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import flexbody
+from flexbody import body_contact
+from flexbody.assembly import _kernels_module
+from flexbody.bench_bodies import bodies_scene_table
+from flexbody.dynamics import contact_solve
+from flexbody.model import load_model
+from flexbody.scene import load_scene
+
+from .conftest import HAS_CC
+
+pytestmark = pytest.mark.skipif(not HAS_CC, reason="needs a C compiler")
+K = _kernels_module()
+G = 9.81
+
+
+def held_rows(masses, dim):
+    from flexbody.held_rows import CompiledHeldRows
+
+    return CompiledHeldRows(np.asarray(masses, float), dim)
+
+
+def dense_reference(x, v, masses, acc, ground_particles, ground_normals, slot_points):
+    """The rows' forces and the accelerations after them, through the dense ``J (m, n dim)``
+    built from the NumPy kernels, ``W = J M^-1 J^T`` and :func:`contact_solve`."""
+    n, d = x.shape
+    rows, bias = [], []
+    for i, normal in zip(ground_particles, ground_normals):
+        row = np.zeros((n, d))
+        row[i] = normal
+        rows.append(row.ravel())
+        bias.append(0.0)
+    for points in slot_points:
+        column = [z[:, None] for z in x[points]] + [z[:, None] for z in v[points]]
+        if d == 2:
+            _, s, normal, _ = K.segment_2d(*column[:3])
+            weights = [1.0, -(1.0 - s[0, 0]), -s[0, 0]]
+            _, _, gap_bias, *_ = K.segment_2d_velocity(*column)
+        else:
+            _, bary, normal, _ = K.triangle_3d(*column[:4])
+            weights = [1.0] + list(-bary[:, 0])
+            _, _, gap_bias = K.triangle_3d_velocity(*column)
+        row = np.zeros((n, d))
+        for particle, w in zip(points, weights):
+            row[particle] += w * normal[:, 0]
+        rows.append(row.ravel())
+        bias.append(gap_bias[0, 0])
+    J = np.array(rows)
+    inverse = np.repeat(1.0 / np.asarray(masses, float), d)
+    lam = contact_solve((J * inverse) @ J.T, -(J @ acc + np.array(bias)))
+    return lam, acc + inverse * (J.T @ lam)
+
+
+def test_a_particle_resting_on_a_segment_gets_the_force_by_hand():
+    # a -> b along -x: the body lies below the segment, its outward normal is +y
+    x = np.array([[0.5, 0.0], [1.0, 0.0], [-1.0, 0.0]])  # the particle at s = 0.25 from a
+    masses = np.array([0.1, 0.2, 0.4])
+    acc = np.array([0.0, -G, 0.0, 1.0, 0.0, -2.0])
+    s = 0.25
+    gap_acc = -G - (1 - s) * 1.0 - s * (-2.0)
+    W = 1 / masses[0] + (1 - s) ** 2 / masses[1] + s**2 / masses[2]
+    lam = held_rows(masses, 2)(x, np.zeros_like(x), acc, [], np.zeros((0, 2)), np.array([[0, 1, 2]]))
+    assert lam == pytest.approx([-gap_acc / W], rel=1e-14)
+    np.testing.assert_allclose(acc.reshape(3, 2)[:, 1], [-G + lam[0] / masses[0], 1.0 - (1 - s) * lam[0] / masses[1],
+                                                        -2.0 - s * lam[0] / masses[2]], rtol=1e-14)
+    after = acc.reshape(3, 2)[:, 1]
+    assert after[0] - (1 - s) * after[1] - s * after[2] == pytest.approx(0.0, abs=1e-13)  # held: no gap acceleration
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_rows_sharing_particles_match_the_dense_contact_solve(dim):
+    """Random rows on a pool of particles (some share, some stand apart; one slot twice,
+    which the ordered Cholesky drops) against the dense reference, with velocities."""
+    rng = np.random.default_rng(7 + dim)
+    for trial in range(20):
+        n = 40
+        x, v = rng.normal(size=(n, dim)), rng.normal(size=(n, dim))
+        masses = rng.uniform(0.05, 2.0, n)
+        acc = rng.normal(size=n * dim)
+        slots = np.array([rng.choice(n, dim + 1, replace=False) for _ in range(12)])
+        slots = np.vstack([slots, slots[3]])  # a dependent row
+        grounds = rng.choice(n, 5, replace=False)
+        normals = rng.normal(size=(5, dim))
+        normals /= np.linalg.norm(normals, axis=1)[:, None]
+        lam_ref, acc_ref = dense_reference(x, v, masses, acc.copy(), grounds, normals, slots)
+        got = acc.copy()
+        lam = held_rows(masses, dim)(x, v, got, grounds, normals, slots)
+        assert lam is not None
+        scale = np.abs(lam_ref).max()
+        np.testing.assert_allclose(lam, lam_ref, rtol=0, atol=1e-9 * scale, err_msg=f"trial {trial}")
+        np.testing.assert_allclose(got, acc_ref, rtol=0, atol=1e-9 * np.abs(acc_ref).max(), err_msg=f"trial {trial}")
+        assert lam[-1] == 0.0  # the repeated slot: dropped, its twin carries it
+
+
+def test_an_indefinite_matrix_is_handed_back_untouched():
+    """A pivot below the drop threshold (here a negative mass) returns None and leaves the
+    accelerations as they were: the caller's contact_solve decides (pivoted, or a blow-up)."""
+    x = np.array([[0.5, 0.0], [1.0, 0.0], [-1.0, 0.0]])
+    acc = np.array([0.0, -G, 0.0, 0.0, 0.0, 0.0])
+    before = acc.copy()
+    assert held_rows([-0.1, 0.2, 0.4], 2)(x, np.zeros_like(x), acc, [], np.zeros((0, 2)), np.array([[0, 1, 2]])) is None
+    np.testing.assert_array_equal(acc, before)
+
+
+def _states_of(table: dict, every: int) -> tuple[body_contact.BodyContactModel, list]:
+    """The model of ``table`` (C) and every ``every``-th state its right-hand side saw with held
+    slots, with the held codes, pushes and elements."""
+    scene = load_scene(table)
+    model = load_model(scene)
+    seen, solve = [], model._solve
+
+    def keep(y, p, held, push):
+        if (np.asarray(held)[model.n_ground_contacts :] != 0).any():
+            seen.append((y.copy(), p.copy(), held.copy(), push.copy(), model.element_of.copy()))
+        return solve(y, p, held, push)
+
+    model._solve = keep
+    result = flexbody.simulate(scene, model=model)
+    assert result.status == "success", result.message
+    del model._solve
+    return model, seen[::every]
+
+
+def _disc_pile() -> dict:
+    return bodies_scene_table(4, 40, 0.3, True)  # the bodies study's pile, small
+
+
+def _sphere_pair() -> dict:
+    spheres = [{"name": f"s{k}", "shape": "sphere", "count": 30, "radius": 0.1, "center": True, "mass_total": 0.5,
+                "stiffness": 2000.0, "damping": 0.5, "damper": "relative", "position": [0.05 * k, 0.0, 0.15 + 0.22 * k],
+                "rotation": [0.1 * k, 0.05, 0.0], "collide": True} for k in range(2)]
+    return {"name": "spheres", "bodies": spheres, "gravity": [0.0, 0.0, -9.81],
+            "simulation": {"t_end": 0.3, "output_dt": 0.01, "method": "RK45", "rtol": 1e-6, "atol": 1e-9}}
+
+
+@pytest.mark.parametrize("table", [_disc_pile, _sphere_pair], ids=["discs_2d", "spheres_3d"])
+def test_the_c_rows_equal_the_numpy_rows_along_a_pile(table):
+    model, states = _states_of(table(), every=5)
+    assert len(states) > 20  # the pile rests on its held slots for a while
+    compiled = model._held_rows
+    weight = 9.81 * model.masses.max()
+    for y, p, held, push, elements in states:
+        model.element_of[:] = elements
+        model._held_rows = compiled
+        c = model._solve(y, p, held, push)
+        model._held_rows = None
+        reference = model._solve(y, p, held, push)
+        np.testing.assert_array_equal(c.rows, reference.rows)
+        # forces to rounding of the larger of the forces and a particle's weight (a slot
+        # just held can push with 1e-16 N: its round-off is the pile's, not its own)
+        scale = max(np.abs(reference.lam).max(), weight)
+        np.testing.assert_allclose(c.lam, reference.lam, rtol=0, atol=1e-10 * scale)
+        np.testing.assert_allclose(c.ydot, reference.ydot, rtol=0, atol=1e-10 * np.abs(reference.ydot).max())
