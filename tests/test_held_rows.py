@@ -163,3 +163,61 @@ def test_the_c_rows_equal_the_numpy_rows_along_a_pile(table):
         scale = max(np.abs(reference.lam).max(), weight)
         np.testing.assert_allclose(c.lam, reference.lam, rtol=0, atol=1e-10 * scale)
         np.testing.assert_allclose(c.ydot, reference.ydot, rtol=0, atol=1e-10 * np.abs(reference.ydot).max())
+        # the contacts coupled to each held slot's: the C blocks, then SciPy's components
+        on = np.asarray(held) != 0
+        for slot in np.flatnonzero(on[model.n_ground_contacts :])[:3] + model.n_ground_contacts:
+            seed = np.zeros(model.n_contacts, bool)
+            seed[slot] = True
+            model._held_rows = compiled
+            blocks = model.coupled_with(y[: model.nq], p, seed, on)
+            model._held_rows = None
+            np.testing.assert_array_equal(blocks, model.coupled_with(y[: model.nq], p, seed, on))
+            # the block's forces from its own particles and rows: the whole right-hand side's, bit for bit
+            model._held_rows = compiled
+            alone = np.where(blocks & on, held, 0).astype(held.dtype)
+            np.testing.assert_array_equal(model.held_forces(y, p, alone, push), model.rhs(y, p, alone, push)[1])
+        model._held_rows = compiled
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_row_blocks_are_the_connected_components_of_rows_and_particles(dim):
+    """Against SciPy's connected components of the graph of rows and the particles they
+    move; blocks numbered in the order of their lowest rows."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    rng = np.random.default_rng(dim)
+    for _ in range(30):
+        n = int(rng.integers(20, 200))
+        slots = np.array([rng.choice(n, dim + 1, replace=False) for _ in range(int(rng.integers(0, 30)))],
+                         int).reshape(-1, dim + 1)
+        grounds = rng.choice(n, int(rng.integers(0, 10)), replace=False)
+        block = held_rows(np.ones(n), dim).blocks(grounds, slots)
+        rows = np.concatenate([np.arange(len(grounds)), len(grounds) + np.repeat(np.arange(len(slots)), dim + 1)])
+        particles = np.concatenate([grounds, slots.ravel()])
+        m = len(grounds) + len(slots)
+        graph = coo_matrix((np.ones(len(rows)), (rows, m + particles)), shape=(m + n, m + n))
+        label = connected_components(graph, directed=False)[1][:m]
+        np.testing.assert_array_equal(label[:, None] == label[None, :], block[:, None] == block[None, :])
+        first_rows = [int(np.flatnonzero(block == b)[0]) for b in range(block.max(initial=-1) + 1)]
+        assert first_rows == sorted(first_rows)
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_free_accelerations_of_some_particles_are_the_right_hand_sides(dim):
+    """The assembled C model's free accelerations of listed particles alone equal its whole
+    right-hand side's with nothing held, bit for bit; the others are left at 0."""
+    if dim == 2:
+        table = bodies_scene_table(2, 30, 0.1, True)
+    else:
+        table = _sphere_pair()
+    model = load_model(load_scene(table))
+    inner, rng = model.inner, np.random.default_rng(dim)
+    p = model.parameters(load_scene(table))
+    y = np.concatenate([rng.normal(size=inner.nq) * 0.1, rng.normal(size=inner.nu), [0.0, 0.0]])
+    push = np.where(rng.random(inner.n_contacts) < 0.2, rng.random(inner.n_contacts), 0.0)
+    listed = rng.choice(inner.n_particles, 7, replace=False)
+    acc = inner.free_accelerations(y, p, push, listed).reshape(-1, dim)
+    whole = inner.rhs(y, p, np.zeros(inner.n_contacts, np.intc), push)[0][inner.nq : inner.nq + inner.nu].reshape(-1, dim)
+    np.testing.assert_array_equal(acc[listed], whole[listed])
+    assert not np.delete(acc, listed, axis=0).any()

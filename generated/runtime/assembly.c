@@ -1243,6 +1243,20 @@ void fb_asm_link_jacobians(const Assembly *A, const double *y, double *out)
     if (A->dim == 3) link_jacobians_3d(A, y, out);
 }
 
+/* The free accelerations (links, gravity, pushes: no held contact's force) of the k listed
+ * particles alone, into their rows of acc (n, dim), as the right-hand side sums them, bit
+ * for bit: a block of held contacts between bodies needs its own particles' only. */
+void fb_asm_free_accelerations(const Assembly *A, const double *y, const double *push, int k, const int *particles,
+                               double *acc)
+{
+    if (A->dim == 2)
+        for (int j = 0; j < k; ++j)
+            free_acceleration_2d(A, y, push, particles[j], acc + 2 * particles[j]);
+    if (A->dim == 3)
+        for (int j = 0; j < k; ++j)
+            free_acceleration_3d(A, y, push, particles[j], acc + 3 * particles[j]);
+}
+
 /* ------------------------------------------------------------------ any system, from Python */
 int fb_sys_rhs(const FbSystem *s, const double *y, const int *held, const double *push, double *ydot, double *lam)
 {

@@ -95,6 +95,66 @@ static void cholesky_solve(const double *L, int n, double *x)
     }
 }
 
+/* Each particle's terms as a list, ascending: head[p] its first, next[t] the one after t. */
+static void link_terms(int n, int n_terms, const Term *terms, int *head, int *next)
+{
+    for (int p = 0; p < n; ++p) head[p] = -1;
+    for (int t = n_terms - 1; t >= 0; --t) {
+        next[t] = head[terms[t].particle];
+        head[terms[t].particle] = t;
+    }
+}
+
+/* block[r] of each of the m rows: rows joined through a particle both move share a block;
+ * blocks are numbered in the order of their lowest rows.  Returns the number of blocks. */
+static int number_blocks(int m, int n_terms, const Term *terms, const int *head, int *parent, int *block)
+{
+    for (int r = 0; r < m; ++r) parent[r] = r;
+    for (int t = 0; t < n_terms; ++t) {
+        const int a = root_of(parent, terms[t].row), b = root_of(parent, terms[head[terms[t].particle]].row);
+        if (a != b) parent[a > b ? a : b] = a < b ? a : b;
+    }
+    int n_blocks = 0;
+    for (int r = 0; r < m; ++r) block[r] = parent[r] == r ? n_blocks++ : -1;
+    for (int r = 0; r < m; ++r) block[r] = block[root_of(parent, r)];
+    return n_blocks;
+}
+
+/* The ground rows' terms: each its particle, with its ground's normal if given. */
+static void ground_terms(int dim, int k_g, const int *ground_particle, const double *ground_normal, Term *terms)
+{
+    for (int r = 0; r < k_g; ++r) {
+        terms[r].row = r;
+        terms[r].particle = ground_particle[r];
+        for (int k = 0; k < dim; ++k) terms[r].c[k] = ground_normal ? ground_normal[dim * r + k] : 0.0;
+    }
+}
+
+/* Which block each row is in (rows as fb_held_rows takes them; no coefficients needed):
+ * out block (k_g + k_s), numbered in the order of their lowest rows.  Returns the number of
+ * blocks, or -1 if memory ran out. */
+int fb_row_blocks(int dim, int n, int k_g, const int *ground_particle, int k_s, const int *slot_points, int *block)
+{
+    const int m = k_g + k_s, n_terms = k_g + (dim + 1) * k_s;
+    Term *terms = malloc((size_t)(n_terms > 0 ? n_terms : 1) * sizeof *terms);
+    int *ints = malloc((size_t)(n + n_terms + m + 1) * sizeof *ints);
+    if (!terms || !ints) {
+        free(terms), free(ints);
+        return -1;
+    }
+    int *head = ints, *next = head + n, *parent = next + n_terms;
+    ground_terms(dim, k_g, ground_particle, NULL, terms);
+    for (int s = 0; s < k_s; ++s)
+        for (int j = 0; j <= dim; ++j) {
+            terms[k_g + (dim + 1) * s + j].row = k_g + s;
+            terms[k_g + (dim + 1) * s + j].particle = slot_points[(dim + 1) * s + j];
+        }
+    link_terms(n, n_terms, terms, head, next);
+    const int n_blocks = number_blocks(m, n_terms, terms, head, parent, block);
+    free(terms), free(ints);
+    return n_blocks;
+}
+
 /* The held rows' forces and the accelerations they give.
  *
  * in: dim (2 or 3), n particles, their positions x and velocities v (n, dim) and inverse
@@ -121,32 +181,14 @@ int fb_held_rows(int dim, int n, const double *x, const double *v, const double 
     int *head = ints, *next = head + n, *parent = next + n_terms, *block = parent + m, *at = block + m,
         *start = at + m, *order = start + m + 1;
     double *bias = reals, *x_block = bias + m;
-    for (int r = 0; r < k_g; ++r) {
-        terms[r].row = r;
-        terms[r].particle = ground_particle[r];
-        for (int k = 0; k < dim; ++k) terms[r].c[k] = ground_normal[dim * r + k];
-        bias[r] = 0.0; /* a ground does not move */
-    }
+    ground_terms(dim, k_g, ground_particle, ground_normal, terms);
+    for (int r = 0; r < k_g; ++r) bias[r] = 0.0; /* a ground does not move */
     for (int s = 0; s < k_s; ++s)
         slot_row(dim, slot_points + (dim + 1) * s, x, v, k_g + s, terms + k_g + (dim + 1) * s, bias + k_g + s);
-    for (int p = 0; p < n; ++p) head[p] = -1;
-    for (int t = n_terms - 1; t >= 0; --t) {
-        next[t] = head[terms[t].particle];
-        head[terms[t].particle] = t;
-    }
-    /* blocks: rows joined through a particle both move, numbered by their lowest row */
-    for (int r = 0; r < m; ++r) parent[r] = r;
-    for (int t = 0; t < n_terms; ++t) {
-        const int a = root_of(parent, terms[t].row), b = root_of(parent, terms[head[terms[t].particle]].row);
-        if (a != b) parent[a > b ? a : b] = a < b ? a : b;
-    }
-    int n_blocks = 0;
-    for (int r = 0; r < m; ++r) block[r] = parent[r] == r ? n_blocks++ : -1;
+    link_terms(n, n_terms, terms, head, next);
+    const int n_blocks = number_blocks(m, n_terms, terms, head, parent, block);
     for (int b = 0; b <= n_blocks; ++b) start[b] = 0;
-    for (int r = 0; r < m; ++r) {
-        block[r] = block[root_of(parent, r)];
-        at[r] = start[block[r] + 1]++; /* rows keep their order within a block */
-    }
+    for (int r = 0; r < m; ++r) at[r] = start[block[r] + 1]++; /* rows keep their order within a block */
     long size = 0; /* every block's matrix, one after the other */
     for (int b = 0; b < n_blocks; ++b) {
         const long rows = start[b + 1];

@@ -29,6 +29,7 @@ from .model import Model, singular_matrix_error
 from .scene import Scene
 
 FloatArray = np.ndarray
+IntArray = np.ndarray
 
 
 def scene_parameters(scene: Scene) -> FloatArray:
@@ -199,6 +200,17 @@ class AssembledC(runtime.SystemModel, AssembledModel):
         system.owner = _AssemblyHandle(lib, handle)
         self._system_cache = (key, system)
         return system
+
+    def free_accelerations(self, y, p, push, particles: IntArray) -> FloatArray:
+        """The free accelerations (links, gravity, pushes; no held contact's force) of
+        ``particles (k,)`` alone, as :meth:`rhs` sums them, bit for bit: shape (n * dim,),
+        zero for the other particles."""
+        y, push = np.ascontiguousarray(y, float), np.ascontiguousarray(push, float)
+        particles = np.ascontiguousarray(particles, np.intc)
+        acc = np.zeros(self.nu)
+        self.lib.fb_asm_free_accelerations(self.system(p).data, y.ctypes.data, push.ctypes.data, len(particles),
+                                           particles.ctypes.data, acc.ctypes.data)
+        return acc
 
     def use_threads(self, threads: int) -> None:
         """Let the right-hand side use up to ``threads`` threads (0: OpenMP's default, the

@@ -105,7 +105,9 @@ class EventFunctions:
         mask = self.held_mask if among is None else self.held_mask & among
         held = self.held if among is None else np.where(mask, self.held, 0).astype(self.held.dtype)
         if mask.any():
-            _, lam = m.rhs(y, self.p, held, self.phases.push)
+            # a block's forces from its own rows (a lift-off's root evaluates nothing else)
+            lam = m.held_forces(y, self.p, held, self.phases.push) if among is not None else \
+                m.rhs(y, self.p, held, self.phases.push)[1]
             g[mask] = lam[mask] + self.force_tolerance[mask]
             if self.margins is not None:  # a contact held on another body's element passes onto the next
                 g[mask] = np.minimum(g[mask], self.margins(y, self.p, held)[mask])

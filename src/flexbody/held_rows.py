@@ -33,8 +33,10 @@ class CompiledHeldRows:
     def __init__(self, masses: FloatArray, dim: int) -> None:
         from . import runtime
 
-        self._call = runtime.library().fb_held_rows
+        lib = runtime.library()
+        self._call, self._blocks = lib.fb_held_rows, lib.fb_row_blocks
         self.dim = dim
+        self.n = len(masses)
         self.inverse_mass = np.ascontiguousarray(1.0 / np.asarray(masses, float))
         self._inverse_mass = self.inverse_mass.ctypes.data  # taken once: each address costs microseconds
 
@@ -72,3 +74,15 @@ class CompiledHeldRows:
         if status < 0:
             raise MemoryError(f"cannot allocate the held rows' work buffers ({len(lam)} rows)")
         return None if status else lam
+
+    def blocks(self, ground_particles: IntArray, slot_points: IntArray) -> IntArray:
+        """Which block each row is in, shape (k_g + k_s,): rows joined through a particle
+        both move share one (they act on each other), numbered in the order of their lowest
+        rows; the rows as for :meth:`__call__` (ground rows first)."""
+        ground_particles = np.ascontiguousarray(ground_particles, np.intc)
+        slot_points = np.ascontiguousarray(slot_points, np.intc)
+        block = np.empty(len(ground_particles) + len(slot_points), np.intc)
+        if self._blocks(self.dim, self.n, len(ground_particles), ground_particles.ctypes.data, len(slot_points),
+                        slot_points.ctypes.data, block.ctypes.data) < 0:
+            raise MemoryError(f"cannot allocate the work buffers of {len(block)} rows' blocks")
+        return block

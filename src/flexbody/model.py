@@ -145,6 +145,12 @@ class Model:
         """
         raise NotImplementedError
 
+    def held_forces(self, y, p, held, push) -> FloatArray:
+        """``rhs(y, p, held, push)[1]``, shape (nc,): the held contacts' forces alone, which
+        a model may find without the whole right-hand side (a block of coupled contacts,
+        :meth:`coupled_with`: what locating its lift-off evaluates again and again)."""
+        return self.rhs(y, p, held, push)[1]
+
     def contact_state(self, y, p, held, push) -> tuple[FloatArray, FloatArray, FloatArray]:  # pragma: no cover
         """Gaps, normal velocities ``J u`` and held-contact forces at ``y``, each shape (nc,)."""
         raise NotImplementedError

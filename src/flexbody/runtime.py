@@ -46,6 +46,7 @@ SIGNATURES = {
     "fb_asm_laws": (None, [_ptr, _ptr]),
     "fb_asm_system": (None, [_ptr, _ptr]),
     "fb_asm_link_jacobians": (None, [_ptr, _ptr, _ptr]),
+    "fb_asm_free_accelerations": (None, [_ptr, _ptr, _ptr, _int, _ptr, _ptr]),
     "fb_sys_rhs": (_int, [_ptr, _ptr, _ptr, _ptr, _ptr, _ptr]),
     "fb_sys_gaps": (None, [_ptr, _ptr, _ptr]),
     "fb_sys_contact_state": (_int, [_ptr, _ptr, _ptr, _ptr, _ptr, _ptr, _ptr]),
@@ -57,6 +58,7 @@ SIGNATURES = {
     "fb_closest_features": (_int, [_int, _int, _ptr, _ptr, _ptr, _ptr, _ptr, _ptr, _ptr, _ptr, _ptr, _ptr, _ptr,
                                    _ptr, _ptr, _ptr]),
     "fb_held_rows": (_int, [_int, _int, _ptr, _ptr, _ptr, _int, _ptr, _ptr, _int, _ptr, _double, _ptr, _ptr]),
+    "fb_row_blocks": (_int, [_int, _int, _int, _ptr, _int, _ptr, _ptr]),
 }
 
 
