@@ -966,13 +966,17 @@ class BodyContactModel(Model):
         else:
             contact = self._closest_features(x, self._pairs_with_body(missing))
             slot_rows, found = self._slots_of(contact.particle, self.element_body[contact.element])
-        row_of = dict(zip(slot_rows[found].tolist(), np.flatnonzero(found).tolist()))
+        row_of = np.full(self.n_primary, -1, np.intp)
+        row_of[slot_rows[found]] = np.flatnonzero(found)
+        rows = row_of[missing % self.n_primary]  # a twin: its slot's answer
+        if (rows < 0).any():
+            raise KeyError(f"slots {missing[rows < 0].tolist()} have no closest feature on their bodies")
+        on_face = contact.kind[rows] == FACE
+        self.element_of[missing[on_face]] = contact.element[rows[on_face]]
+        if on_face.all():
+            return
         normals = (segment_normals if self.dim == 2 else triangle_normals)(x, self.elements)
-        for slot in missing.tolist():
-            r = row_of[slot % self.n_primary]  # a twin: its slot's answer
-            if contact.kind[r] == FACE:
-                self.element_of[slot] = contact.element[r]
-                continue
+        for slot, r in zip(missing[~on_face].tolist(), rows[~on_face].tolist()):
             feature = contact.feature[r][contact.feature[r] >= 0]
             around = self._elements_at(feature[0])
             for other in feature[1:]:
