@@ -298,33 +298,93 @@ class BodyContactModel(Model):
         return np.array([0.5 * float(np.sum(self.masses * np.sum(v * v, axis=1)))])
 
     def rhs(self, y, p, held, push):
+        if not np.any(held):  # every contact free (an instant's free accelerations): the inner model's alone
+            ng = self.n_ground_contacts
+            self._share_slips(p)
+            lam = np.zeros(self.n_contacts)
+            ydot, lam[:ng] = self.inner.rhs(y, p, np.zeros(ng, np.intc), np.asarray(push, float)[:ng])
+            return ydot, lam
         solved = self._dynamics(y, p, held, push)
         return solved.ydot.copy(), solved.lam.copy()  # new arrays: SciPy keeps references
 
+    def rhs_function(self, p, held, push):
+        """As :meth:`flexbody.model.Model.rhs_function`: on particles in C without friction,
+        the inner model's C right-hand side and the held rows' forces in C, laid out once for
+        the frozen contact set (:class:`_FrozenRows`; a pile's steps evaluate nothing else),
+        the same numbers as :meth:`rhs`, bit for bit."""
+        frozen = self._frozen_rows(p, held)
+        general = super().rhs_function(p, held, push)
+        if frozen is None:
+            return general
+        nq, nu, ng = self.nq, self.nu, self.n_ground_contacts
+        inner = self.inner.rhs_function(p, frozen.fast, np.asarray(push, float)[:ng])
+        if not len(frozen.slots):
+            return inner
+
+        def f(t, y):
+            if not frozen.current(self.element_of):
+                return general(t, y)
+            ydot = inner(t, y)
+            if frozen.solve(self._held_rows, np.asarray(y, float), ydot[nq : nq + nu]) is None:
+                return general(t, y)  # a pivot below the drop threshold: contact_solve's fallback
+            return ydot
+
+        return f
+
+    def forces_function(self, p, held, push):
+        """As :meth:`flexbody.model.Model.forces_function`, laid out once as :meth:`rhs_function`."""
+        frozen = self._frozen_rows(p, held)
+        if frozen is None:
+            return super().forces_function(p, held, push)
+        nq, nu, ng = self.nq, self.nu, self.n_ground_contacts
+        push = np.asarray(push, float)
+
+        def forces(y):
+            if not frozen.current(self.element_of):
+                return self.rhs(y, p, held, push)[1]
+            lam = np.zeros(self.n_contacts)
+            ydot, lam[:ng] = self.inner.rhs(y, p, frozen.fast, push[:ng])
+            force = frozen.solve(self._held_rows, np.asarray(y, float), ydot[nq : nq + nu]) if len(frozen.slots) \
+                else np.zeros(0)
+            if force is None:
+                return self.rhs(y, p, held, push)[1]
+            lam[frozen.rows] = force
+            return lam
+
+        return forces
+
+    def _frozen_rows(self, p, held) -> _FrozenRows | None:
+        """What :meth:`_solve` finds for the contact set ``held`` (codes (nc,)) before its
+        first number, for C models on particles without friction where every held slot has
+        its element; else None."""
+        held = np.asarray(held)
+        ng = self.n_ground_contacts
+        slots = np.flatnonzero(held[ng:] != 0)
+        if self._held_rows is None or self._frictional or (self.element_of[slots] < 0).any():
+            return None
+        grounds = self._coupled_grounds(held, slots)
+        fast = np.array(held[:ng], np.intc)
+        fast[grounds] = 0
+        normals = self._coordinates.ground_normals(p)[self.inner.contacts[grounds, 1]]
+        return _FrozenRows(slots, self.element_of[slots].copy(), fast, np.concatenate([grounds, ng + slots]),
+                           self._slot_points(slots), self.inner.contacts[grounds, 0], normals, self.nq, self.dim)
+
     def held_forces(self, y, p, held, push) -> FloatArray:
         """As :meth:`flexbody.model.Model.held_forces`: where every held contact couples to a
-        held slot (a block of :meth:`coupled_with`), without friction, on particles in C,
-        from the free accelerations of the particles the rows move and the rows alone
+        held slot (a block of :meth:`coupled_with`), on particles in C without friction, from
+        the free accelerations of the particles the rows move and the rows alone
         (``rhs``'s numbers, bit for bit, at O(the block) instead of O(the scene))."""
-        ng = self.n_ground_contacts
-        on = np.flatnonzero(np.asarray(held))
-        grounds, slots = on[on < ng], on[on >= ng] - ng
-        if self._held_rows is None or not len(slots) or (self.mu[on] > 0.0).any():
+        frozen = self._frozen_rows(p, held)
+        if frozen is None or not len(frozen.slots) or frozen.fast.any():  # fast: a ground contact held alone
             return self.rhs(y, p, held, push)[1]
         y = np.asarray(y, float)
-        x, v = self._coordinates.particles(y[: self.nq], y[self.nq : self.nq + self.nu], p)
-        self._constrain_elements(slots, x)
-        points = self._slot_points(slots)
-        at = self.inner.contacts[grounds, 0]
-        if not np.isin(at, points).all():  # a ground contact the inner model holds alone
-            return self.rhs(y, p, held, push)[1]
-        acc = self.inner.free_accelerations(y, p, np.asarray(push, float)[:ng], np.unique(np.concatenate([at, points.ravel()])))
-        normals = self._coordinates.ground_normals(p)[self.inner.contacts[grounds, 1]]
-        force = self._held_rows(x, v, acc, at, normals, points)
+        moved = np.unique(np.concatenate([frozen.at, frozen.points.ravel()]))
+        acc = self.inner.free_accelerations(y, p, np.asarray(push, float)[: self.n_ground_contacts], moved)
+        force = frozen.solve(self._held_rows, y, acc)
         if force is None:  # a pivot below the drop threshold: contact_solve's fallback
             return self.rhs(y, p, held, push)[1]
         lam = np.zeros(self.n_contacts)
-        lam[on] = force  # ground rows first, as `on` lists them
+        lam[frozen.rows] = force
         return lam
 
     def friction(self, y, p, held, push) -> tuple[FloatArray, FloatArray, FloatArray]:
@@ -372,19 +432,9 @@ class BodyContactModel(Model):
         held_slots = np.flatnonzero(held[ng:] != 0)
         lam = np.zeros(self.n_contacts)
         q, u = y[: self.nq], y[self.nq : self.nq + self.nu]
-        # Ground contacts of the particles held slots move couple with them (on frames T, all
-        # held ones do; only those with friction need this solve there): solved here.
-        moved = np.zeros(self.n_particles, bool)
-        # a particle held on two grounds at once (a corner): its friction couples them
-        held_g = held[:ng] != 0
-        moved |= np.bincount(self.inner.contacts[held_g, 0], minlength=self.n_particles) > 1
         if len(held_slots):
-            x = self._coordinates.particles(q, None, p)[0]
-            self._constrain_elements(held_slots, x)
-            moved[self._slot_points(held_slots).ravel()] = True
-        ground_rows = np.flatnonzero(self._coordinates.coupled_grounds(held[:ng] != 0, moved))
-        if not len(held_slots) and not (self.mu[ground_rows] > 0.0).any():
-            ground_rows = ground_rows[:0]
+            self._constrain_elements(held_slots, self._coordinates.particles(q, None, p)[0])
+        ground_rows = self._coupled_grounds(held, held_slots)
         fast = held[:ng].copy()
         fast[ground_rows] = 0
         self._share_slips(p)
@@ -428,6 +478,21 @@ class BodyContactModel(Model):
         # the power sliding friction dissipates (>= 0): the contact work entry of the state, as a ground's
         ydot[self.nq + self.nu + 1] -= float(np.sum(np.where(sliding, lam_t * slip, 0.0)))
         return _Solved(ydot, lam, fast, rows, slip, lam_t, r.tangents, stick)
+
+    def _coupled_grounds(self, held: np.ndarray, held_slots: IntArray) -> IntArray:
+        """The held ground contacts :meth:`_solve` solves with the held slots ``held_slots``
+        (each with its element), ascending: those of the particles the slots move (on frames
+        T, every held one; only those with friction need this solve there), and of a
+        particle held on two grounds at once (a corner: its friction couples them); none
+        where no slot is held and nothing has friction."""
+        ng = self.n_ground_contacts
+        held_g = held[:ng] != 0
+        moved = np.bincount(self.inner.contacts[held_g, 0], minlength=self.n_particles) > 1
+        moved[self._slot_points(held_slots).ravel()] = True
+        ground_rows = np.flatnonzero(self._coordinates.coupled_grounds(held_g, moved))
+        if not len(held_slots) and not (self.mu[ground_rows] > 0.0).any():
+            ground_rows = ground_rows[:0]
+        return ground_rows
 
     def _coupled_forces(self, r: _Rows, acc, k: int, mu: np.ndarray, stick: np.ndarray, drag: np.ndarray):
         """Normal forces (k,), tangential ones (k,) and the acceleration change on
@@ -1088,6 +1153,34 @@ class BodyContactModel(Model):
             w = np.einsum("kd,kd->k", scaled[first], coefficients[second])
             weight += [w] + ([w] if mirrored else [])
         return np.bincount(layout.index, np.concatenate(weight), minlength=m * m).reshape(m, m)
+
+
+class _FrozenRows(NamedTuple):
+    """The coupled rows of one contact set, as :meth:`BodyContactModel._solve` finds them:
+    the held ``slots`` (k_s,) with their ``elements`` then, the inner model's codes
+    ``fast`` (ng,) with the coupled ground rows cleared, every coupled row ``rows`` (ground
+    rows, then slots; contact indices), the slots' points (k_s, 1 + dim), and the ground
+    rows' particles ``at`` and ``normals`` (k_g, dim)."""
+
+    slots: IntArray
+    elements: IntArray
+    fast: IntArray
+    rows: IntArray
+    points: IntArray
+    at: IntArray
+    normals: FloatArray
+    nq: int
+    dim: int
+
+    def current(self, element_of: IntArray) -> bool:
+        """Whether the held slots are still on these elements."""
+        return np.array_equal(element_of[self.slots], self.elements)
+
+    def solve(self, held_rows: CompiledHeldRows, y: FloatArray, acc: FloatArray) -> FloatArray | None:
+        """The rows' forces at state ``y``, their accelerations added to ``acc`` (see
+        :class:`flexbody.held_rows.CompiledHeldRows`)."""
+        nq, d = self.nq, self.dim  # on particles the velocities follow the positions, nu = nq
+        return held_rows(y[:nq].reshape(-1, d), y[nq : 2 * nq].reshape(-1, d), acc, self.at, self.normals, self.points)
 
 
 class _Layout(NamedTuple):

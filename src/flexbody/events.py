@@ -54,6 +54,7 @@ class EventFunctions:
         if self.friction:
             self.direction[phases.phase == SLIDING] = 0.0
         self._coupled: dict[int, np.ndarray] = {}  # each held contact's block (see one)
+        self._forces = model.forces_function(p, self.held, phases.push)  # the segment's contact set, laid out once
 
     def renew(self, y: np.ndarray) -> None:
         """Take each sliding contact's slip direction at ``y`` (the start of the next step):
@@ -106,8 +107,7 @@ class EventFunctions:
         held = self.held if among is None else np.where(mask, self.held, 0).astype(self.held.dtype)
         if mask.any():
             # a block's forces from its own rows (a lift-off's root evaluates nothing else)
-            lam = m.held_forces(y, self.p, held, self.phases.push) if among is not None else \
-                m.rhs(y, self.p, held, self.phases.push)[1]
+            lam = m.held_forces(y, self.p, held, self.phases.push) if among is not None else self._forces(y)
             g[mask] = lam[mask] + self.force_tolerance[mask]
             if self.margins is not None:  # a contact held on another body's element passes onto the next
                 g[mask] = np.minimum(g[mask], self.margins(y, self.p, held)[mask])

@@ -145,6 +145,14 @@ class Model:
         """
         raise NotImplementedError
 
+    def forces_function(self, p, held, push):
+        """``forces(y) -> lam`` (nc,), ``rhs(y, p, held, push)[1]`` with the contact set
+        frozen (the event functions' of one segment)."""
+        def forces(y):
+            return self.rhs(y, p, held, push)[1]
+
+        return forces
+
     def held_forces(self, y, p, held, push) -> FloatArray:
         """``rhs(y, p, held, push)[1]``, shape (nc,): the held contacts' forces alone, which
         a model may find without the whole right-hand side (a block of coupled contacts,
