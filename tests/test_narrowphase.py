@@ -553,3 +553,31 @@ def test_compiled_closest_features_equal_the_numpy_twin(rng, surface):
                                        err_msg=field)
     kinds = set(closest_features(points, vertices, elements, every, body).kind.tolist())
     assert kinds == ({FACE, VERTEX} if dim == 2 else {FACE, EDGE, VERTEX})
+
+
+@pytest.mark.skipif(not HAS_CC, reason="needs a C compiler")
+@pytest.mark.parametrize("dim", [2, 3])
+def test_the_c_narrow_phase_boxes_kept_pairs_as_the_broad_phase_does(dim):
+    """fb_closest_features over every kept pair with ``reach`` = the margin answers as over
+    the broad phase's filtered pairs (CandidateList.pairs), along a motion that rebuilds."""
+    from flexbody.broadphase import CandidateList
+    from flexbody.surface_contact import CompiledClosestFeatures
+
+    from .test_broadphase import random_bodies
+
+    rng = np.random.default_rng(11 + dim)
+    x, elements, body = random_bodies(rng, dim, bodies=5)
+    element_body = body[elements[:, 0]]
+    narrow = CompiledClosestFeatures(elements, len(x), element_body)
+    kept = CandidateList(elements, body, margin=0.05, skin=0.05, element_body=element_body)
+    drift = -0.5 * (x - x.mean(axis=0))
+    checked = boxed_out = 0
+    for k in range(60):
+        now = x + drift * k * 5e-3
+        everything, filtered = kept.all_kept(now), kept.pairs(now)
+        boxed_out += len(everything) - len(filtered)
+        boxed, reference = narrow(now, now, everything, reach=kept.margin), narrow(now, now, filtered)
+        for name in ("particle", "kind", "element", "feature", "weights", "gap", "normal"):
+            np.testing.assert_array_equal(getattr(boxed, name), getattr(reference, name), err_msg=f"{name}, step {k}")
+        checked += len(reference.particle)
+    assert checked > 0 and boxed_out > 0 and kept.rebuilds >= 2

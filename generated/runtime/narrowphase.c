@@ -151,31 +151,51 @@ static void pseudo_normal(int dim, const double *vertices, const int *elements, 
     }
 }
 
+/* Whether x lies in the element's bounding box grown by reach on every side: the broad
+ * phase's filter of its kept pairs (flexbody.broadphase.CandidateList.pairs), the same
+ * comparisons. */
+static int in_box(int dim, const double *x, const double *vertices, const int *corner, double reach)
+{
+    for (int k = 0; k < dim; k++) {
+        double low = vertices[dim * corner[0] + k], high = low;
+        for (int j = 1; j < dim; j++) {
+            low = fmin(low, vertices[dim * corner[j] + k]);
+            high = fmax(high, vertices[dim * corner[j] + k]);
+        }
+        if (!(x[k] >= low - reach && x[k] <= high + reach)) return 0;
+    }
+    return 1;
+}
+
 /* Each particle's nearest candidate element (per particle and surface body) and its signed
  * gap.  in: x (n, dim) particle positions, vertices (nv, dim), elements (m, dim), the
  * body of each element (m; NULL: one surface), pairs (n_pairs, 2) of (particle, element),
- * each vertex's elements as CSR (incident_start (nv + 1), incident).  out, one row per
+ * each vertex's elements as CSR (incident_start (nv + 1), incident), and reach: only the
+ * pairs whose particle lies in the element's bounding box grown by reach count (INFINITY:
+ * every pair).  out, one row per
  * (particle, surface) with a candidate, ordered by particle then surface, up to n_pairs
  * rows: particle, kind, element, feature (dim, -1 padded), weights (dim), gap, normal (dim).
  * Returns the number of rows, or -1 if memory runs out. */
 int fb_closest_features(int dim, int n_pairs, const double *x, const double *vertices, const int *elements,
                         const int *element_body, const int *pairs, const int *incident_start, const int *incident,
-                        int *particle, int *kind, int *element, int *feature, double *weights, double *gap,
-                        double *normal)
+                        double reach, int *particle, int *kind, int *element, int *feature, double *weights,
+                        double *gap, double *normal)
 {
     Candidate *candidates = malloc((size_t)(n_pairs > 0 ? n_pairs : 1) * sizeof *candidates);
     if (!candidates) return -1;
+    int n_candidates = 0;
     for (int r = 0; r < n_pairs; r++) {
         const int p = pairs[2 * r], e = pairs[2 * r + 1];
+        if (reach < INFINITY && !in_box(dim, x + dim * p, vertices, elements + dim * e, reach)) continue;
         int k_kind, k_feature[3];
         double k_weights[3];
-        candidates[r] = (Candidate){p, element_body ? element_body[e] : 0, e,
-                                    closest_on_element(dim, x + dim * p, vertices, elements + dim * e,
-                                                       &k_kind, k_feature, k_weights)};
+        candidates[n_candidates++] = (Candidate){p, element_body ? element_body[e] : 0, e,
+                                                 closest_on_element(dim, x + dim * p, vertices, elements + dim * e,
+                                                                    &k_kind, k_feature, k_weights)};
     }
-    qsort(candidates, (size_t)n_pairs, sizeof *candidates, by_particle_surface_distance);
+    qsort(candidates, (size_t)n_candidates, sizeof *candidates, by_particle_surface_distance);
     int rows = 0;
-    for (int r = 0; r < n_pairs; r++) {
+    for (int r = 0; r < n_candidates; r++) {
         const Candidate *c = candidates + r;
         if (r > 0 && c->particle == c[-1].particle && c->surface == c[-1].surface) continue;
         int *f = feature + dim * rows;

@@ -214,6 +214,7 @@ class BodyContactModel(Model):
         self._last: tuple[tuple[np.ndarray, ...], _Solved] | None = None  # the last state's answer (see _dynamics)
         self._swept: dict[bytes, tuple] = {}  # positions -> the whole surface sweep (see _surface_contacts)
         self._layouts: dict[tuple, _Layout] = {}  # held rows -> where their terms go (see _rows)
+        self._allowed_pairs: tuple[IntArray, IntArray] | None = None  # (kept pairs, the allowed ones; see _allowed_kept)
         self._element = ElementKernels(self.dim, self.backend)
         # frictionless held rows on particles, solved in C with a C model (see _solve)
         self._held_rows = (CompiledHeldRows(self.masses, self.dim)
@@ -995,6 +996,10 @@ class BodyContactModel(Model):
         return (np.bincount(edge_owner[falling], minlength=len(w)) == 0) & (np.einsum("kd,kd->k", outward, normal) < 0.0)
 
     def _closest(self, x, slots: IntArray | None = None):
+        if slots is None and self._narrow is not None:
+            # the whole sweep in C: the allowed kept pairs, boxed there (no NumPy pass over them)
+            contact = self._narrow(x, x, self._allowed_kept(x), reach=self._candidates.margin)
+            return contact if len(contact.particle) else None
         pairs = self._candidates.pairs(x, None if slots is None else np.unique(self.slot_particle[slots]))
         keep = self.allowed[self.particle_body[pairs[:, 0]], self.element_body[pairs[:, 1]]]
         if slots is not None:  # only the asked slots' bodies
@@ -1006,6 +1011,15 @@ class BodyContactModel(Model):
         if not len(pairs):
             return None
         return self._closest_features(x, pairs)
+
+    def _allowed_kept(self, x) -> IntArray:
+        """The broad phase's kept pairs at x between bodies that may touch, shape (k, 2):
+        filtered once per rebuild of its list."""
+        kept = self._candidates.all_kept(x)
+        if self._allowed_pairs is None or self._allowed_pairs[0] is not kept:
+            allowed = self.allowed[self.particle_body[kept[:, 0]], self.element_body[kept[:, 1]]]
+            self._allowed_pairs = (kept, np.ascontiguousarray(kept[allowed], np.intc))
+        return self._allowed_pairs[1]
 
     def _closest_features(self, x, pairs) -> SurfaceContact:
         if self._narrow is not None:

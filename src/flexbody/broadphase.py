@@ -297,6 +297,14 @@ class CandidateList:
             kept = self._pairs[slices(self._first[particles], self._first[np.asarray(particles) + 1])]
         return kept[self._inside(x, kept)]
 
+    def all_kept(self, x: FloatArray) -> IntArray:
+        """Every kept pair at positions x (n, d), shape (k, 2), unfiltered: a superset of
+        :meth:`pairs`, which are those whose particle lies in the element's box grown by
+        ``margin`` (a filter the C narrow phase can apply itself); the same array until
+        the next rebuild (:attr:`rebuilds`)."""
+        self._renew(np.asarray(x, float))
+        return self._pairs
+
     def kept(self, x: FloatArray, particle: int) -> IntArray:
         """Particle ``particle``'s kept pairs at positions x (n, d), shape (k, 2): a superset
         of its :meth:`pairs` (every element whose ``margin``-grown box holds it is among

@@ -385,9 +385,11 @@ class CompiledClosestFeatures:
                      np.empty((k, d)), np.empty(k), np.empty((k, d)))
         self._out_addresses = tuple(a.ctypes.data for a in self._out)
 
-    def __call__(self, x: FloatArray, vertices: FloatArray, pairs: IntArray) -> SurfaceContact:
+    def __call__(self, x: FloatArray, vertices: FloatArray, pairs: IntArray, reach: float = np.inf) -> SurfaceContact:
         """Each particle's closest feature over its candidate ``pairs`` (k, 2): as
-        :func:`closest_features` with this surface."""
+        :func:`closest_features` with this surface; with ``reach``, over the pairs whose
+        particle lies in the element's bounding box grown by ``reach`` (m) only (the broad
+        phase's filter, :meth:`flexbody.broadphase.CandidateList.pairs`)."""
         x = np.ascontiguousarray(x, dtype=float)
         vertices = x if vertices is x else np.ascontiguousarray(vertices, dtype=float)
         pairs = np.ascontiguousarray(pairs, dtype=np.intc).reshape(-1, 2)
@@ -397,7 +399,8 @@ class CompiledClosestFeatures:
         elements, body, start, incident = self._surface
         x_at = x.ctypes.data
         rows = self.lib.fb_closest_features(self.dim, k, x_at, x_at if vertices is x else vertices.ctypes.data,
-                                            elements, body, pairs.ctypes.data, start, incident, *self._out_addresses)
+                                            elements, body, pairs.ctypes.data, start, incident, float(reach),
+                                            *self._out_addresses)
         if rows < 0:
             raise MemoryError(f"cannot allocate the narrow phase's {k} candidates")
         particle, kind, element, feature, weights, gap, normal = (a[:rows] for a in self._out)
