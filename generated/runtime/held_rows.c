@@ -10,8 +10,9 @@
  * particle (n) and its element's vertices (-w_k n, w the projection's weights).  Rows that
  * share no particle do not act on each other, so J M^-1 J^T is block diagonal once rows
  * are grouped by the particles they share (a pile's held rows: dozens of blocks of a few
- * rows).  Each block is factorised by the ordered Cholesky of flexbody.dynamics.contact_solve
- * (a pivot at or below `redundant` of the largest diagonal entry drops its row: force 0).
+ * rows).  Each block is a problem of its own, factorised by the whole-scene models' ordered
+ * Cholesky (the twin of flexbody.dynamics.contact_solve's): a pivot at or below REDUNDANT
+ * of the block's largest diagonal entry drops its row (force 0).
  */
 #include <math.h>
 #include <stdlib.h>
@@ -56,16 +57,22 @@ static void slot_row(int dim, const int *points, const double *x, const double *
     }
 }
 
-/* Cholesky of the n x n block A in place (lower), columns of dropped rows zeroed; -1 if a
- * pivot falls below -redundant * largest (not positive semidefinite, or rounding grown
- * through a small pivot: the caller solves again with a pivoted factorisation). */
-static int ordered_cholesky(double *A, int n, double threshold)
+/* Small dense Cholesky for the contact matrix (n = number of constrained contacts),
+ * semidefinite-safe: a pivot at or below REDUNDANT of the largest diagonal entry belongs to
+ * a contact that depends on earlier ones (more contacts than the body has freedoms: a rigid
+ * box flat on four corners).  Its column is dropped (its force or impulse is 0) and the
+ * others hold it: the motion is the same for every force that satisfies the constraints
+ * (twin: flexbody.dynamics.contact_solve).  -1 if the matrix is not positive semidefinite. */
+#define REDUNDANT 1e-12
+static int cholesky(double *A, int n)
 {
+    double largest = 0.0;
+    for (int j = 0; j < n; ++j) largest = fmax(largest, A[j * n + j]);
     for (int j = 0; j < n; ++j) {
         double d = A[j * n + j];
         for (int k = 0; k < j; ++k) d -= A[j * n + k] * A[j * n + k];
-        if (!(d > -threshold)) return -1;
-        if (d <= threshold) { /* dependent on earlier rows: dropped */
+        if (!(d > -REDUNDANT * largest)) return -1;
+        if (d <= REDUNDANT * largest) { /* dependent: dropped */
             for (int i = j; i < n; ++i) A[i * n + j] = 0.0;
             continue;
         }
@@ -80,7 +87,6 @@ static int ordered_cholesky(double *A, int n, double threshold)
     return 0;
 }
 
-/* x with L L^T x = b in place; a dropped row (zero pivot) gets 0. */
 static void cholesky_solve(const double *L, int n, double *x)
 {
     for (int i = 0; i < n; ++i) {
@@ -160,14 +166,14 @@ int fb_row_blocks(int dim, int n, int k_g, const int *ground_particle, int k_s, 
  * in: dim (2 or 3), n particles, their positions x and velocities v (n, dim) and inverse
  * masses (n); k_g ground rows: their particles (k_g) and the grounds' unit normals
  * (k_g, dim); k_s held slots: their points (k_s, dim + 1), the particle then its element's
- * vertices; redundant: flexbody.dynamics.REDUNDANT.
+ * vertices.
  * in/out: acc (n, dim), the free accelerations, returned with the rows' forces added.
  * out: lam (k_g + k_s), each row's force (N), ground rows first.
- * Returns 0; 1 if a pivot fell below -redundant of the largest diagonal entry (nothing
- * added to acc: solve again with a pivoted factorisation); -1 if memory ran out. */
+ * Returns 0; 1 if a pivot fell below -REDUNDANT of its block's largest diagonal entry
+ * (nothing added to acc: solve again with a pivoted factorisation); -1 if memory ran out. */
 int fb_held_rows(int dim, int n, const double *x, const double *v, const double *inverse_mass, int k_g,
                  const int *ground_particle, const double *ground_normal, int k_s, const int *slot_points,
-                 double redundant, double *acc, double *lam)
+                 double *acc, double *lam)
 {
     const int m = k_g + k_s, n_terms = k_g + (dim + 1) * k_s;
     Term *terms = malloc((size_t)(n_terms > 0 ? n_terms : 1) * sizeof *terms);
@@ -208,7 +214,6 @@ int fb_held_rows(int dim, int n, const double *x, const double *v, const double 
     }
     for (int r = 0; r < m; ++r) order[start[block[r]] + at[r]] = r;
     /* W_ab = sum over the particles p rows a and b share of c_a . c_b / m_p */
-    double largest = 0.0;
     for (int t = 0; t < n_terms; ++t) {
         const Term *first = terms + t;
         const int r = first->row, b = block[r], rows = start[b + 1] - start[b];
@@ -218,17 +223,13 @@ int fb_held_rows(int dim, int n, const double *x, const double *v, const double 
             W[offset[b] + (long)at[r] * rows + at[terms[u].row]] += dot * inverse_mass[first->particle];
         }
     }
-    for (int r = 0; r < m; ++r) {
-        const int b = block[r], rows = start[b + 1] - start[b];
-        largest = fmax(largest, W[offset[b] + (long)at[r] * rows + at[r]]);
-    }
     /* each row's right-hand side: -(J acc + bias) */
     for (int r = 0; r < m; ++r) lam[r] = -bias[r];
     for (int t = 0; t < n_terms; ++t)
         for (int k = 0; k < dim; ++k) lam[terms[t].row] -= terms[t].c[k] * acc[dim * terms[t].particle + k];
     int status = 0;
     for (int b = 0; b < n_blocks && !status; ++b)
-        status = ordered_cholesky(W + offset[b], start[b + 1] - start[b], redundant * largest);
+        status = cholesky(W + offset[b], start[b + 1] - start[b]);
     if (!status) {
         for (int b = 0; b < n_blocks; ++b) {
             const int rows = start[b + 1] - start[b];

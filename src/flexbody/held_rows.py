@@ -4,16 +4,15 @@
 (``generated/runtime/held_rows.c``): the frictionless rows of
 :meth:`flexbody.body_contact.BodyContactModel._solve` (the held slots and the ground rows
 of the particles they move), their ``J M^-1 J^T`` in the independent blocks of rows that
-share particles, each solved by the ordered Cholesky of
-:func:`flexbody.dynamics.contact_solve`.  A pile's right-hand side solves such rows at every
+share particles, each solved as a problem of its own by the ordered Cholesky of
+:func:`flexbody.dynamics.contact_solve` (its redundant rows dropped relative to the block's
+own largest diagonal entry).  A pile's right-hand side solves such rows at every
 evaluation; in NumPy their assembly cost three times the whole C right-hand side.
 """
 
 from __future__ import annotations
 
 import numpy as np
-
-from .dynamics import REDUNDANT
 
 FloatArray = np.ndarray
 IntArray = np.ndarray
@@ -60,7 +59,7 @@ class CompiledHeldRows:
         -------
         lam : ndarray, shape (k_g + k_s,) or None
             The forces (N), ground rows first; None, with ``acc`` unchanged, where a pivot
-            falls below ``-REDUNDANT`` of the largest diagonal entry (the caller solves with
+            falls below ``-REDUNDANT`` of its block's largest diagonal entry (the caller solves with
             :func:`flexbody.dynamics.contact_solve`, whose pivoted fallback copes).
         """
         x, v = np.ascontiguousarray(x, float), np.ascontiguousarray(v, float)
@@ -70,7 +69,7 @@ class CompiledHeldRows:
         lam = np.empty(len(ground_particles) + len(slot_points))
         status = self._call(self.dim, len(x), x.ctypes.data, v.ctypes.data, self._inverse_mass,
                             len(ground_particles), ground_particles.ctypes.data, ground_normals.ctypes.data,
-                            len(slot_points), slot_points.ctypes.data, REDUNDANT, acc.ctypes.data, lam.ctypes.data)
+                            len(slot_points), slot_points.ctypes.data, acc.ctypes.data, lam.ctypes.data)
         if status < 0:
             raise MemoryError(f"cannot allocate the held rows' work buffers ({len(lam)} rows)")
         return None if status else lam
