@@ -105,6 +105,54 @@ def test_rows_sharing_particles_match_the_dense_contact_solve(dim):
         assert lam[-1] == 0.0  # the repeated slot: dropped, its twin carries it
 
 
+def test_nearly_dependent_rows_are_dropped_against_every_rows_largest_entry():
+    """A particle of 1 kg on two grounds 7e-6 rad apart beside one of 10 g on a ground: the
+    pair's second pivot, (7e-6)^2 of the heavy block's scale, lies below 1e-12 of the light
+    particle's (the largest diagonal entry of all the rows) and is dropped, as
+    contact_solve drops it on the whole matrix; within its own block it would be kept, and
+    the pair, pulled 0.3 m/s^2 along the grounds, would push and pull with 4e4 N."""
+    x = np.array([[0.0, 0.0], [1.0, 0.0]])
+    masses = np.array([1.0, 0.01])
+    normals = np.array([[0.0, 1.0], [np.sin(7e-6), np.cos(7e-6)], [0.0, 1.0]])
+    acc = np.array([0.3, -G, 0.0, -G])  # pulled along the grounds too: the pair's rows disagree
+    lam_ref, acc_ref = dense_reference(x, np.zeros_like(x), masses, acc.copy(), [0, 0, 1], normals,
+                                       np.zeros((0, 3), int))
+    lam = held_rows(masses, 2)(x, np.zeros_like(x), acc, [0, 0, 1], normals, np.zeros((0, 3), int))
+    np.testing.assert_allclose(lam, lam_ref, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(lam, [masses[0] * G, 0.0, masses[1] * G], rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(acc, acc_ref, rtol=0, atol=1e-9)
+
+
+def test_bad_arrays_are_refused_before_c_reads_them():
+    rows = held_rows([0.1, 0.2, 0.4], 2)
+    x = np.zeros((3, 2))
+    with pytest.raises(ValueError, match="acc must be"):
+        rows(x, x, np.zeros(5), [], np.zeros((0, 2)), np.array([[0, 1, 2]]))
+    with pytest.raises(ValueError, match="slot_points must be particle indices"):
+        rows(x, x, np.zeros(6), [], np.zeros((0, 2)), np.array([[0, 1, 3]]))
+    with pytest.raises(ValueError, match="positions and velocities"):
+        rows(np.zeros((2, 2)), x, np.zeros(6), [], np.zeros((0, 2)), np.array([[0, 1, 2]]))
+
+
+def test_where_c_hands_back_the_model_answers_by_numpy(monkeypatch):
+    """Every user of the C rows falls back to NumPy's contact_solve where C hands back (a
+    pivot below the drop threshold): the same numbers as the NumPy path, bit for bit."""
+    from flexbody.held_rows import CompiledHeldRows
+
+    model, states = _states_of(_box_on_wedge(), every=40)
+    monkeypatch.setattr(CompiledHeldRows, "__call__", lambda *args: None)
+    compiled = model._held_rows
+    for y, p, held, push, elements in states:
+        model.element_of[:] = elements
+        model._held_rows = None
+        ydot, lam = model.rhs(y, p, held, push)
+        model._held_rows = compiled
+        np.testing.assert_array_equal(model.rhs(y, p, held, push)[0], ydot)
+        np.testing.assert_array_equal(model.rhs_function(p, held, push)(0.0, y), ydot)
+        np.testing.assert_array_equal(model.forces_function(p, held, push)(y), lam)
+        np.testing.assert_array_equal(model.held_forces(y, p, held, push), lam)
+
+
 def test_an_indefinite_matrix_is_handed_back_untouched():
     """A pivot below the drop threshold (here a negative mass) returns None and leaves the
     accelerations as they were: the caller's contact_solve decides (pivoted, or a blow-up)."""
@@ -251,6 +299,20 @@ def test_free_accelerations_of_some_particles_are_the_right_hand_sides(dim):
     whole = inner.rhs(y, p, np.zeros(inner.n_contacts, np.intc), push)[0][inner.nq : inner.nq + inner.nu].reshape(-1, dim)
     np.testing.assert_array_equal(acc[listed], whole[listed])
     assert not np.delete(acc, listed, axis=0).any()
+
+
+def test_a_segments_functions_keep_the_contact_set_they_were_made_with():
+    """The caller's held codes changed after a segment's functions were made: they answer
+    for the set they were made with."""
+    model, states = _states_of(_disc_pile(), every=25)
+    y, p, held, push, elements = states[-1]
+    model.element_of[:] = elements
+    held = held.copy()
+    f, forces = model.rhs_function(p, held, push), model.forces_function(p, held, push)
+    ydot, lam = model.rhs(y, p, held, push)
+    held[np.flatnonzero(held[model.n_ground_contacts :])[0] + model.n_ground_contacts] = 0
+    np.testing.assert_array_equal(f(0.0, y), ydot)
+    np.testing.assert_array_equal(forces(y), lam)
 
 
 def test_a_segments_functions_follow_a_held_slot_handed_to_another_element():

@@ -268,12 +268,12 @@ static double row_dot(const double *J, int c, const double *x)
  * a contact that depends on earlier ones (more contacts than the body has freedoms: a rigid
  * box flat on four corners).  Its column is dropped (its force or impulse is 0) and the
  * others hold it: the motion is the same for every force that satisfies the constraints
- * (twin: flexbody.dynamics.contact_solve).  -1 if the matrix is not positive semidefinite. */
+ * (twin: flexbody.dynamics.contact_solve).  -1 if the matrix is not positive semidefinite.
+ * cholesky_within: the same for a diagonal block of a larger such matrix, whose largest
+ * diagonal entry sets the threshold. */
 #define REDUNDANT 1e-12
-static int cholesky(double *A, int n)
+static int cholesky_within(double *A, int n, double largest)
 {
-    double largest = 0.0;
-    for (int j = 0; j < n; ++j) largest = fmax(largest, A[j * n + j]);
     for (int j = 0; j < n; ++j) {
         double d = A[j * n + j];
         for (int k = 0; k < j; ++k) d -= A[j * n + k] * A[j * n + k];
@@ -291,6 +291,13 @@ static int cholesky(double *A, int n)
         }
     }
     return 0;
+}
+
+static inline int cholesky(double *A, int n)
+{
+    double largest = 0.0;
+    for (int j = 0; j < n; ++j) largest = fmax(largest, A[j * n + j]);
+    return cholesky_within(A, n, largest);
 }
 
 static void cholesky_solve(const double *L, int n, double *x)

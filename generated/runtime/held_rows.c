@@ -10,9 +10,9 @@
  * particle (n) and its element's vertices (-w_k n, w the projection's weights).  Rows that
  * share no particle do not act on each other, so J M^-1 J^T is block diagonal once rows
  * are grouped by the particles they share (a pile's held rows: dozens of blocks of a few
- * rows).  Each block is a problem of its own, factorised by the whole-scene models' ordered
- * Cholesky (the twin of flexbody.dynamics.contact_solve's): a pivot at or below REDUNDANT
- * of the block's largest diagonal entry drops its row (force 0).
+ * rows).  Each block is factorised by the whole-scene models' ordered Cholesky (the twin
+ * of flexbody.dynamics.contact_solve's), as a block of the whole matrix: a pivot at or
+ * below REDUNDANT of the largest diagonal entry of all the rows drops its row (force 0).
  */
 #include <math.h>
 #include <stdlib.h>
@@ -62,12 +62,12 @@ static void slot_row(int dim, const int *points, const double *x, const double *
  * a contact that depends on earlier ones (more contacts than the body has freedoms: a rigid
  * box flat on four corners).  Its column is dropped (its force or impulse is 0) and the
  * others hold it: the motion is the same for every force that satisfies the constraints
- * (twin: flexbody.dynamics.contact_solve).  -1 if the matrix is not positive semidefinite. */
+ * (twin: flexbody.dynamics.contact_solve).  -1 if the matrix is not positive semidefinite.
+ * cholesky_within: the same for a diagonal block of a larger such matrix, whose largest
+ * diagonal entry sets the threshold. */
 #define REDUNDANT 1e-12
-static int cholesky(double *A, int n)
+static int cholesky_within(double *A, int n, double largest)
 {
-    double largest = 0.0;
-    for (int j = 0; j < n; ++j) largest = fmax(largest, A[j * n + j]);
     for (int j = 0; j < n; ++j) {
         double d = A[j * n + j];
         for (int k = 0; k < j; ++k) d -= A[j * n + k] * A[j * n + k];
@@ -85,6 +85,13 @@ static int cholesky(double *A, int n)
         }
     }
     return 0;
+}
+
+static inline int cholesky(double *A, int n)
+{
+    double largest = 0.0;
+    for (int j = 0; j < n; ++j) largest = fmax(largest, A[j * n + j]);
+    return cholesky_within(A, n, largest);
 }
 
 static void cholesky_solve(const double *L, int n, double *x)
@@ -169,8 +176,8 @@ int fb_row_blocks(int dim, int n, int k_g, const int *ground_particle, int k_s, 
  * vertices.
  * in/out: acc (n, dim), the free accelerations, returned with the rows' forces added.
  * out: lam (k_g + k_s), each row's force (N), ground rows first.
- * Returns 0; 1 if a pivot fell below -REDUNDANT of its block's largest diagonal entry
- * (nothing added to acc: solve again with a pivoted factorisation); -1 if memory ran out. */
+ * Returns 0; 1 if a pivot fell below -REDUNDANT of the largest diagonal entry (nothing
+ * added to acc: solve again with a pivoted factorisation); -1 if memory ran out. */
 int fb_held_rows(int dim, int n, const double *x, const double *v, const double *inverse_mass, int k_g,
                  const int *ground_particle, const double *ground_normal, int k_s, const int *slot_points,
                  double *acc, double *lam)
@@ -214,6 +221,7 @@ int fb_held_rows(int dim, int n, const double *x, const double *v, const double 
     }
     for (int r = 0; r < m; ++r) order[start[block[r]] + at[r]] = r;
     /* W_ab = sum over the particles p rows a and b share of c_a . c_b / m_p */
+    double largest = 0.0;
     for (int t = 0; t < n_terms; ++t) {
         const Term *first = terms + t;
         const int r = first->row, b = block[r], rows = start[b + 1] - start[b];
@@ -223,13 +231,17 @@ int fb_held_rows(int dim, int n, const double *x, const double *v, const double 
             W[offset[b] + (long)at[r] * rows + at[terms[u].row]] += dot * inverse_mass[first->particle];
         }
     }
+    for (int r = 0; r < m; ++r) {
+        const int b = block[r], rows = start[b + 1] - start[b];
+        largest = fmax(largest, W[offset[b] + (long)at[r] * rows + at[r]]);
+    }
     /* each row's right-hand side: -(J acc + bias) */
     for (int r = 0; r < m; ++r) lam[r] = -bias[r];
     for (int t = 0; t < n_terms; ++t)
         for (int k = 0; k < dim; ++k) lam[terms[t].row] -= terms[t].c[k] * acc[dim * terms[t].particle + k];
     int status = 0;
     for (int b = 0; b < n_blocks && !status; ++b)
-        status = cholesky(W + offset[b], start[b + 1] - start[b]);
+        status = cholesky_within(W + offset[b], start[b + 1] - start[b], largest);
     if (!status) {
         for (int b = 0; b < n_blocks; ++b) {
             const int rows = start[b + 1] - start[b];

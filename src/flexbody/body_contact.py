@@ -313,6 +313,7 @@ class BodyContactModel(Model):
         the inner model's C right-hand side and the held rows' forces in C, laid out once for
         the frozen contact set (:class:`_FrozenRows`; a pile's steps evaluate nothing else),
         the same numbers as :meth:`rhs`, bit for bit."""
+        held = np.array(held, np.intc)  # frozen: the caller may change its array later
         frozen = self._frozen_rows(p, held)
         general = super().rhs_function(p, held, push)
         if frozen is None:
@@ -334,6 +335,7 @@ class BodyContactModel(Model):
 
     def forces_function(self, p, held, push):
         """As :meth:`flexbody.model.Model.forces_function`, laid out once as :meth:`rhs_function`."""
+        held = np.array(held, np.intc)  # frozen: the caller may change its array later
         frozen = self._frozen_rows(p, held)
         if frozen is None:
             return super().forces_function(p, held, push)
@@ -373,8 +375,9 @@ class BodyContactModel(Model):
     def held_forces(self, y, p, held, push) -> FloatArray:
         """As :meth:`flexbody.model.Model.held_forces`: where every held contact couples to a
         held slot (a block of :meth:`coupled_with`), on particles in C without friction, from
-        the free accelerations of the particles the rows move and the rows alone
-        (``rhs``'s numbers, bit for bit, at O(the block) instead of O(the scene))."""
+        the free accelerations of the particles the rows move and the rows alone (``rhs``'s
+        numbers, bit for bit; the C work is the block's, not the scene's, while finding the
+        rows still takes a few passes over the contacts)."""
         frozen = self._frozen_rows(p, held)
         if frozen is None or not len(frozen.slots) or frozen.fast.any():  # fast: a ground contact held alone
             return self.rhs(y, p, held, push)[1]

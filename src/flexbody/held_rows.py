@@ -4,9 +4,10 @@
 (``generated/runtime/held_rows.c``): the frictionless rows of
 :meth:`flexbody.body_contact.BodyContactModel._solve` (the held slots and the ground rows
 of the particles they move), their ``J M^-1 J^T`` in the independent blocks of rows that
-share particles, each solved as a problem of its own by the ordered Cholesky of
-:func:`flexbody.dynamics.contact_solve` (its redundant rows dropped relative to the block's
-own largest diagonal entry).  A pile's right-hand side solves such rows at every
+share particles, each solved by the ordered Cholesky of
+:func:`flexbody.dynamics.contact_solve` as a block of the whole matrix (redundant rows
+dropped relative to the largest diagonal entry of all the rows, as ``contact_solve`` drops
+them).  A pile's right-hand side solves such rows at every
 evaluation; in NumPy their assembly cost three times the whole C right-hand side.
 """
 
@@ -59,13 +60,21 @@ class CompiledHeldRows:
         -------
         lam : ndarray, shape (k_g + k_s,) or None
             The forces (N), ground rows first; None, with ``acc`` unchanged, where a pivot
-            falls below ``-REDUNDANT`` of its block's largest diagonal entry (the caller solves with
+            falls below ``-REDUNDANT`` of the largest diagonal entry (the caller solves with
             :func:`flexbody.dynamics.contact_solve`, whose pivoted fallback copes).
         """
         x, v = np.ascontiguousarray(x, float), np.ascontiguousarray(v, float)
+        d = self.dim
+        if x.shape != (self.n, d) or v.shape != (self.n, d):
+            raise ValueError(f"positions and velocities must be ({self.n}, {d}); got {x.shape} and {v.shape}")
+        if acc.dtype != np.float64 or not acc.flags.c_contiguous or acc.shape != (self.n * d,):
+            raise ValueError(f"acc must be a C-contiguous float64 array of shape ({self.n * d},), written in place")
         ground_particles = np.ascontiguousarray(ground_particles, np.intc)
         ground_normals = np.ascontiguousarray(ground_normals, float)
         slot_points = np.ascontiguousarray(slot_points, np.intc)
+        for name, index in (("ground_particles", ground_particles), ("slot_points", slot_points)):
+            if index.size and not (0 <= index.min() and index.max() < self.n):
+                raise ValueError(f"{name} must be particle indices in [0, {self.n}); got {index.min()}..{index.max()}")
         lam = np.empty(len(ground_particles) + len(slot_points))
         status = self._call(self.dim, len(x), x.ctypes.data, v.ctypes.data, self._inverse_mass,
                             len(ground_particles), ground_particles.ctypes.data, ground_normals.ctypes.data,
