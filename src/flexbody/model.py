@@ -25,6 +25,7 @@ from .paths import cache_root, generated_root, model_dir_name
 from .scene import Scene, load_scene
 
 FloatArray = np.ndarray
+IntArray = np.ndarray
 
 
 class ModelError(RuntimeError):
