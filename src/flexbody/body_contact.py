@@ -365,7 +365,12 @@ class BodyContactModel(Model):
         slots = np.flatnonzero(held[ng:] != 0)
         if self._held_rows is None or self._frictional or (self.element_of[slots] < 0).any():
             return None
-        grounds = self._coupled_grounds(held, slots)
+        return self._laid_out(p, held, slots, self._coupled_grounds(held, slots))
+
+    def _laid_out(self, p, held, slots: IntArray, grounds: IntArray) -> _FrozenRows:
+        """The held ``slots`` (each with its element) and the ground rows ``grounds`` coupled
+        to them (:meth:`_coupled_grounds`), laid out for the C rows (:class:`_FrozenRows`)."""
+        ng = self.n_ground_contacts
         fast = np.array(held[:ng], np.intc)
         fast[grounds] = 0
         normals = self._coordinates.ground_normals(p)[self.inner.contacts[grounds, 1]]
@@ -452,10 +457,7 @@ class BodyContactModel(Model):
         stick = (mu > 0.0) & (codes == HELD)
         sliding = (mu > 0.0) & (codes == SLIDING)
         if self._held_rows is not None and not (mu > 0.0).any():
-            x, v = self._coordinates.particles(q, u, p)
-            normals = self._coordinates.ground_normals(p)[self.inner.contacts[ground_rows, 1]]
-            force = self._held_rows(x, v, acc, self.inner.contacts[ground_rows, 0], normals,
-                                    self._slot_points(held_slots))
+            force = self._laid_out(p, held, held_slots, ground_rows).solve(self._held_rows, y, acc)
             if force is not None:  # else a pivot fell below the drop threshold: contact_solve's fallback below
                 lam[rows] = force
                 return _Solved(ydot, lam, fast, rows, np.zeros(k), np.zeros(k), np.zeros((k, self.dim)), stick)
