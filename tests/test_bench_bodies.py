@@ -63,3 +63,18 @@ def test_the_stiff_set_changes_the_links_stiffness_only():
     assert all(np.all(b.stiffness == STIFF) for b in stiff.bodies)
     np.testing.assert_array_equal(soft.initial_positions(), stiff.initial_positions())
     assert soft.name != stiff.name
+
+
+def test_the_row_holds_its_discs_gap_apart_side_by_side_at_the_piles_lift():
+    from flexbody.bench_bodies import row_positions
+
+    radius = disc_radius(23)
+    centres = row_positions(5, radius)
+    np.testing.assert_allclose(np.diff(centres[:, 0]), 2 * radius + GAP)
+    np.testing.assert_allclose(centres[:, 1] - radius, LIFT)  # lowest points LIFT above the ground
+    row, pile = bodies_scene(5, 23, 0.3, collide=True, row=True), bodies_scene(5, 23, 0.3, collide=True)
+    assert row.n_particles == pile.n_particles and row.name != pile.name
+    x = row.initial_positions()
+    assert x[:, 1].min() > 0.0  # above the ground
+    spans = [(b.initial_positions()[:, 0].min(), b.initial_positions()[:, 0].max()) for b in row.bodies]
+    assert all(right[0] - left[1] >= GAP - 1e-12 for left, right in zip(spans, spans[1:]))  # apart

@@ -157,10 +157,15 @@ def test_a_ring_comes_to_rest_on_a_block_carrying_its_weight():
     assert ng == scene.n_particles  # one ground
 
 
-def test_contacts_that_never_touch_another_body_give_the_ground_only_answer():
+@pytest.mark.parametrize("instants", ["per_particle", "lcp"])
+def test_contacts_that_never_touch_another_body_give_the_ground_only_answer(instants, monkeypatch):
     """Two rings far apart that may touch: every contact is with the ground, decoupled, and
-    the body-contact model (its impacts and lift-offs through the LCPs) gives the same events
-    and motion as the assembled model's per-particle closed form."""
+    the body-contact model gives the same events and motion as the assembled model's
+    per-particle closed form: its instants through the LCPs (``lcp``), and solved per
+    particle where they decouple (``per_particle``, the default: then every number is the
+    ground-only run's, its right-hand side being the inner model's too)."""
+    if instants == "lcp":
+        monkeypatch.setattr(BodyContactModel, "per_particle", lambda *args: False)
     table = {
         "name": "apart",
         "bodies": [
@@ -179,6 +184,9 @@ def test_contacts_that_never_touch_another_body_give_the_ground_only_answer():
     np.testing.assert_array_equal(alone.events_particle, together.events_particle)
     np.testing.assert_allclose(together.events_time, alone.events_time, atol=1e-9)
     np.testing.assert_allclose(together.positions, alone.positions, atol=1e-9)
+    if instants == "per_particle":
+        np.testing.assert_array_equal(together.events_time, alone.events_time)
+        np.testing.assert_array_equal(together.positions, alone.positions)
 
 
 def _momenta_3d(result):

@@ -3,17 +3,25 @@
 Twenty flexible discs (``shape = "disc"``, about 200 particles each, the thesis ball's
 lattice spacing and per-particle constants, as in :func:`flexbody.bench_scale.disc_scene_table`)
 in two staggered rows, the upper row over the gaps of the lower, dropped onto the ground and
-onto each other.  Three runs, all with SciPy's RK45 (body contact runs with SciPy's steppers
-only, so the ratios isolate the cost of contact, not of the stepper):
+onto each other (a pile), and the same discs dropped side by side in one row, ``GAP``
+apart.  Five runs, all with SciPy's RK45 (body contact runs with SciPy's steppers only, so
+the ratios isolate the cost of contact, not of the stepper):
 
-* ``collide`` — the drop with ``collide = true``: contacts between bodies (broad phase,
+* ``collide`` — the pile with ``collide = true``: contacts between bodies (broad phase,
   closest features, coupled impacts and held forces, :mod:`flexbody.body_contact`);
 * ``pass_through`` — the same 20 bodies with ``collide = false`` (they pass through each
   other and touch the ground only);
 * ``separate`` — one body alone, run once per body position and summed: the "20 separate
-  drops" of the issue.
+  drops" of the issue;
+* ``row_collide`` — the row with ``collide = true``: every contact the broad phase and the
+  closest features watch, none made (the cost of watching);
+* ``row_separate`` — its bodies alone, summed.
 
-The three runs are made twice: with the thesis ball's link stiffness (2000 N/m), on which
+The pile's bodies make about ten times the events of its separate drops (each contact
+between two discs opens, closes and chatters as the ground's do); the row's make the same
+events as its separate drops, so its ratio is what watching for contact costs.
+
+The five runs are made twice: with the thesis ball's link stiffness (2000 N/m), on which
 the larger discs are soft (their lattice crushes under the pile), and with it scaled by
 the full study's radius (:data:`STIFF`), so that its discs sag under their own weight as
 the thesis ball does (``--quick``'s thesis-ball discs run at the same two stiffnesses).
@@ -52,6 +60,12 @@ def disc_radius(count: int) -> float:
     return 0.1 * (count / 23) ** 0.5
 
 
+def row_positions(n_bodies: int, radius: float, gap: float = GAP, lift: float = LIFT) -> np.ndarray:
+    """Centres of ``n_bodies`` discs side by side, ``gap`` apart, their lowest points ``lift``
+    above the ground, shape (n_bodies, 2)."""
+    return np.column_stack([np.arange(n_bodies) * (2 * radius + gap), np.full(n_bodies, radius + lift)])
+
+
 def disc_positions(n_bodies: int, radius: float, gap: float = GAP, lift: float = LIFT) -> np.ndarray:
     """Centres of ``n_bodies`` (>= 2) discs in two staggered rows, shape (n_bodies, 2).
 
@@ -70,27 +84,28 @@ def disc_positions(n_bodies: int, radius: float, gap: float = GAP, lift: float =
 
 
 def bodies_scene_table(n_bodies: int, count: int, t_end: float, collide: bool,
-                       only: int | None = None, stiffness: float = STIFFNESS) -> dict:
+                       only: int | None = None, stiffness: float = STIFFNESS, row: bool = False) -> dict:
     """The study's scene as a table: ``n_bodies`` discs of about ``count`` particles, 0.05 kg
     each, ``stiffness`` (N/m) and c = 0.5 N s/m per link (relative dampers), each turned by a
-    different small angle so no two land alike; ``only``: that body alone, where it is in
+    different small angle so no two land alike, in a pile (:func:`disc_positions`) or with
+    ``row`` side by side (:func:`row_positions`); ``only``: that body alone, where it is in
     the full scene."""
     radius = disc_radius(count)
-    centres = disc_positions(n_bodies, radius)
+    centres = (row_positions if row else disc_positions)(n_bodies, radius)
     keep = range(n_bodies) if only is None else (only,)
     bodies = [{"name": f"disc{k}", "shape": "disc", "count": count, "radius": radius, "mass": 0.05,
                "stiffness": stiffness, "damping": 0.5, "damper": "relative", "position": centres[k].tolist(),
                "angle": 0.05 + 0.07 * k, "collide": collide} for k in keep]
     # output every 10 ms: the study times the integration, not the sampling
-    name = f"bodies_{n_bodies}x{count}" + ("" if stiffness == STIFFNESS else f"_k{stiffness:g}")
+    name = f"bodies_{n_bodies}x{count}" + ("_row" if row else "") + ("" if stiffness == STIFFNESS else f"_k{stiffness:g}")
     return {"name": name + ("" if only is None else f"_{only}"), "bodies": bodies,
             "simulation": {"t_end": t_end, "output_dt": 1e-2, "method": "RK45", "rtol": 1e-6, "atol": 1e-9}}
 
 
 def bodies_scene(n_bodies: int, count: int, t_end: float, collide: bool, only: int | None = None,
-                 stiffness: float = STIFFNESS) -> Scene:
+                 stiffness: float = STIFFNESS, row: bool = False) -> Scene:
     """:func:`bodies_scene_table`, loaded (validated)."""
-    return load_scene(bodies_scene_table(n_bodies, count, t_end, collide, only, stiffness))
+    return load_scene(bodies_scene_table(n_bodies, count, t_end, collide, only, stiffness, row))
 
 
 #: Wall-time cap of one run (s): a run stopped by it reports the time it reached.
@@ -133,7 +148,7 @@ def bodies_study(out: Path, quick: bool, repeats: int = 3) -> dict:
     sets = {}
     for label, stiffness in (("soft", STIFFNESS), ("stiff", STIFF)):
         print(f" links {stiffness:g} N/m ({label})")
-        sets[label] = _three_runs(n, count, t_end, stiffness, repeats, contact_repeats)
+        sets[label] = _five_runs(n, count, t_end, stiffness, repeats, contact_repeats)
     data = {"bodies": n, "count": count, "t_end_s": t_end, "method": "RK45", "rtol": 1e-6,
             "stiffness_N_per_m": STIFFNESS, **sets["soft"],
             "stiff": {"stiffness_N_per_m": STIFF, **sets["stiff"]}, "environment": _environment()}
@@ -141,22 +156,17 @@ def bodies_study(out: Path, quick: bool, repeats: int = 3) -> dict:
     return data
 
 
-def _three_runs(n: int, count: int, t_end: float, stiffness: float, repeats: int, contact_repeats: int) -> dict:
-    """``collide``, ``pass_through`` and ``separate`` at one link stiffness, printed as a
-    table: ``{"runs": ..., "ratio_to_separate": ...}``."""
+def _five_runs(n: int, count: int, t_end: float, stiffness: float, repeats: int, contact_repeats: int) -> dict:
+    """The pile's ``collide``, ``pass_through`` and ``separate``, and the row's
+    ``row_collide`` and ``row_separate``, at one link stiffness, printed as a table:
+    ``{"runs": ..., "ratio_to_separate": ...}`` (the row's runs to ``row_separate``)."""
     runs = {"collide": _measure(bodies_scene(n, count, t_end, True, stiffness=stiffness), contact_repeats),
-            "pass_through": _measure(bodies_scene(n, count, t_end, False, stiffness=stiffness), repeats)}
-    alone = [_measure(bodies_scene(n, count, t_end, False, only=k, stiffness=stiffness), repeats) for k in range(n)]
-    runs["separate"] = {"particles": sum(r["particles"] for r in alone),
-                        "status": "success" if all(r["status"] == "success" for r in alone) else "failed",
-                        "t_reached_s": min(r["t_reached_s"] for r in alone),
-                        "wall_s": sum(r["wall_s"] for r in alone), "repeats": repeats,
-                        **{k: sum(r[k] for r in alone) for k in ("rhs_evaluations", "steps", "events")},
-                        "max_penetration_m": max(r["max_penetration_m"] for r in alone),
-                        "energy_drift_relative": max(r["energy_drift_relative"] for r in alone),
-                        "broadphase_rebuilds": None, "each_wall_s": [r["wall_s"] for r in alone]}
-    separate = runs["separate"]["wall_s"]
-    ratios = {label: r["wall_s"] / separate for label, r in runs.items()}
+            "pass_through": _measure(bodies_scene(n, count, t_end, False, stiffness=stiffness), repeats),
+            "separate": _separate(n, count, t_end, stiffness, repeats, row=False),
+            "row_collide": _measure(bodies_scene(n, count, t_end, True, stiffness=stiffness, row=True), repeats),
+            "row_separate": _separate(n, count, t_end, stiffness, repeats, row=True)}
+    ratios = {label: r["wall_s"] / runs["row_separate" if label.startswith("row") else "separate"]["wall_s"]
+              for label, r in runs.items()}
     print(f"  {'run':14s} {'status':>11s} {'t reached':>9s} {'wall s':>8s} {'x separate':>10s} {'RHS evals':>9s} "
           f"{'events':>7s} {'penetration m':>13s} {'drift':>8s} {'rebuilds':>8s}")
     for label, r in runs.items():
@@ -169,25 +179,43 @@ def _three_runs(n: int, count: int, t_end: float, stiffness: float, repeats: int
     return {"runs": runs, "ratio_to_separate": ratios}
 
 
+def _separate(n: int, count: int, t_end: float, stiffness: float, repeats: int, row: bool) -> dict:
+    """Each of the ``n`` bodies dropped alone where it is in the pile (or with ``row``, in the
+    row), its numbers summed (maxima of the penetration and drift): the separate drops."""
+    alone = [_measure(bodies_scene(n, count, t_end, False, only=k, stiffness=stiffness, row=row), repeats)
+             for k in range(n)]
+    return {"particles": sum(r["particles"] for r in alone),
+            "status": "success" if all(r["status"] == "success" for r in alone) else "failed",
+            "t_reached_s": min(r["t_reached_s"] for r in alone),
+            "wall_s": sum(r["wall_s"] for r in alone), "repeats": repeats,
+            **{k: sum(r[k] for r in alone) for k in ("rhs_evaluations", "steps", "events")},
+            "max_penetration_m": max(r["max_penetration_m"] for r in alone),
+            "energy_drift_relative": max(r["energy_drift_relative"] for r in alone),
+            "broadphase_rebuilds": None, "each_wall_s": [r["wall_s"] for r in alone]}
+
+
 def plot_bodies(data: dict):
-    """Wall time and RHS evaluations of the three runs, side by side (log axes), for each link
-    stiffness the JSON holds (the soft set; the stiff one where it was run)."""
+    """Wall time and RHS evaluations of the runs, side by side (log axes), for each link
+    stiffness the JSON holds (the soft set; the stiff one where it was run); a study saved
+    before the row was added has the pile's three runs only."""
     from matplotlib.figure import Figure
 
     sets = [(f"{data.get('stiffness_N_per_m', STIFFNESS):g} N/m", data["runs"])]
     if "stiff" in data:
         sets.append((f"{data['stiff']['stiffness_N_per_m']:g} N/m", data["stiff"]["runs"]))
-    labels = {"separate": f"{data['bodies']} alone\n(summed)", "pass_through": "together,\ncollide\nfalse",
-              "collide": "together,\ncollide\ntrue"}
-    order = ("separate", "pass_through", "collide")
-    fig = Figure(figsize=(12, 5), layout="constrained")
+    labels = {"separate": f"pile:\n{data['bodies']} alone\n(summed)", "pass_through": "pile:\ncollide\nfalse",
+              "collide": "pile:\ncollide\ntrue", "row_separate": f"row:\n{data['bodies']} alone\n(summed)",
+              "row_collide": "row:\ncollide\ntrue"}
+    order = ("separate", "pass_through", "collide", "row_separate", "row_collide")
+    colours = {"separate": "C0", "pass_through": "C2", "collide": "C3", "row_separate": "C9", "row_collide": "C1"}
+    fig = Figure(figsize=(14, 5.5), layout="constrained")
     for ax, key, title in zip(fig.subplots(1, 2), ("wall_s", "rhs_evaluations"),
                               ("wall time of the integration (s)", "RHS evaluations")):
         ticks, names = [], []
         for s, (stiffness, runs) in enumerate(sets):
             keys = [k for k in order if k in runs]
-            at = [4 * s + i for i in range(len(keys))]
-            bars = ax.bar(at, [runs[k][key] for k in keys], color=["C0", "C2", "C3"][: len(keys)],
+            at = [(len(order) + 1) * s + i for i in range(len(keys))]
+            bars = ax.bar(at, [runs[k][key] for k in keys], color=[colours[k] for k in keys],
                           alpha=1.0 if s == 0 else 0.6)
             ticks += at
             names += [f"{labels[k]}\n{stiffness}" for k in keys]

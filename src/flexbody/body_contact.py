@@ -85,7 +85,8 @@ import numpy as np
 
 from .assembly import AssembledModel, _kernels_module
 from .broadphase import CandidateList, slices
-from .constants import HELD, SLIDING
+from .constants import FREE, HELD, SLIDING
+from .contact import Phases
 from .dynamics import contact_solve
 from .held_rows import CompiledHeldRows
 from .model import GeneratedModel, Model
@@ -377,6 +378,22 @@ class BodyContactModel(Model):
         return _FrozenRows(slots, self.element_of[slots].copy(), fast, np.concatenate([grounds, ng + slots]),
                            self._slot_points(slots), self.inner.contacts[grounds, 0], normals, self.nq, self.dim)
 
+    def per_particle(self, y, p, phases: Phases, seeds: np.ndarray, gap_tolerance: float) -> bool:
+        """Whether the instant of the contacts ``seeds`` (bool (nc,)) is the inner model's
+        alone, solved per particle (:func:`flexbody.contact.resolve` on it): on particles
+        without friction, with no slot held, every seed a ground contact and no free slot
+        within ``gap_tolerance`` of its floor (a touch the instant would find).  Its
+        ``J M^-1 J^T`` is then diagonal by particle, the coupled LCP's answer the same.  The
+        inner path also sets an impacting particle found up to the gap tolerance below a
+        ground onto it (``settle``), as in a scene whose bodies do not touch."""
+        ng = self.n_ground_contacts
+        if not isinstance(self._coordinates, _ParticleCoordinates) or self._frictional \
+                or np.asarray(seeds)[ng:].any() or phases.on_ground[ng:].any():
+            return False
+        x = self._coordinates.particles(y[: self.nq], None, p)[0]
+        free = phases.phase[ng:] == FREE
+        return not (free & (self._surface_gaps(x)[0] <= phases.floor[ng:] + gap_tolerance)).any()
+
     def held_forces(self, y, p, held, push) -> FloatArray:
         """As :meth:`flexbody.model.Model.held_forces`: where every held contact couples to a
         held slot (a block of :meth:`coupled_with`), on particles in C without friction, from
@@ -384,7 +401,12 @@ class BodyContactModel(Model):
         numbers, bit for bit; the C work is the block's, not the scene's, while finding the
         rows still takes a few passes over the contacts)."""
         frozen = self._frozen_rows(p, held)
-        if frozen is None or not len(frozen.slots) or frozen.fast.any():  # fast: a ground contact held alone
+        if frozen is not None and not len(frozen.slots):  # ground contacts alone: the inner model's, per particle
+            lam = np.zeros(self.n_contacts)
+            lam[: self.n_ground_contacts] = self.inner.held_forces(y, p, frozen.fast,
+                                                                  np.asarray(push, float)[: self.n_ground_contacts])
+            return lam
+        if frozen is None or frozen.fast.any():  # fast: a ground contact held alone
             return self.rhs(y, p, held, push)[1]
         y = np.asarray(y, float)
         moved = np.unique(np.concatenate([frozen.at, frozen.points.ravel()]))

@@ -553,6 +553,8 @@ class _Run:
         if self.compiled and not self.model.coupled:  # the compiled twin of contact.resolve
             found, not_held, loss = self.compiled.resolve(t, touching, leaving, s.impact == "thesis", s.impact_dt)
             new = [Event(t, c, EVENT_KINDS[kind], speed) for c, kind, speed in found]
+        elif self.per_particle(touching | leaving):
+            new, not_held, loss = self.resolve_per_particle(t, touching, leaving)
         else:
             renewed = held_before = None
             if self.model.n_slots:
@@ -589,6 +591,32 @@ class _Run:
         if loss:
             self.losses.append((t, loss))
         return new
+
+    def per_particle(self, seeds: np.ndarray) -> bool:
+        """Whether the instant of the contacts ``seeds`` (bool (nc,)) of a coupled model is its
+        inner model's, per particle (:meth:`flexbody.body_contact.BodyContactModel.per_particle`)."""
+        return (self.model.coupled and self.settings.impact == "instant" and hasattr(self.model, "per_particle")
+                and self.model.per_particle(self.y, self.p, self.phases, seeds, self.gap_tolerance))
+
+    def resolve_per_particle(self, t: float, touching: np.ndarray, leaving: np.ndarray
+                             ) -> tuple[list[Event], np.ndarray, float]:
+        """:func:`flexbody.contact.resolve` on the inner model's ground contacts alone (the
+        first ``n_ground_contacts``; the slots, all free and out of reach, keep their
+        phases).  Returns the new events, the contacts not held after their impact (bool
+        (nc,)) and the kinetic energy the impacts removed (J)."""
+        ng, s = self.model.n_ground_contacts, self.settings
+        grounds = Phases(*(getattr(self.phases, name)[:ng] for name in ("phase", "floor", "push", "push_until")))
+        res = resolve(self.model.inner, t, self.y, self.p, grounds, np.asarray(touching)[:ng],
+                      np.asarray(leaving)[:ng], gap_tolerance=self.gap_tolerance,
+                      force_tolerance=self.force_tolerance[:ng], masses=self.contact_masses[:ng], impact=s.impact,
+                      impact_dt=s.impact_dt, restitution=self.restitution[:ng], min_rebound=self.min_rebound[:ng],
+                      speed_tolerance=self.speed_tolerance, friction=None, zeno_rise=self.zeno_rise)
+        self.y[:] = res.y
+        grounds.assign(res.phases)  # views: the ground contacts' part of self.phases
+        self.indeterminate += [(t, note) for note in res.notes]
+        not_held = np.zeros(self.model.n_contacts, bool)
+        not_held[:ng] = res.not_held
+        return res.events, not_held, res.impact_loss
 
     def switch_elements(self, t: float, touching: np.ndarray, leaving: np.ndarray
                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
