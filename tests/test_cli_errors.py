@@ -133,6 +133,7 @@ def test_staged_folder_leaves_the_old_folder_when_writing_fails(tmp_path):
     (["--impact-dt", "nan"], "`impact_dt` = nan"),
     (["--impact", "thesis", "--impact-dt", "inf"], "`impact_dt` = inf: must be a finite number > 0"),
     (["--rtol", "-1e-6"], "`rtol` = -1e-06: must be in [1e-14, 1)"),
+    (["--chatter-impacts", "-3"], "`chatter_impacts` = -3: must be an integer >= 1"),
     (["--rtol=-1e-6"], "`rtol` = -1e-06: must be in [1e-14, 1)"),
     (["--atol", "-1"], "`atol` = -1.0: must be in (0, 1)"),
     (["--t-end", "-2"], "`t_end` = -2.0"),

@@ -92,3 +92,21 @@ def test_a_stack_of_flexible_boxes_with_rebounds_between_them_comes_down():
               "position": [0.03 * i, 0.02 * i, 0.06 + 0.13 * i], "rotation": [0.02 * i, 0.03 * i, 0.3 * i]}
              for i in range(3)]
     run_to(pile(boxes, 0.55, 0.5))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("count, restitution", [(200, None), (100, 0.5)])
+def test_finer_3d_spheres_stop_in_a_burst_of_impacts_that_a_raised_chatter_bound_lets_settle(count, restitution):
+    """Five 200-particle spheres (plastic) and five 100-particle spheres with e = 0.5 between
+    them: at 0.135 s two spheres press faces together, each held by its vertices on the
+    other's faces, and the patch takes turns (each impact lifts its neighbours off at 4e-3 to
+    5e-2 m/s, far above the Zeno speed): one particle is held and released again more than 25
+    times within 1 ms, and the default guard stops the pile with ``chattering``.  The burst
+    ends: with ``simulation.chatter_impacts = 100`` the pile runs on, nothing inside anything
+    by 1e-9 m and the ledger closed to 1e-6."""
+    table = sphere_pile(0.2, count=count, restitution=restitution)
+    stopped = flexbody.simulate(load_scene(table))
+    assert stopped.status == "chattering" and "held and released again" in stopped.message
+    assert 0.13 < stopped.events_time[-1] < 0.14
+    table["simulation"]["chatter_impacts"] = 100
+    run_to(table)

@@ -245,6 +245,36 @@ def test_chattering_is_reported_not_spun_on(ball):
         run.check_guards(impacts[25].t, [impacts[25]])
     assert info.value.status == "chattering"
     assert "particle 3 impacted 26 times" in info.value.message and "rtol" in info.value.message
+    assert "chatter_impacts" in info.value.message and "now 25" in info.value.message
+
+
+@pytest.mark.parametrize("given", ["scene", "option"])
+def test_the_chatter_bound_is_the_scenes_or_the_options(ball, given):
+    """``simulation.chatter_impacts`` (or the option ``chatter_impacts``) moves the guard's
+    bound: 40 impacts within 1 ms pass under a bound of 40, the 41st stops the run."""
+    if given == "scene":
+        table = {"name": "ball", "bodies": [{"name": "b", "particles": [[0.0, 0.0], [0.1, 0.0]], "links": [[0, 1]],
+                                              "mass": 0.1, "stiffness": 1000.0, "damping": 0.1,
+                                              "position": [0.0, 0.3]}],
+                 "simulation": {"t_end": 1.0, "chatter_impacts": 40}}
+        scene = flexbody.load_scene(table)
+        assert scene.simulation.chatter_impacts == 40
+        settings, model = _settings(scene, {"backend": "numpy"}), load_model(scene, backend="numpy")
+    else:
+        scene, settings = ball, _settings(ball, {"chatter_impacts": 40, "backend": "numpy"})
+        model = load_model(ball, backend="numpy")
+    run = _Run(scene, model, settings, None, 10**6)
+    impacts = [Event(0.5 + 1e-5 * k, 1, "impact", -1e-7) for k in range(41)]
+    for e in impacts[:40]:
+        run.check_guards(e.t, [e])
+    with pytest.raises(SimulationFailed) as info:
+        run.check_guards(impacts[40].t, [impacts[40]])
+    assert "impacted 41 times" in info.value.message and "now 40" in info.value.message
+
+
+def test_a_run_records_its_chatter_bound(ball):
+    assert flexbody.simulate(ball, t_end=0.05, chatter_impacts=60).stats["chatter_impacts"] == 60
+    assert flexbody.simulate(ball, t_end=0.05).stats["chatter_impacts"] == 25
 
 
 @needs_cc

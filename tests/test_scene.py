@@ -85,6 +85,11 @@ def test_overdamped_link_warns():
         (scene_table(body(), simulation={"t_end": 1.0, "method": "Euler"}), "simulation.method", "one of"),
         (scene_table(body(), simulation={"t_end": 1.0, "impact": "thesis"}), "simulation.impact_dt", "required"),
         (scene_table(body(), simulation={}), "simulation.t_end", "required"),
+        (scene_table(body(), simulation={"t_end": 1.0, "chatter_impacts": 0}), "simulation.chatter_impacts", ">= 1"),
+        (scene_table(body(), simulation={"t_end": 1.0, "chatter_impacts": 2.5}), "simulation.chatter_impacts",
+         "an integer"),
+        (scene_table(body(), simulation={"t_end": 1.0, "chatter_impacts": True}), "simulation.chatter_impacts",
+         "an integer"),
         ({"simulation": {"t_end": 1.0}}, "bodies", "required"),
     ],
 )

@@ -23,3 +23,9 @@ MAX_PARTICLES = 1_000_000
 MAX_SAMPLES = 10_000_000
 #: Default ``--max-wall-time`` of ``flexbody run`` (s).
 DEFAULT_MAX_WALL_TIME = 600.0
+#: Default ``simulation.chatter_impacts``: a particle with more impacts than this within
+#: ``CHATTER_WINDOW`` (in a row without being held, or held and released again) is
+#: chattering, and the run stops (:meth:`flexbody.driver._Run.check_guards`).
+CHATTER_IMPACTS = 25
+#: The chatter guard's window (s).
+CHATTER_WINDOW = 1e-3

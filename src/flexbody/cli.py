@@ -26,7 +26,7 @@ EXIT_FAILED, EXIT_USAGE, EXIT_INTERRUPTED = 1, 2, 130
 BUG = "this is a bug in flexbody: please report it with the command and scene"
 #: Options that take a number, which may be negative (``--rtol -1e-6`` must reach the range check).
 NUMERIC_OPTIONS = ("--rtol", "--atol", "--impact-dt", "--t-end", "--output-dt", "--max-wall-time", "--repeats",
-                   "--every")
+                   "--every", "--chatter-impacts")
 
 
 def _add_scene(parser: argparse.ArgumentParser) -> None:
@@ -66,6 +66,10 @@ def _parser() -> argparse.ArgumentParser:
     run.add_argument("--max-wall-time", type=float, default=DEFAULT_MAX_WALL_TIME, metavar="S",
                      help=f"stop a run that takes longer than this (s; default {DEFAULT_MAX_WALL_TIME:g}; 'inf' for "
                           "no limit) with status too_slow and exit 1")
+    run.add_argument("--chatter-impacts", type=int, metavar="N",
+                     help="stop with status chattering where one particle impacts more than N times within 1 ms "
+                          "(default: the scene's simulation.chatter_impacts, else 25); raise it where a burst of "
+                          "impacts ends (a pile settling)")
     run.add_argument("--quiet", action="store_true", help="no progress bar")
     run.add_argument("--vtk", action="store_true",
                      help="also write DIR/vtk/: the run as a ParaView time series (as flexbody export DIR does)")

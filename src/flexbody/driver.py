@@ -24,6 +24,7 @@ from .compiled import CompiledPath
 from .constants import (EVENT, IMPACT, LIFTOFF, NON_FINITE, SINGULAR, SLIP, STEP_COLLAPSE, STICK, TOO_SLOW,
                         ZENO_RISE)
 from .assembly import AssembledModel
+from .choices import CHATTER_IMPACTS, CHATTER_WINDOW  # noqa: F401  (the default bound, beside its window)
 from .contact import FREE, HELD, PUSHED, Event, Phases, UnsettledInstant, resolve
 from .coupled import CoupledImpactError, project_held
 from .events import EventFunctions, locate
@@ -47,12 +48,14 @@ IMPLICIT = ("Radau", "BDF", "LSODA")
 #: Above these a run is flagged in ``stats["warnings"]``: relative energy drift, and rtol
 #: (looser tolerances can change the event sequence).
 DRIFT_WARNING, LOOSE_RTOL = 1e-3, 1e-4
-#: A particle with more impacts than this within CHATTER_WINDOW seconds is chattering: in a
-#: row without being held (an accumulation the Zeno threshold does not end), or held each
-#: time and released again.  A cascade of rebounds that ends held counts as its hold: a
-#: flexible sphere landing on another with e = 0.5 restarted its cascade (7 impacts, the
-#: last held) 4 times within 1 ms as its neighbours' impacts released it, 26 impacts.
-CHATTER_IMPACTS, CHATTER_WINDOW = 25, 1e-3
+#: A particle with more impacts than ``simulation.chatter_impacts`` (default CHATTER_IMPACTS)
+#: within CHATTER_WINDOW seconds is chattering: in a row without being held (an
+#: accumulation the Zeno threshold does not end), or held each time and released again.  A
+#: cascade of rebounds that ends held counts as its hold: a flexible sphere landing on
+#: another with e = 0.5 restarted its cascade (7 impacts, the last held) 4 times within 1 ms
+#: as its neighbours' impacts released it, 26 impacts.  Within the window a burst that ends
+#: looks like one that does not: where a scene's bursts end (a pile settling), the scene
+#: raises its bound.
 #: A contact switching between stick and slip more than this within CHATTER_WINDOW is chattering.
 CHATTER_FRICTION = 25
 #: A sliding contact slower than this times sqrt(|g| size) has come to rest (m/s).
@@ -159,6 +162,10 @@ def _settings(scene: Scene, overrides: dict) -> SimulationSettings:
         problems.append(f"`rtol` = {values['rtol']!r}: must be in [1e-14, 1)")
     if not 0 < values["atol"] < 1:
         problems.append(f"`atol` = {values['atol']!r}: must be in (0, 1)")
+    bound = values["chatter_impacts"]
+    if not isinstance(bound, int) or isinstance(bound, bool) or bound < 1:
+        problems.append(f"`chatter_impacts` = {shown(bound)}: must be an integer >= 1 (impacts of one particle "
+                        "within 1 ms)")
     if values["impact"] not in IMPACT_MODES:
         problems.append(f"`impact` = {shown(values['impact'])}: must be one of {list(IMPACT_MODES)}")
     if values["impact"] == "instant":
@@ -756,16 +763,19 @@ class _Run:
                 recent.popleft()
             held = [h for _, _, h in recent]
             in_a_row = held[::-1].index(True) if True in held else len(held)  # since the last hold
-            if max(in_a_row, sum(held)) > CHATTER_IMPACTS:
+            bound = self.settings.chatter_impacts
+            if max(in_a_row, sum(held)) > bound:
                 particle = int(self.model.contacts[e.contact][0])
                 speed = max(abs(v) for _, v, _ in list(recent)[-5:])
-                how = (f"{in_a_row} in a row, none held" if in_a_row > CHATTER_IMPACTS else
+                how = (f"{in_a_row} in a row, none held" if in_a_row > bound else
                        f"held and released again {sum(held)} times")
                 raise SimulationFailed(
                     "chattering",
                     f"particle {particle} impacted {len(recent)} times within {CHATTER_WINDOW * 1e3:g} ms up to "
                     f"t = {t:.9g} s at normal speeds up to {speed:.3g} m/s (an accumulation of impacts: {how}); "
-                    "tighten --rtol/--atol, or add damping so the body settles.",
+                    "tighten --rtol/--atol, or add damping so the body settles; if its impacts come in a burst "
+                    "that ends (a pile settling, its contacts taking turns), raise the bound: simulation."
+                    f"chatter_impacts (--chatter-impacts), now {bound}.",
                 )
 
     def check_folds(self, t: float, new_events: list[Event]) -> None:
@@ -913,7 +923,7 @@ class _Run:
             "method": s.method, "rtol": s.rtol, "atol": s.atol, "backend": model.backend,
             "formulation": model.formulation, "model": "assembled" if isinstance(getattr(model, "inner", model), AssembledModel) else "derived",
             "threads": getattr(model, "inner", model).threads,
-            "impact": s.impact, "impact_dt": s.impact_dt,
+            "impact": s.impact, "impact_dt": s.impact_dt, "chatter_impacts": s.chatter_impacts,
             "t_end": s.t_end, "t_reached": float(T[-1]) if len(T) else 0.0,
             "wall_time_s": wall, "rhs_evaluations": self.nfev + int(self.counters[0]),
             "jacobian_evaluations": self.njev, "steps": self.steps + int(self.counters[1]),
@@ -948,6 +958,7 @@ def simulate(
     formulation: str | None = None,
     impact: str | None = None,
     impact_dt: float | None = None,
+    chatter_impacts: int | None = None,
     max_events: int = 100_000,
     max_wall_time: float = np.inf,
     progress: Progress | None = None,
@@ -959,7 +970,7 @@ def simulate(
     scene : Scene, path or bundled scene name
     model : Model, optional
         A loaded model (skips loading); otherwise ``load_model(scene, backend, formulation)``.
-    method, rtol, atol, t_end, output_dt, backend, formulation, impact, impact_dt
+    method, rtol, atol, t_end, output_dt, backend, formulation, impact, impact_dt, chatter_impacts
         Override the scene's ``[simulation]`` settings.
     max_events : int
         Stop with status ``max_events`` after this many events.
@@ -977,7 +988,8 @@ def simulate(
     if not isinstance(scene, Scene):
         scene = load_scene(scene)
     settings = _settings(scene, dict(method=method, rtol=rtol, atol=atol, t_end=t_end, output_dt=output_dt,
-                                     backend=backend, formulation=formulation, impact=impact, impact_dt=impact_dt))
+                                     backend=backend, formulation=formulation, impact=impact, impact_dt=impact_dt,
+                                     chatter_impacts=chatter_impacts))
     if model is None:
         model = load_model(scene, backend=settings.backend, formulation=settings.formulation)
     settings = _settings(scene, dict(vars(settings), backend=model.backend, formulation=model.formulation))

@@ -41,7 +41,7 @@ def run_command(args: argparse.Namespace) -> int:
     scene = load_scene(args.scene)
     overrides = dict(method=args.method, rtol=args.rtol, atol=args.atol, t_end=args.t_end,
                      output_dt=args.output_dt, backend=args.backend, formulation=args.formulation,
-                     impact=args.impact, impact_dt=args.impact_dt)
+                     impact=args.impact, impact_dt=args.impact_dt, chatter_impacts=args.chatter_impacts)
     settings = _settings(scene, overrides)  # every option checked before deriving or compiling
     model = load_model(scene, backend=settings.backend, formulation=settings.formulation)
     bar = None if args.quiet else ProgressBar()

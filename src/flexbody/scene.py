@@ -53,6 +53,7 @@ from . import presets
 from ._fields import Problems, TableReader, Words
 from .choices import (  # noqa: F401  (re-exported: the choices are part of the scene schema)
     BACKENDS,
+    CHATTER_IMPACTS,
     COMPILED_METHODS,
     DAMPERS,
     FORMULATIONS,
@@ -79,6 +80,7 @@ ELASTIC_KEYS = ("stiffness", "damping", "damper", "rest_lengths")
 CONTACT_KEYS = ("bodies", "friction", "restitution")
 SIMULATION_KEYS = (
     "t_end", "output_dt", "method", "rtol", "atol", "impact", "impact_dt", "formulation", "backend",
+    "chatter_impacts",
 )  # fmt: skip
 #: Geometry keys each shape takes (``None``: explicit ``particles`` and ``links``); any other
 #: geometry key beside them is an error, not silently ignored.
@@ -274,6 +276,8 @@ class SimulationSettings:
     impact_dt: float | None = None
     formulation: str = "particles"
     backend: str = "c"
+    #: The chatter guard's bound: more impacts of one particle than this within 1 ms stop the run.
+    chatter_impacts: int = CHATTER_IMPACTS
 
 
 @dataclass(frozen=True, eq=False)
@@ -915,8 +919,10 @@ def _simulation(r: TableReader) -> SimulationSettings | None:
         r.fail("impact_dt", None, 'is required when impact = "thesis" (the time step ΔT of eq. 4.6, s)')
     formulation = r.string("formulation", "particles", choices=FORMULATIONS)
     backend = r.string("backend", "c", choices=BACKENDS)
+    chatter_impacts = r.integer("chatter_impacts", CHATTER_IMPACTS, minimum=1)
     r.finish()
-    if None in (t_end, rtol, atol, impact, formulation, backend) or (r.has("method") and method is None):
+    if None in (t_end, rtol, atol, impact, formulation, backend, chatter_impacts) or \
+            (r.has("method") and method is None):
         return None
     if (output_dt is None and r.has("output_dt")) or (impact == "thesis" and impact_dt is None):
         return None  # already reported
@@ -936,6 +942,7 @@ def _simulation(r: TableReader) -> SimulationSettings | None:
         impact_dt=impact_dt,
         formulation=formulation,
         backend=backend,
+        chatter_impacts=chatter_impacts,
     )
 
 
