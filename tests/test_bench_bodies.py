@@ -72,9 +72,16 @@ def test_the_row_holds_its_discs_gap_apart_side_by_side_at_the_piles_lift():
     centres = row_positions(5, radius)
     np.testing.assert_allclose(np.diff(centres[:, 0]), 2 * radius + GAP)
     np.testing.assert_allclose(centres[:, 1] - radius, LIFT)  # lowest points LIFT above the ground
-    row, pile = bodies_scene(5, 23, 0.3, collide=True, row=True), bodies_scene(5, 23, 0.3, collide=True)
-    assert row.n_particles == pile.n_particles and row.name != pile.name
-    x = row.initial_positions()
-    assert x[:, 1].min() > 0.0  # above the ground
+    row = bodies_scene(5, 23, 0.3, collide=True, row=True)
     spans = [(b.initial_positions()[:, 0].min(), b.initial_positions()[:, 0].max()) for b in row.bodies]
     assert all(right[0] - left[1] >= GAP - 1e-12 for left, right in zip(spans, spans[1:]))  # apart
+    assert row.name != bodies_scene(5, 23, 0.3, collide=True).name
+
+
+def test_one_body_alone_is_where_it_is_in_the_row():
+    full = bodies_scene(4, 23, 0.3, collide=False, row=True)
+    offsets = np.cumsum([0] + [b.n_particles for b in full.bodies])
+    for k in range(4):
+        alone = bodies_scene(4, 23, 0.3, collide=False, only=k, row=True)
+        np.testing.assert_array_equal(alone.initial_positions(),
+                                      full.initial_positions()[offsets[k] : offsets[k + 1]])

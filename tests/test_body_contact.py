@@ -157,6 +157,19 @@ def test_a_ring_comes_to_rest_on_a_block_carrying_its_weight():
     assert ng == scene.n_particles  # one ground
 
 
+#: Two rings far apart that may touch (with ``_scene``): every contact is with the ground.
+APART = {
+    "name": "apart",
+    "bodies": [
+        {"name": "left", "shape": "ring", "count": 8, "radius": 0.1, "center": True, "mass": 0.05,
+         "stiffness": 2000.0, "damping": 0.5, "position": [-0.5, 0.3], "angle": 0.05},
+        {"name": "right", "shape": "ring", "count": 8, "radius": 0.1, "center": True, "mass": 0.05,
+         "stiffness": 2000.0, "damping": 0.5, "position": [0.5, 0.4], "angle": -0.1},
+    ],
+    "simulation": {"t_end": 0.5, "output_dt": 0.01},
+}
+
+
 @pytest.mark.parametrize("instants", ["per_particle", "lcp"])
 def test_contacts_that_never_touch_another_body_give_the_ground_only_answer(instants, monkeypatch):
     """Two rings far apart that may touch: every contact is with the ground, decoupled, and
@@ -166,16 +179,7 @@ def test_contacts_that_never_touch_another_body_give_the_ground_only_answer(inst
     ground-only run's, its right-hand side being the inner model's too)."""
     if instants == "lcp":
         monkeypatch.setattr(BodyContactModel, "per_particle", lambda *args: False)
-    table = {
-        "name": "apart",
-        "bodies": [
-            {"name": "left", "shape": "ring", "count": 8, "radius": 0.1, "center": True, "mass": 0.05,
-             "stiffness": 2000.0, "damping": 0.5, "position": [-0.5, 0.3], "angle": 0.05},
-            {"name": "right", "shape": "ring", "count": 8, "radius": 0.1, "center": True, "mass": 0.05,
-             "stiffness": 2000.0, "damping": 0.5, "position": [0.5, 0.4], "angle": -0.1},
-        ],
-        "simulation": {"t_end": 0.5, "output_dt": 0.01},
-    }
+    table = APART
     alone = flexbody.simulate(flexbody.load_scene(table), method="RK45")
     together = flexbody.simulate(_scene(table, restitution=0.0))
     assert alone.status == together.status == "success"
@@ -187,6 +191,47 @@ def test_contacts_that_never_touch_another_body_give_the_ground_only_answer(inst
     if instants == "per_particle":
         np.testing.assert_array_equal(together.events_time, alone.events_time)
         np.testing.assert_array_equal(together.positions, alone.positions)
+
+
+def test_an_instant_is_solved_per_particle_only_where_nothing_couples_it():
+    """``per_particle`` holds at a ground contact's instant with every slot free and out of
+    reach; not with a slot held, a slot within the gap tolerance of its floor, or a slot
+    among the instant's contacts."""
+    from flexbody.constants import HELD
+    from flexbody.contact import Phases
+    from flexbody.state import initial_coordinates
+
+    scene = _scene(APART, restitution=0.0)
+    model = load_model(scene)
+    p = model.parameters(scene)
+    q, u = initial_coordinates(scene, model)
+    y = np.concatenate([q, u, np.zeros(model.ny - model.nq - model.nu)])
+    ng, nc = model.n_ground_contacts, model.n_contacts
+    ground, slot = np.zeros(nc, bool), np.zeros(nc, bool)
+    ground[0], slot[ng] = True, True
+    free = Phases.all_free(nc)
+    assert model.per_particle(y, p, free, ground, 1e-9)
+    assert not model.per_particle(y, p, free, ground | slot, 1e-9)  # a slot among the instant's contacts
+    held = free.copy()
+    held.phase[ng + 3] = HELD
+    assert not model.per_particle(y, p, held, ground, 1e-9)
+    reach = free.copy()  # a free slot whose gap (margin: nothing near) is within the tolerance of its floor
+    reach.floor[ng + 5] = model.gaps(y[: model.nq], p)[ng + 5] - 0.5e-9
+    assert not model.per_particle(y, p, reach, ground, 1e-9)
+
+
+def test_a_bouncy_ground_keeps_the_coupled_instants(monkeypatch):
+    """With e > 0 on the ground the instants stay the LCPs' (whose Zeno threshold counts the
+    contact's own pull, not gravity's alone): the run is the same with the per-particle
+    path forbidden, bit for bit."""
+    table = {**APART, "grounds": [{"point": [0.0, 0.0], "normal": [0.0, 1.0], "restitution": 0.5}]}
+    default = flexbody.simulate(_scene(table, restitution=0.0))
+    monkeypatch.setattr(BodyContactModel, "per_particle", lambda *args: False)
+    coupled = flexbody.simulate(_scene(table, restitution=0.0))
+    assert default.status == coupled.status == "success" and len(default.events_time) > 10
+    assert (default.events_kind == "impact").sum() > 8  # rebounds
+    np.testing.assert_array_equal(default.events_time, coupled.events_time)
+    np.testing.assert_array_equal(default.positions, coupled.positions)
 
 
 def _momenta_3d(result):

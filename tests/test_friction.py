@@ -489,7 +489,8 @@ def test_a_stiffer_finer_ring_rolls_closer_to_g_sin_theta_over_two():
                                          (["impact"], "an accumulation of impacts")])
 def test_stick_slip_chattering_and_micro_bounce_cascades_stop_with_a_status(kinds, says):
     from flexbody.contact import Event
-    from flexbody.driver import CHATTER_FRICTION, CHATTER_IMPACTS, CHATTER_WINDOW, SimulationFailed, _Run, _settings
+    from flexbody.choices import CHATTER_IMPACTS, CHATTER_WINDOW
+    from flexbody.driver import CHATTER_FRICTION, SimulationFailed, _Run, _settings
 
     scene = particle_scene([0.0, 0.0], [1.0, 0.0], friction=0.3, restitution=0.5)
     run = _Run(scene, assembled_model(scene, "numpy"), _settings(scene, {"backend": "numpy"}), None, 10**6)

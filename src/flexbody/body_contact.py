@@ -399,14 +399,17 @@ class BodyContactModel(Model):
         held slot (a block of :meth:`coupled_with`), on particles in C without friction, from
         the free accelerations of the particles the rows move and the rows alone (``rhs``'s
         numbers, bit for bit; the C work is the block's, not the scene's, while finding the
-        rows still takes a few passes over the contacts)."""
-        frozen = self._frozen_rows(p, held)
-        if frozen is not None and not len(frozen.slots):  # ground contacts alone: the inner model's, per particle
+        rows still takes a few passes over the contacts); where no slot is held, the inner
+        model's per particle (``rhs`` is then the inner model's too)."""
+        ng = self.n_ground_contacts
+        held = np.asarray(held)
+        if self._held_rows is not None and not self._frictional and not held[ng:].any():
+            # ground contacts alone (frictionless, on particles): the inner model's, per particle
             lam = np.zeros(self.n_contacts)
-            lam[: self.n_ground_contacts] = self.inner.held_forces(y, p, frozen.fast,
-                                                                  np.asarray(push, float)[: self.n_ground_contacts])
+            lam[:ng] = self.inner.held_forces(y, p, held[:ng], np.asarray(push, float)[:ng])
             return lam
-        if frozen is None or frozen.fast.any():  # fast: a ground contact held alone
+        frozen = self._frozen_rows(p, held)
+        if frozen is None or not len(frozen.slots) or frozen.fast.any():  # fast: a ground contact held alone
             return self.rhs(y, p, held, push)[1]
         y = np.asarray(y, float)
         moved = np.unique(np.concatenate([frozen.at, frozen.points.ravel()]))

@@ -19,7 +19,7 @@ import sys
 import traceback
 import warnings
 
-from .choices import BACKENDS, DEFAULT_MAX_WALL_TIME, FORMULATIONS, IMPACT_MODES, METHODS
+from .choices import BACKENDS, CHATTER_IMPACTS, CHATTER_WINDOW, DEFAULT_MAX_WALL_TIME, FORMULATIONS, IMPACT_MODES, METHODS
 from .errors import InputError
 
 EXIT_FAILED, EXIT_USAGE, EXIT_INTERRUPTED = 1, 2, 130
@@ -67,9 +67,9 @@ def _parser() -> argparse.ArgumentParser:
                      help=f"stop a run that takes longer than this (s; default {DEFAULT_MAX_WALL_TIME:g}; 'inf' for "
                           "no limit) with status too_slow and exit 1")
     run.add_argument("--chatter-impacts", type=int, metavar="N",
-                     help="stop with status chattering where one particle impacts more than N times within 1 ms "
-                          "(default: the scene's simulation.chatter_impacts, else 25); raise it where a burst of "
-                          "impacts ends (a pile settling)")
+                     help=f"stop with status chattering where one particle impacts more than N (an integer >= 1) "
+                          f"times within {CHATTER_WINDOW * 1e3:g} ms (default: the scene's simulation.chatter_impacts, "
+                          f"else {CHATTER_IMPACTS}); raise it where a burst of impacts ends (a pile settling)")
     run.add_argument("--quiet", action="store_true", help="no progress bar")
     run.add_argument("--vtk", action="store_true",
                      help="also write DIR/vtk/: the run as a ParaView time series (as flexbody export DIR does)")

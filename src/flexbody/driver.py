@@ -11,6 +11,7 @@ and the guards stay here, whichever path integrates.
 
 from __future__ import annotations
 
+import numbers
 import time
 from collections import defaultdict, deque
 from collections.abc import Callable
@@ -24,7 +25,7 @@ from .compiled import CompiledPath
 from .constants import (EVENT, IMPACT, LIFTOFF, NON_FINITE, SINGULAR, SLIP, STEP_COLLAPSE, STICK, TOO_SLOW,
                         ZENO_RISE)
 from .assembly import AssembledModel
-from .choices import CHATTER_IMPACTS, CHATTER_WINDOW  # noqa: F401  (the default bound, beside its window)
+from .choices import CHATTER_WINDOW
 from .contact import FREE, HELD, PUSHED, Event, Phases, UnsettledInstant, resolve
 from .coupled import CoupledImpactError, project_held
 from .events import EventFunctions, locate
@@ -163,9 +164,11 @@ def _settings(scene: Scene, overrides: dict) -> SimulationSettings:
     if not 0 < values["atol"] < 1:
         problems.append(f"`atol` = {values['atol']!r}: must be in (0, 1)")
     bound = values["chatter_impacts"]
-    if not isinstance(bound, int) or isinstance(bound, bool) or bound < 1:
+    if not isinstance(bound, numbers.Integral) or isinstance(bound, bool) or bound < 1:
         problems.append(f"`chatter_impacts` = {shown(bound)}: must be an integer >= 1 (impacts of one particle "
-                        "within 1 ms)")
+                        f"within {CHATTER_WINDOW * 1e3:g} ms)")
+    else:
+        values["chatter_impacts"] = int(bound)
     if values["impact"] not in IMPACT_MODES:
         problems.append(f"`impact` = {shown(values['impact'])}: must be one of {list(IMPACT_MODES)}")
     if values["impact"] == "instant":
@@ -601,8 +604,12 @@ class _Run:
 
     def per_particle(self, seeds: np.ndarray) -> bool:
         """Whether the instant of the contacts ``seeds`` (bool (nc,)) of a coupled model is its
-        inner model's, per particle (:meth:`flexbody.body_contact.BodyContactModel.per_particle`)."""
+        inner model's, per particle (:meth:`flexbody.body_contact.BodyContactModel.per_particle`):
+        only on plastic grounds, whose impacts stop, so that the Zeno threshold of a rebound
+        (the coupled one's counts the contact's own pull, :func:`flexbody.coupled.coupled_impact`;
+        the per-particle one gravity's) never decides."""
         return (self.model.coupled and self.settings.impact == "instant" and hasattr(self.model, "per_particle")
+                and not (self.restitution[: self.model.n_ground_contacts] > 0.0).any()
                 and self.model.per_particle(self.y, self.p, self.phases, seeds, self.gap_tolerance))
 
     def resolve_per_particle(self, t: float, touching: np.ndarray, leaving: np.ndarray
@@ -618,8 +625,11 @@ class _Run:
                       force_tolerance=self.force_tolerance[:ng], masses=self.contact_masses[:ng], impact=s.impact,
                       impact_dt=s.impact_dt, restitution=self.restitution[:ng], min_rebound=self.min_rebound[:ng],
                       speed_tolerance=self.speed_tolerance, friction=None, zeno_rise=self.zeno_rise)
+        settled = not np.array_equal(res.y[: self.model.nq], self.y[: self.model.nq])
         self.y[:] = res.y
         grounds.assign(res.phases)  # views: the ground contacts' part of self.phases
+        if settled:  # a particle set onto a ground moves the slots it carries: re-arm them (as resolve does)
+            self.phases.arm(self.model.gaps(self.y[: self.model.nq], self.p), self.gap_tolerance)
         self.indeterminate += [(t, note) for note in res.notes]
         not_held = np.zeros(self.model.n_contacts, bool)
         not_held[:ng] = res.not_held

@@ -44,7 +44,8 @@ class EventFunctions:
         self.free = phases.phase == FREE
         self.held_mask = phases.on_ground
         self.held = phases.held
-        self.margins = model.element_margins if model.n_slots else None
+        # held slots' element margins (all inf where the segment holds no slot)
+        self.margins = model.element_margins if phases.on_ground[model.n_ground_contacts :].any() else None
         # Contacts between bodies (past the grounds'): a just released one is checked more densely.
         self.between_bodies = np.arange(model.n_contacts) >= model.n_ground_contacts
         self.friction = bool(self.held_mask.any() and model.laws[:, 0].any())
