@@ -285,6 +285,8 @@ def _earliest(events: EventFunctions, dense: Callable[[float], np.ndarray], fire
         earliest = int(candidates[np.argmin(chord)])
         hi = _root(events, dense, earliest, ta, hi, float(ga[earliest]))
         rooted[earliest] = True
+        if fired.size == 1:  # nothing else fired: the instant is its root (no function evaluated again)
+            return Crossing(hi, rooted)
         g_hi = evaluate(dense(hi))
         candidates = fired[(g_hi[fired] <= 0.0) & ~rooted[fired]]  # fired by then: their roots are not later
     group = np.zeros(len(ga), bool)
