@@ -85,3 +85,25 @@ def test_one_body_alone_is_where_it_is_in_the_row():
         alone = bodies_scene(4, 23, 0.3, collide=False, only=k, row=True)
         np.testing.assert_array_equal(alone.initial_positions(),
                                       full.initial_positions()[offsets[k] : offsets[k + 1]])
+
+
+def test_the_quick_study_saves_five_runs_a_set_and_the_stiff_row_touches_nothing(tmp_path):
+    """``--quick`` (4 thesis-ball discs, 0.3 s): five runs per stiffness, each ratio against
+    its own layout's separate drops; side by side the stiff discs make no contact between
+    bodies, so the row's run has exactly its separate drops' events."""
+    import json
+
+    from flexbody.bench_bodies import bodies_study
+
+    bodies_study(tmp_path, quick=True, repeats=1)
+    data = json.loads((tmp_path / "bodies.json").read_text())
+    assert (tmp_path / "bodies.png").stat().st_size > 0
+    for runs, ratios in ((data["runs"], data["ratio_to_separate"]),
+                         (data["stiff"]["runs"], data["stiff"]["ratio_to_separate"])):
+        assert set(runs) == {"collide", "pass_through", "separate", "row_collide", "row_separate"}
+        assert all(r["status"] == "success" for r in runs.values())
+        assert ratios["row_collide"] == pytest.approx(runs["row_collide"]["wall_s"] / runs["row_separate"]["wall_s"])
+        assert ratios["collide"] == pytest.approx(runs["collide"]["wall_s"] / runs["separate"]["wall_s"])
+    stiff = data["stiff"]["runs"]
+    assert stiff["row_collide"]["events"] == stiff["row_separate"]["events"] > 0
+    assert stiff["collide"]["events"] > stiff["separate"]["events"]  # the pile's discs land on each other
