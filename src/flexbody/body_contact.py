@@ -381,13 +381,17 @@ class BodyContactModel(Model):
     def per_particle(self, y, p, phases: Phases, seeds: np.ndarray, gap_tolerance: float) -> bool:
         """Whether the instant of the contacts ``seeds`` (bool (nc,)) is the inner model's
         alone, solved per particle (:func:`flexbody.contact.resolve` on it): on particles
-        without friction, with no slot held, every seed a ground contact and no free slot
-        within ``gap_tolerance`` of its floor (a touch the instant would find).  Its
-        ``J M^-1 J^T`` is then diagonal by particle, the coupled LCP's answer the same.  The
-        inner path also sets an impacting particle found up to the gap tolerance below a
-        ground onto it (``settle``), as in a scene whose bodies do not touch."""
+        without friction, on plastic grounds, with no slot held, every seed a ground contact
+        and no free slot within ``gap_tolerance`` of its floor (a touch the instant would
+        find).  Its ``J M^-1 J^T`` is then diagonal by particle, the coupled LCP's answer the
+        same; with e > 0 it would not be: the LCP's Zeno threshold of a rebound counts the
+        contact's own pull (:func:`flexbody.coupled.coupled_impact`), the per-particle one
+        gravity's alone.  The inner path also sets an impacting particle found up to the gap
+        tolerance below a ground onto it (``settle``), as in a scene whose bodies do not
+        touch."""
         ng = self.n_ground_contacts
         if not isinstance(self._coordinates, _ParticleCoordinates) or self._frictional \
+                or (self.laws[: self.n_grounds, 1] > 0.0).any() \
                 or np.asarray(seeds)[ng:].any() or phases.on_ground[ng:].any():
             return False
         x = self._coordinates.particles(y[: self.nq], None, p)[0]

@@ -77,6 +77,11 @@ class Phases:
     def copy(self) -> Phases:
         return Phases(self.phase.copy(), self.floor.copy(), self.push.copy(), self.push_until.copy())
 
+    def first(self, n: int) -> Phases:
+        """The first ``n`` contacts' phases, views of these arrays: what is assigned to them
+        (:meth:`assign`) lands here."""
+        return Phases(self.phase[:n], self.floor[:n], self.push[:n], self.push_until[:n])
+
     def assign(self, other: Phases) -> None:
         """Take ``other``'s values into these arrays (whose addresses C may hold)."""
         for name in ("phase", "floor", "push", "push_until"):

@@ -604,12 +604,8 @@ class _Run:
 
     def per_particle(self, seeds: np.ndarray) -> bool:
         """Whether the instant of the contacts ``seeds`` (bool (nc,)) of a coupled model is its
-        inner model's, per particle (:meth:`flexbody.body_contact.BodyContactModel.per_particle`):
-        only on plastic grounds, whose impacts stop, so that the Zeno threshold of a rebound
-        (the coupled one's counts the contact's own pull, :func:`flexbody.coupled.coupled_impact`;
-        the per-particle one gravity's) never decides."""
-        return (self.model.coupled and self.settings.impact == "instant" and hasattr(self.model, "per_particle")
-                and not (self.restitution[: self.model.n_ground_contacts] > 0.0).any()
+        inner model's, per particle (:meth:`flexbody.model.Model.per_particle`)."""
+        return (self.model.coupled and self.settings.impact == "instant"
                 and self.model.per_particle(self.y, self.p, self.phases, seeds, self.gap_tolerance))
 
     def resolve_per_particle(self, t: float, touching: np.ndarray, leaving: np.ndarray
@@ -619,7 +615,7 @@ class _Run:
         phases).  Returns the new events, the contacts not held after their impact (bool
         (nc,)) and the kinetic energy the impacts removed (J)."""
         ng, s = self.model.n_ground_contacts, self.settings
-        grounds = Phases(*(getattr(self.phases, name)[:ng] for name in ("phase", "floor", "push", "push_until")))
+        grounds = self.phases.first(ng)
         res = resolve(self.model.inner, t, self.y, self.p, grounds, np.asarray(touching)[:ng],
                       np.asarray(leaving)[:ng], gap_tolerance=self.gap_tolerance,
                       force_tolerance=self.force_tolerance[:ng], masses=self.contact_masses[:ng], impact=s.impact,
@@ -627,7 +623,7 @@ class _Run:
                       speed_tolerance=self.speed_tolerance, friction=None, zeno_rise=self.zeno_rise)
         settled = not np.array_equal(res.y[: self.model.nq], self.y[: self.model.nq])
         self.y[:] = res.y
-        grounds.assign(res.phases)  # views: the ground contacts' part of self.phases
+        grounds.assign(res.phases)  # into self.phases
         if settled:  # a particle set onto a ground moves the slots it carries: re-arm them (as resolve does)
             self.phases.arm(self.model.gaps(self.y[: self.model.nq], self.p), self.gap_tolerance)
         self.indeterminate += [(t, note) for note in res.notes]

@@ -154,6 +154,12 @@ class Model:
 
         return forces
 
+    def per_particle(self, y, p, phases, seeds: np.ndarray, gap_tolerance: float) -> bool:
+        """Whether a coupled model's instant of the contacts ``seeds`` (bool (nc,)) at state
+        ``y`` with ``phases`` (:class:`flexbody.contact.Phases`) is its inner model's, solved
+        per particle (:class:`flexbody.body_contact.BodyContactModel`): never here."""
+        return False
+
     def held_forces(self, y, p, held, push) -> FloatArray:
         """``rhs(y, p, held, push)[1]``, shape (nc,): the held contacts' forces alone, which
         a model may find without the whole right-hand side (a block of coupled contacts,
