@@ -40,7 +40,10 @@ Elements
     net force and moment.  Their ``_velocity`` twins give the gap rate (the Jacobian times
     the velocities), the tangential part of the velocity of x relative to the material
     point of the element under it (for friction), and the gap acceleration's velocity
-    term ``d(J v)/dq . v`` that a held contact between bodies needs (:mod:`flexbody.body_contact`).
+    term ``d(J v)/dq . v`` that a held contact between bodies needs (:mod:`flexbody.body_contact`);
+    and for friction between bodies the slip rates along the element's unit tangents (2D:
+    ``t = (-n_y, n_x)``, in ``segment_2d_velocity``; 3D: ``t1 = (b - a) / |b - a|``,
+    ``t2 = n x t1``, in ``triangle_3d_slip``) with their accelerations' velocity terms.
 
 Every kernel is a :class:`Kernel`: named inputs (flat arrays of given sizes) and named
 outputs (SymPy matrices of those inputs only).
@@ -254,11 +257,22 @@ def _surface_kernels(d: int) -> list[Kernel]:
     velocity_outputs = {"gap_rate": rate,
                         "tangential_velocity": sp.Matrix([tangential.dot(e) for e in axes]),
                         "gap_bias": rate.jacobian(coordinates) * velocities}
+    # Coulomb friction between bodies: the slip rates along the element's unit tangents, linear
+    # in the velocities with the Jacobian [t, -w_a t, ...], and their accelerations' velocity
+    # terms.  2D: t = (-n_y, n_x), in the velocity kernel.  3D: t1 along the edge a -> b and
+    # t2 = n x t1 (smooth in the vertices, unlike a basis built from n alone, so their rates
+    # are defined everywhere), in a kernel of their own: only friction calls it, and with the
+    # velocity kernel's outputs it would cost every frictionless held row half as much again.
     if d == 2:
-        # Coulomb friction between bodies (2D): the slip rate along t = (-n_y, n_x), linear in the
-        # velocities with the Jacobian [t, -w_a t, -w_b t], and its acceleration's velocity term.
-        slip = sp.Matrix([relative.dot(N.z.cross(normal))])
-        velocity_outputs |= {"slip_rate": slip, "slip_bias": slip.jacobian(coordinates) * velocities}
+        tangents = [N.z.cross(normal)]
+    else:
+        edge = b - a
+        tangents = [edge / sp.sqrt(edge.dot(edge))]
+        tangents.append(normal.cross(tangents[0]))
+    slip = sp.Matrix([relative.dot(t) for t in tangents])
+    slip_outputs = {"slip_rate": slip, "slip_bias": slip.jacobian(coordinates) * velocities}
+    if d == 2:
+        velocity_outputs |= slip_outputs
     return [
         Kernel(name, f"Particle x against the {element} of another body: signed gap (x - a) . n (m, < 0 "
                f"inside), {what}, the outward unit normal n and d gap / d[x, {', '.join(corners)}].",
@@ -272,7 +286,13 @@ def _surface_kernels(d: int) -> list[Kernel]:
                                        "acceleration's velocity term (m/s^2)." if d == 2 else "."),
                positions + [("v", v)] + [(f"v{c}", V[c]) for c in corners],
                velocity_outputs),
-    ]
+    ] + ([] if d == 2 else [
+        Kernel(f"{name}_slip", f"Slip rates (m/s) of particle x against the {element}: its velocity relative to "
+               "the element's material point under x along the unit tangents t1 = (b - a) / |b - a| and "
+               "t2 = n x t1, and their accelerations' velocity terms (m/s^2), d2 s / dt2 - J_t a.",
+               positions + [("v", v)] + [(f"v{c}", V[c]) for c in corners],
+               slip_outputs),
+    ])
 
 
 def all_kernels() -> list[Kernel]:

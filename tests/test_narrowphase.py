@@ -125,7 +125,8 @@ def test_kernels_equal_their_sympy_expressions(rng):
     from derivation.elements import _surface_kernels
 
     kernels = {k.name: k for d in (2, 3) for k in _surface_kernels(d)}
-    assert set(kernels) == {"segment_2d", "segment_2d_velocity", "triangle_3d", "triangle_3d_velocity"}
+    assert set(kernels) == {"segment_2d", "segment_2d_velocity", "triangle_3d", "triangle_3d_velocity",
+                            "triangle_3d_slip"}
     for name, kernel in kernels.items():
         values = {arg: rng.normal(size=len(symbols)) for arg, symbols in kernel.inputs}
         if name.startswith("triangle"):
@@ -166,8 +167,9 @@ def test_c_kernels_equal_numpy_kernels(rng):
 def test_gap_rate_is_the_time_derivative_of_the_gap(rng):
     """Along a random motion of the particle and the element's vertices, the gap rate equals
     the central difference of the gap, and ``J a + gap_bias`` its second difference; the tangential velocity is the relative velocity of x
-    and the material point under it, less its normal part (which is the gap rate); in 2D the
-    slip rate is its component along t, and ``J_t a + slip_bias`` the slip rate's derivative."""
+    and the material point under it, less its normal part (which is the gap rate); the slip
+    rates are its components along the tangents (2D: t = (-n_y, n_x); 3D: t1 along a -> b,
+    t2 = n x t1), and ``J_t a + slip_bias`` the slip rates' derivatives."""
     for _ in range(20):
         for d, corners in ((2, 2), (3, 3)):
             if d == 2:
@@ -196,19 +198,28 @@ def test_gap_rate_is_the_time_derivative_of_the_gap(rng):
             assert rate[0] == pytest.approx(relative @ n, rel=1e-12, abs=1e-12)
             np.testing.assert_allclose(tangential, relative - (relative @ n) * n, atol=1e-12)
             assert abs(tangential @ n) < 1e-12
-            if d == 2:  # the slip rate along t = (-n_y, n_x), and its acceleration J_t a + slip_bias
-                rate_t, bias_t = slip
-                t_axis = np.array([-n[1], n[0]])
-                assert rate_t[0] == pytest.approx(relative @ t_axis, rel=1e-12, abs=1e-12)
+            # the slip rates along the element's tangents, and their accelerations J_t a + slip_bias
+            if d == 2:
+                axes = [np.array([-n[1], n[0]])]
+                slip_kernel, first = K.segment_2d_velocity, 3
+            else:
+                t1 = (q0[2] - q0[1]) / np.linalg.norm(q0[2] - q0[1])
+                axes = [t1, np.cross(n, t1)]
+                slip_kernel, first = K.triangle_3d_slip, 0
+                slip = K.triangle_3d_slip(*q0, *v)
+            rate_t, bias_t = slip
+            for i, t_axis in enumerate(axes):
+                assert abs(t_axis @ n) < 1e-12 and t_axis @ t_axis == pytest.approx(1.0, rel=1e-14)
+                assert rate_t[i] == pytest.approx(relative @ t_axis, rel=1e-12, abs=1e-12)
 
-                def slip_rate(t, q0=q0, v=v, acc=acc):
+                def slip_rate(t, q0=q0, v=v, acc=acc, i=i, slip_kernel=slip_kernel, first=first):
                     q, qd = q0 + v * t + acc * t**2 / 2, v + acc * t
-                    return K.segment_2d_velocity(*q, *qd)[3][0]
+                    return slip_kernel(*q, *qd)[first][i]
 
-                jacobian_t = np.concatenate([t_axis, -(1 - w) * t_axis, -w * t_axis])
+                jacobian_t = np.concatenate([t_axis] + [-wk * t_axis for wk in weights])
                 h = 1e-5
                 derivative = (slip_rate(h) - slip_rate(-h)) / (2 * h)
-                assert jacobian_t @ acc.ravel() + bias_t[0] == pytest.approx(derivative, rel=1e-6, abs=1e-6)
+                assert jacobian_t @ acc.ravel() + bias_t[i] == pytest.approx(derivative, rel=1e-6, abs=1e-6)
 
 
 def _moment(r, f):
