@@ -426,17 +426,6 @@ def test_a_rigid_bar_sliding_flat_on_a_rough_ground_stops_at_the_closed_form_tim
     np.testing.assert_allclose(r.contact_force[-1], [0.3 * g, 0.7 * g], rtol=1e-9)  # at rest: statics
 
 
-def test_a_rigid_body_on_a_ground_with_friction_is_refused_in_3d():
-    table = {"name": "r", "gravity": [0.0, 0.0, -9.81],
-             "grounds": [{"point": [0.0, 0.0, 0.0], "normal": [0.0, 0.0, 1.0], "friction": 0.5}],
-             "bodies": [{"name": "box", "rigid": True, "shape": "box", "size": [0.2, 0.2, 0.2], "count": [2, 2, 2],
-                         "mass": 0.1,
-                         "position": [0.0, 0.0, 0.5]}],
-             "simulation": {"t_end": 0.1}}
-    with pytest.raises(InputError, match="coupled sticking and sliding are simulated in 2D only"):
-        simulate(flexbody.load_scene(table))
-
-
 @needs_cc
 def test_a_redundant_contact_set_free_as_implied_is_not_hit_again_at_later_instants():
     """A box resting on its four bottom corners: three freedoms, four contacts, so the

@@ -455,23 +455,6 @@ def _refused(tmp_path, capsys, path, says: str) -> None:
     assert not out.exists()
 
 
-def test_run_refuses_friction_between_bodies_in_3d_naming_them():
-    """Coulomb friction between bodies runs in 2D (tests/test_friction_bodies.py); in 3D a
-    polygonal cone is not Coulomb's, so it is refused, naming the bodies."""
-    from pathlib import Path
-
-    mesh = str(Path(flexbody.__file__).parent / "scenes" / "icosahedron.obj")
-    body = {"shape": "mesh", "file": mesh, "scale": 0.1, "center": True, "mass_total": 0.65, "stiffness": 2000.0,
-            "damping": 0.2}
-    table = {"name": "rough_icosahedra", "gravity": [0.0, 0.0, -9.81],
-             "bodies": [{**body, "name": "a", "position": [0.0, 0.0, 0.2]},
-                        {**body, "name": "b", "position": [0.0, 0.0, 0.5]}],
-             "contacts": [{"bodies": ["a", "b"], "friction": 0.4}], "simulation": {"t_end": 0.01}}
-    with pytest.raises(InputError, match="bodies 'a' and 'b' may touch each other with friction = 0.4: friction "
-                                         "between bodies is simulated in 2D only"):
-        flexbody.simulate(flexbody.load_scene(table))
-
-
 def test_the_refusal_is_exit_code_2_of_the_real_command(tmp_path):
     path = _toml(tmp_path, TWO_RINGS.format(ball="self_contact = true", contacts=""))
     run = subprocess.run([sys.executable, "-m", "flexbody.cli", "run", str(path), "--out", str(tmp_path / "out")],

@@ -50,11 +50,13 @@ body lies on that element's outer side there, the other slot is carried by it (n
 its rate is read as 0; :meth:`BodyContactModel._made_from_the_other_side`); where both
 are hit at once, the lower-numbered is the contact (:meth:`BodyContactModel.same_contacts`).
 
-**Coulomb friction** (2D; the pairs' ``friction``, and the grounds' where contacts couple):
-a held contact with friction sticks, its slip rate's acceleration kept at 0 too (the tangent
-row ``[t, -w_1 t, ...]``, ``t = (-n_y, n_x)``, and the kernels' ``slip_bias``), or slides,
-pushed back by ``-mu lam`` along its slip; impacts and the stick/slip decisions at an
-instant are Coulomb's LCPs (:mod:`flexbody.coupled`).
+**Coulomb friction** (the pairs' ``friction``, and the grounds' where contacts couple): a
+held contact with friction sticks, its slip rates' accelerations kept at 0 too (the tangent
+rows ``[t, -w_1 t, ...]``, 2D: ``t = (-n_y, n_x)``; 3D: ``t1 = (b - a) / |b - a|``,
+``t2 = n x t1`` of the element, or a fixed pair of a ground's; and the kernels'
+``slip_bias``), or slides, pushed back by ``-mu lam`` along its slip direction; impacts and
+the stick/slip decisions at an instant are Coulomb's LCPs (:mod:`flexbody.coupled`; in 3D
+on the circular cone, :mod:`flexbody.contact_problems`).
 
 The model inside is the assembled particles formulation (q: the particle positions, M
 diagonal) or a whole-scene derived one (the floating formulation: rigid bodies, frames T),
@@ -208,8 +210,6 @@ class BodyContactModel(Model):
         self.mu = np.concatenate([np.array(ground_laws, float).reshape(-1, 2)[inner.contacts[:, 1], 0],
                                   np.array(pair_laws, float).reshape(-1, 2)[self.slot_pair, 0]])
         self._ground_friction = bool((self.mu[: self.n_ground_contacts] > 0.0).any())
-        if self.dim == 3 and (self.mu > 0.0).any():  # the driver refuses such scenes with the reason
-            raise ValueError("Coulomb friction on coupled contacts is simulated in 2D only")
         self._slip = np.zeros((self.n_contacts, self.dim))
         self._frictional = bool((self.mu > 0.0).any())  # else the slip directions change no answer
         self._last: tuple[tuple[np.ndarray, ...], _Solved] | None = None  # the last state's answer (see _dynamics)
@@ -438,10 +438,11 @@ class BodyContactModel(Model):
             vt[:ng], ft[:ng], slack[:ng] = self.inner.friction(y, p, solved.fast, np.asarray(push, float)[:ng])
         rows = solved.rows
         if len(rows):
-            vt[rows] = solved.slip[:, None] * solved.tangents
-            ft[rows] = solved.lam_t[:, None] * solved.tangents
+            vt[rows] = np.einsum("km,kmd->kd", solved.slip, solved.tangents)
+            ft[rows] = np.einsum("km,kmd->kd", solved.lam_t, solved.tangents)
             stick = solved.stick
-            slack[rows[stick]] = self.mu[rows[stick]] * solved.lam[rows[stick]] - np.abs(solved.lam_t[stick])
+            slack[rows[stick]] = (self.mu[rows[stick]] * solved.lam[rows[stick]]
+                                  - np.linalg.norm(solved.lam_t[stick], axis=1))
         return vt, ft, slack
 
     def _share_slips(self, p) -> None:
@@ -478,40 +479,45 @@ class BodyContactModel(Model):
         self._share_slips(p)
         ydot, lam[:ng] = self.inner.rhs(y, p, fast, push[:ng])
         rows = np.concatenate([ground_rows, ng + held_slots]).astype(np.intp)
-        none = np.zeros(0)
+        m = self.dim - 1  # tangent rows per contact
         if not len(rows):
-            return _Solved(ydot, lam, fast, rows, none, none, np.zeros((0, self.dim)), none.astype(bool))
+            return _Solved(ydot, lam, fast, rows, np.zeros((0, m)), np.zeros((0, m)), np.zeros((0, m, self.dim)),
+                           np.zeros(0, bool))
         acc = ydot[self.nq : self.nq + self.nu]
         k, mu, codes = len(rows), self.mu[rows], held[rows]
         stick = (mu > 0.0) & (codes == HELD)
         sliding = (mu > 0.0) & (codes == SLIDING)
+        none = np.zeros((k, m))
         if self._held_rows is not None and not (mu > 0.0).any():
             force = self._laid_out(p, held, held_slots, ground_rows).solve(self._held_rows, y, acc)
             if force is not None:  # else a pivot fell below the drop threshold: contact_solve's fallback below
                 lam[rows] = force
-                return _Solved(ydot, lam, fast, rows, np.zeros(k), np.zeros(k), np.zeros((k, self.dim)), stick)
+                return _Solved(ydot, lam, fast, rows, none, none, np.zeros((k, m, self.dim)), stick)
         r = self._rows(ground_rows, held_slots, q, u, p, tangents=bool((mu > 0.0).any()))
         if not (stick | sliding).any():  # frictionless: no tangent rows, a symmetric system
             force = contact_solve(r.W, -(r.J @ acc[r.columns] + r.bias))
             acc[r.columns] += r.scaled.T @ force
             lam[rows] = force
-            return _Solved(ydot, lam, fast, rows, np.zeros(k), np.zeros(k), r.tangents, stick)
-        slip = r.J[k:] @ u[r.columns]
+            return _Solved(ydot, lam, fast, rows, none, none, r.tangents, stick)
+        slip = (r.J[k:] @ u[r.columns]).reshape(m, k).T
         # a sliding contact's friction is -mu lam_n along its slip direction (the step start's,
-        # continued past a stop, as for a ground), or from rest (a slip at round-off of the
-        # velocities counts as none) against the pull that slips it
-        sign = np.sign(np.einsum("kd,kd->k", self._slip[rows], r.tangents))
-        moving = np.abs(slip) > SLIP_ROUNDOFF * max(1.0, float(np.abs(u[r.columns]).max(initial=0.0)))
-        sign = np.where(sign != 0.0, sign, np.where(moving, np.sign(slip), 0.0))
-        if (sliding & (sign == 0.0)).any():
-            held_t = self._coupled_forces(r, acc, k, mu, stick | sliding, np.zeros(k))[1]
-            sign = np.where(sign != 0.0, sign, -np.sign(held_t))
-        drag = np.where(sliding, -mu * sign, 0.0)
+        # continued past a stop, as for a ground, taken into the contact's tangent plane now),
+        # or from rest (a slip at round-off of the velocities counts as none) against the pull
+        # that slips it
+        along = _unit_rows(np.einsum("kd,kmd->km", self._slip[rows], r.tangents))
+        moving = np.linalg.norm(slip, axis=1) > SLIP_ROUNDOFF * max(1.0, float(np.abs(u[r.columns]).max(initial=0.0)))
+        none_yet = ~along.any(axis=1)
+        along[none_yet & moving] = _unit_rows(slip[none_yet & moving])
+        none_yet = ~along.any(axis=1)
+        if (sliding & none_yet).any():
+            held_t = self._coupled_forces(r, acc, k, mu, stick | sliding, np.zeros((k, m)))[1]
+            along[none_yet] = -_unit_rows(held_t[none_yet])
+        drag = np.where(sliding[:, None], -mu[:, None] * along, 0.0)
         lam_n, lam_t, delta = self._coupled_forces(r, acc, k, mu, stick, drag)
         acc[r.columns] += delta
         lam[rows] = lam_n
         # the power sliding friction dissipates (>= 0): the contact work entry of the state, as a ground's
-        ydot[self.nq + self.nu + 1] -= float(np.sum(np.where(sliding, lam_t * slip, 0.0)))
+        ydot[self.nq + self.nu + 1] -= float(np.sum(np.where(sliding[:, None], lam_t * slip, 0.0)))
         return _Solved(ydot, lam, fast, rows, slip, lam_t, r.tangents, stick)
 
     def _coupled_grounds(self, held: np.ndarray, held_slots: IntArray) -> IntArray:
@@ -530,10 +536,10 @@ class BodyContactModel(Model):
         return ground_rows
 
     def _coupled_forces(self, r: _Rows, acc, k: int, mu: np.ndarray, stick: np.ndarray, drag: np.ndarray):
-        """Normal forces (k,), tangential ones (k,) and the acceleration change on
+        """Normal forces (k,), tangential ones (k, dim - 1) and the acceleration change on
         ``r.columns`` of held rows (friction ``mu`` (k,)): sticking contacts keep their slip
-        rate's acceleration at 0 too, sliding ones are pushed back by ``drag * lam_n`` along
-        their tangent.
+        rates' accelerations at 0 too, sliding ones are pushed back by ``drag * lam_n``
+        (``drag`` (k, dim - 1)) along their tangents.
 
         With sliding friction the system is not symmetric: solved directly (a Painlevé
         configuration makes it singular: least squares, and the LCP at the instants reports
@@ -542,10 +548,14 @@ class BodyContactModel(Model):
         such contact is equally near its limit and their slack events fire together (the
         least-squares answer in tangential forces scaled by ``sqrt(mu lam_n)``).
         """
-        Jn, Jt, Sn, St = r.J[:k], r.J[k:], r.scaled[:k], r.scaled[k:]
-        C = np.vstack([Jn, Jt[stick]])  # the constrained rates
-        G = np.vstack([Sn + drag[:, None] * St, St[stick]])  # G M^-1: the forces' directions, M^-1
-        b = -(C @ acc[r.columns] + np.concatenate([r.bias[:k], r.bias[k:][stick]]))
+        m = drag.shape[1]
+        Jn, Sn = r.J[:k], r.scaled[:k]
+        Jt, St = (r.J[k * (j + 1) : k * (j + 2)] for j in range(m)), [r.scaled[k * (j + 1) : k * (j + 2)] for j in range(m)]
+        bias_t = [r.bias[k * (j + 1) : k * (j + 2)][stick] for j in range(m)]
+        C = np.vstack([Jn, *(J[stick] for J in Jt)])  # the constrained rates
+        pushed = Sn + sum(drag[:, j, None] * St[j] for j in range(m))
+        G = np.vstack([pushed, *(S[stick] for S in St)])  # G M^-1: the forces' directions, M^-1
+        b = -(C @ acc[r.columns] + np.concatenate([r.bias[:k], *bias_t]))
         A = _gram(C, G)
         if not (np.all(np.isfinite(A)) and np.all(np.isfinite(b))):  # the driver reports a blow-up
             raise FloatingPointError("the held contacts' forces are not finite (the state diverged)")
@@ -553,10 +563,10 @@ class BodyContactModel(Model):
         if stick.any():
             limit = mu[stick] * x[:k][stick]
             weight = np.maximum(limit, 1e-12 * max(float(limit.max()), 1e-300))
-            scale = np.concatenate([np.ones(k), np.sqrt(weight)])
+            scale = np.concatenate([np.ones(k), *([np.sqrt(weight)] * m)])
             x = scale * _least_squares(A * scale, b)
-        lam_t = drag * x[:k]
-        lam_t[stick] = x[k:]
+        lam_t = drag * x[:k, None]
+        lam_t[stick] = x[k:].reshape(m, -1).T
         return x[:k], lam_t, G.T @ x
 
     def coupled_with(self, q, p, seeds: np.ndarray, among: np.ndarray, jumped: np.ndarray | None = None) -> np.ndarray:
@@ -625,13 +635,13 @@ class BodyContactModel(Model):
 
     def contact_coupling(self, q, u, p, rows: IntArray, tangents: bool = False):
         """The contact rows ``rows`` (contact indices) as :mod:`flexbody.coupled` needs them;
-        with ``tangents``, each contact's normal rows then its tangent rows (2D), stacked.
+        with ``tangents``, the normal rows then each tangent block (one in 2D, two in 3D), stacked.
 
         Returns
         -------
         J : ndarray, shape (m, c)
             On the coordinates ``columns`` of the particles the rows move; m = k rows, or
-            2 k with ``tangents`` (normal rows, then tangent rows).
+            dim k with ``tangents`` (normal rows, then the tangent blocks).
         columns : ndarray of int, shape (c,)
         W : ndarray, shape (m, m)
             ``J M^-1 J^T``.
@@ -1118,20 +1128,36 @@ class BodyContactModel(Model):
 
     def _rows(self, ground_rows, slots, q, u, p, tangents: bool = False) -> _Rows:
         """Constraint rows (ground rows, then slots) on the coordinates they move: their
-        normal rows, and with ``tangents`` (2D) their tangent rows after them."""
+        normal rows, and with ``tangents`` their tangent rows after them (2D: one block
+        along t = (-n_y, n_x); 3D: two, along a ground's :func:`_plane_basis` or an
+        element's t1 = (b - a) / |b - a|, t2 = n x t1, the slip kernel's)."""
         d = self.dim
         x, v = self._coordinates.particles(q, u, p)
         k_g, k = len(ground_rows), len(ground_rows) + len(slots)
         layout = self._layout(ground_rows, slots, tangents)
         normals = self._coordinates.ground_normals(p)[self.inner.contacts[ground_rows, 1]]
+        axes = _plane_basis(normals) if tangents and d == 3 else np.zeros((k_g, 2, d))
         weights = [np.ones((k_g, 1))]
-        bias, slip_bias = np.zeros(k), np.zeros(k)
+        bias, slip_bias = np.zeros(k), np.zeros((k, d - 1))
         if len(slots):
             terms = self._element_terms(slots, x, v)
-            bias[k_g:], slip_bias[k_g:] = terms.bias, terms.slip_bias if tangents else 0.0
+            bias[k_g:] = terms.bias
             weights.append(np.column_stack([np.ones(len(slots)), -terms.weights]))
             normals = np.vstack([normals, terms.normal])
-        directions = [normals] + ([np.column_stack([-normals[:, 1], normals[:, 0]])] if tangents else [])
+            if tangents and d == 2:
+                slip_bias[k_g:, 0] = terms.slip_bias
+            elif tangents:
+                points = self._slot_points(slots)
+                slip_bias[k_g:] = self._element.slip_bias([x[i] for i in points.T], [v[i] for i in points.T])
+                first = x[points[:, 2]] - x[points[:, 1]]
+                first /= np.linalg.norm(first, axis=1)[:, None]
+                axes = np.concatenate([axes, np.stack([first, np.cross(terms.normal, first)], axis=1)])
+        if not tangents:
+            directions = [normals]
+        elif d == 2:
+            directions = [normals, np.column_stack([-normals[:, 1], normals[:, 0]])]
+        else:
+            directions = [normals, axes[:, 0], axes[:, 1]]
         # every term (row, particle, coefficient (d,)): ground rows, then slots, per direction
         coefficients = []
         for direction in directions:
@@ -1142,13 +1168,14 @@ class BodyContactModel(Model):
         coefficients = np.concatenate(coefficients)
         J = np.zeros((len(directions) * k, len(layout.particles), d))
         np.add.at(J, (layout.rows, layout.at), coefficients)
-        bias = np.concatenate([bias, slip_bias]) if tangents else bias
+        bias = np.concatenate([bias, *slip_bias.T]) if tangents else bias
         columns, J, scaled, bias = self._coordinates.rows(layout.particles, J.reshape(len(J), -1), bias, q, u, p)
         if isinstance(self._coordinates, _ParticleCoordinates) and J.shape[1] > DENSE_WIDTH:
             W = self._sparse_gram(layout, coefficients, len(J))
         else:
             W = _gram(scaled, J)
-        return _Rows(columns, J, scaled, bias, directions[-1] if tangents else np.zeros((k, d)), W)
+        unit = np.stack(directions[1:], axis=1) if tangents else np.zeros((k, d - 1, d))
+        return _Rows(columns, J, scaled, bias, unit, W)
 
     def _layout(self, ground_rows, slots, tangents: bool) -> _Layout:
         """Where the terms of :meth:`_rows` go (:class:`_Layout`): fixed by the rows, their
@@ -1164,7 +1191,7 @@ class BodyContactModel(Model):
         points = [self.inner.contacts[ground_rows, :1]] + ([self._slot_points(slots)] if len(slots) else [])
         particles = np.unique(np.concatenate([z.ravel() for z in points]))
         rows, at = [], []
-        for block in range(2 if tangents else 1):
+        for block in range(self.dim if tangents else 1):  # normal rows, then dim - 1 tangent blocks
             offset = 0
             for z in points:
                 rows.append(block * k + np.repeat(np.arange(offset, offset + len(z)), z.shape[1]))
@@ -1175,7 +1202,7 @@ class BodyContactModel(Model):
         # found as neighbours `offset` apart in the terms sorted by particle
         order = np.argsort(at, kind="stable")
         sorted_rows, sorted_at = rows[order], at[order]
-        m = (2 if tangents else 1) * k
+        m = (self.dim if tangents else 1) * k
         pairs, index = [], []
         for offset in range(len(sorted_at)):
             same = np.flatnonzero(sorted_at[offset:] == sorted_at[: len(sorted_at) - offset])
@@ -1253,8 +1280,8 @@ class _Layout(NamedTuple):
 class _Rows(NamedTuple):
     """Contact rows on the coordinates ``columns (c,)`` they move: ``J (m, c)``, ``J M^-1
     (m, c)`` and the velocity terms ``bias (m,)`` of their accelerations (m = k normal rows,
-    then k tangent rows if asked), each contact's unit tangent (k, dim) (zeros if not), and
-    ``W = J M^-1 J^T``."""
+    then dim - 1 blocks of k tangent rows if asked), each contact's unit tangents (k, dim - 1,
+    dim) (zeros if not), and ``W = J M^-1 J^T``."""
 
     columns: IntArray
     J: FloatArray
@@ -1268,8 +1295,8 @@ class _Rows(NamedTuple):
 class _Solved:
     """One evaluation of :meth:`BodyContactModel._dynamics`: the right-hand side, every
     contact's normal force, the ground contacts the inner model held alone (its codes), and
-    for the coupled contacts ``rows (k,)``: slip rates, tangential forces (k,), unit
-    tangents (k, dim) and which stick with friction."""
+    for the coupled contacts ``rows (k,)``: slip rates and tangential forces along their
+    unit tangents (k, dim - 1), the tangents (k, dim - 1, dim) and which stick with friction."""
 
     ydot: FloatArray
     lam: FloatArray
@@ -1377,7 +1404,8 @@ class HandOvers(NamedTuple):
 class ElementTerms(NamedTuple):
     """A particle against an element, k contacts: gap (k,), weights (k, dim), outward normal
     (k, dim), gap rate (k,), the gap acceleration's velocity term (k,), and in 2D the slip
-    rate along t = (-n_y, n_x) (k,) and its acceleration's velocity term (k,) (None in 3D)."""
+    rate along t = (-n_y, n_x) (k,) and its acceleration's velocity term (k,) (None in 3D:
+    :meth:`ElementKernels.slip_bias` gives those, only where friction asks)."""
 
     gap: FloatArray
     weights: FloatArray
@@ -1410,6 +1438,9 @@ class ElementKernels:
             self.c = [getattr(lib, f"fb_kb_{self.name}"), getattr(lib, f"fb_kb_{self.name}_velocity")]
             self.c[0].argtypes = [ctypes.c_long] + [ctypes.c_void_p] * (dim + 1 + 4)
             self.c[1].argtypes = [ctypes.c_long] + [ctypes.c_void_p] * (2 * (dim + 1) + self.velocity_outputs)
+            if dim == 3:
+                self._slip_c = lib.fb_kb_triangle_3d_slip
+                self._slip_c.argtypes = [ctypes.c_long] + [ctypes.c_void_p] * (2 * (dim + 1) + 2)
             self._grow(16)
 
     def _grow(self, k: int) -> None:
@@ -1447,6 +1478,17 @@ class ElementKernels:
         slip_terms = (slip[0][0], slip[1][0]) if d == 2 else (None, None)
         return ElementTerms(gap[0], weights, normal.T, rate[0], bias[0], *slip_terms)
 
+    def slip_bias(self, points: list[FloatArray], rates: list[FloatArray]) -> FloatArray:
+        """3D: the velocity terms (k, 2) of the slip rates' accelerations along the
+        triangle's t1, t2 (the ``triangle_3d_slip`` kernel; only friction asks for them)."""
+        k = len(points[0])
+        if self.c is not None:
+            inputs = [np.ascontiguousarray(z, dtype=float) for z in points + rates]
+            slip, bias = np.empty((k, 2)), np.empty((k, 2))
+            self._slip_c(k, *(z.ctypes.data for z in inputs), slip.ctypes.data, bias.ctypes.data)
+            return bias
+        return self.numpy.triangle_3d_slip(*(z.T for z in points + rates))[1].T
+
 
 def _kept(store: dict, key, make, size: int):
     """``store[key]``, made by ``make()`` if missing; ``store`` keeps the last ``size`` made
@@ -1471,6 +1513,23 @@ def _read_only(answer):
         for field in dataclasses.fields(answer):
             _read_only(getattr(answer, field.name))
     return answer
+
+
+def _unit_rows(a: FloatArray) -> FloatArray:
+    """Each row of ``a`` (k, m) scaled to length 1; zero rows stay 0 (in 1D: its sign)."""
+    norm = np.linalg.norm(a, axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(norm[:, None] > 0.0, a / norm[:, None], 0.0)
+
+
+def _plane_basis(normals: FloatArray) -> FloatArray:
+    """An orthonormal tangent pair of each unit normal (k, 3), shape (k, 2, 3): ``t1`` across
+    the normal's smallest component's axis, ``t2 = n x t1`` (a ground's normal is constant, so
+    its slip rows have no velocity terms)."""
+    axis = np.eye(3)[np.argmin(np.abs(normals), axis=1)]
+    first = np.cross(normals, axis)
+    first /= np.linalg.norm(first, axis=1)[:, None]
+    return np.stack([first, np.cross(normals, first)], axis=1)
 
 
 def _gram(A: FloatArray, B: FloatArray) -> FloatArray:

@@ -307,7 +307,8 @@ def resolve(
             # contacts coupled to the hit ones
             touching_now = instant | (phases.on_ground & model.coupled_with(y[: model.nq], p, instant, phases.on_ground))
             before = _free_accelerations(model, y, p, phases.push)
-            out = coupled_impact(model, y, p, touching_now, np.where(hit & rebounds, e, 0.0), slowest, zeno_rise)
+            out = coupled_impact(model, y, p, touching_now, np.where(hit & rebounds, e, 0.0), slowest, zeno_rise,
+                                 notes)
             y, loss = out.y, loss + out.loss
             seeds |= touching_now
             jumped |= _free_accelerations(model, y, p, phases.push) != before

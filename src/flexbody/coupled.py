@@ -21,8 +21,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from .constants import HELD, SLIDING
-from .contact_problems import (delassus, independent_blocks, solve_forces, solve_forces_friction, solve_impact,
-                               solve_impact_friction, velocity_change)
+from .contact_problems import (UNALIGNED, delassus, independent_blocks, solve_forces, solve_forces_friction,
+                               solve_impact, solve_impact_friction, velocity_change)
 from .dynamics import contact_solve
 
 #: Rows too slow to leave are stopped (:func:`coupled_impact`) only where that takes at most
@@ -131,7 +131,7 @@ def project_held(model, y: np.ndarray, p: np.ndarray, rows: np.ndarray) -> np.nd
 
 
 def coupled_impact(model, y: np.ndarray, p: np.ndarray, touching: np.ndarray, restitution: np.ndarray,
-                   slowest: np.ndarray, zeno_rise: float = 0.0) -> CoupledImpact:
+                   slowest: np.ndarray, zeno_rise: float = 0.0, notes: list[str] | None = None) -> CoupledImpact:
     """Impulses on the ``touching`` contacts (bool, shape (nc,)) by Newton's law per contact.
 
     Parameters
@@ -158,6 +158,9 @@ def coupled_impact(model, y: np.ndarray, p: np.ndarray, touching: np.ndarray, re
         it would not rise that far either.  Without it a particle pressed into a notch
         far harder than by its weight (a pile's) was handed flank to flank more than 25
         times within 1 ms on its way to the Zeno threshold (``chattering``).
+    notes : list of str, optional
+        Receives the message of a 3D frictional answer that missed Coulomb's circular law
+        (:func:`_note_unaligned`).
 
     Raises
     ------
@@ -176,14 +179,15 @@ def coupled_impact(model, y: np.ndarray, p: np.ndarray, touching: np.ndarray, re
     J, cols, W, response, _ = _coupling(model, q, u, p, rows, friction)
     v_minus = _rounded(J @ u[cols], J, u[cols])
     if friction:  # Coulomb's law per contact too: normal and tangential impulses, one LCP
-        solution = solve_impact_friction(W, v_minus, restitution[rows], model.mu[rows])
-        P = np.concatenate([solution.normal, solution.tangent])
+        solution = solve_impact_friction(W, v_minus, restitution[rows], model.mu[rows], dim=model.dim)
+        P = np.concatenate([solution.normal, _blocks(solution.tangent)])
     else:
         solution = solve_impact(W, v_minus, restitution[rows])
         P = solution.normal
     # left approaching slower than a Zeno rebound, a contact is stopped below anyway
     if not (solution.solved or _within_rounding(solution, v_minus[:k], slowest[rows], restitution[rows])):
         raise CoupledImpactError(f"the impact of contacts {rows.tolist()} has no solution found: {solution.message}")
+    _note_unaligned(solution, rows, notes)
     out = np.array(y, float)
     u_new = u + response(P)
     impulses[rows] = solution.normal
@@ -196,8 +200,8 @@ def coupled_impact(model, y: np.ndarray, p: np.ndarray, touching: np.ndarray, re
     while (~leaves).any():  # what stays is stopped exactly (v+ = 0 up to round-off, or too slow to leave)
         stopped = np.flatnonzero(~leaves)
         if friction:  # and what sticks keeps sticking: else that stop's impulse would slide it
-            stuck = ~leaves & (model.mu[rows] > 0.0) & (np.abs(solution.tangent_rate) <= np.maximum(slowest[rows], 1e-12))
-            stopped = np.concatenate([stopped, k + np.flatnonzero(stuck)])
+            stuck = ~leaves & (model.mu[rows] > 0.0) & (_speeds(solution.tangent_rate) <= np.maximum(slowest[rows], 1e-12))
+            stopped = np.concatenate([stopped, *(k * (j + 1) + np.flatnonzero(stuck) for j in range(model.dim - 1))])
         rates, W_stopped = J[stopped] @ u_new[cols], W[np.ix_(stopped, stopped)]
         extra = np.zeros(len(J))
         extra[stopped] = contact_solve(W_stopped, -rates)
@@ -286,8 +290,9 @@ def coupled_release(model, y: np.ndarray, p: np.ndarray, held: np.ndarray, push:
     if friction:
         codes = np.zeros(model.n_contacts, np.intc) if codes is None else np.asarray(codes)
         solution = solve_forces_friction(W, a_free, model.mu[rows],
-                                         _sliding_rates(J, u[cols], rows, codes, speed_tolerance))
+                                         _sliding_rates(J, u[cols], rows, codes, speed_tolerance), dim=model.dim)
         _note_indeterminate(solution, rows, notes)
+        _note_unaligned(solution, rows, notes)
         J, a_free = J[:k], a_free[:k]  # the normal rows decide who lifts off
     else:
         solution = solve_forces(W, a_free)
@@ -338,11 +343,32 @@ NULL_SHARE = 1e-6
 
 def _sliding_rates(J: np.ndarray, u: np.ndarray, rows: np.ndarray, codes: np.ndarray,
                    speed_tolerance: float = np.inf) -> np.ndarray:
-    """Slip rates (k,) of the held contacts ``rows`` that slide (code SLIDING, or faster than
-    ``speed_tolerance``), from the tangent rows of ``J`` (2 k, c); 0 for those that stick,
-    and for a sliding one exactly at its stop, which the LCP then treats as sticking."""
-    slip = J[len(rows) :] @ u
-    return np.where((codes[rows] == SLIDING) | (np.abs(slip) > speed_tolerance), slip, 0.0)
+    """Slip rates of the held contacts ``rows`` that slide (code SLIDING, or faster than
+    ``speed_tolerance``), from the tangent rows of ``J`` (dim k, c): (k,) in 2D, (k, 2) in
+    3D; 0 for those that stick, and for a sliding one exactly at its stop, which the LCP
+    then treats as sticking."""
+    slip = _slip_rates(J, u, len(rows))
+    sliding = (codes[rows] == SLIDING) | (_speeds(slip) > speed_tolerance)
+    return np.where(sliding[:, None] if slip.ndim == 2 else sliding, slip, 0.0)
+
+
+def _slip_rates(J: np.ndarray, u: np.ndarray, k: int) -> np.ndarray:
+    """The slip rates of k contacts from the tangent rows of ``J`` (dim k, c): (k,) in 2D,
+    (k, 2) in 3D (along each contact's t1, t2), as the solvers of
+    :mod:`flexbody.contact_problems` take them."""
+    slip = J[k:] @ u
+    return slip if len(slip) == k else slip.reshape(-1, k).T
+
+
+def _speeds(rates: np.ndarray) -> np.ndarray:
+    """Each contact's slip speed: ``|rate|`` of (k,) rates, the row norms of (k, 2) ones."""
+    return np.abs(rates) if rates.ndim == 1 else np.linalg.norm(rates, axis=1)
+
+
+def _blocks(tangent: np.ndarray) -> np.ndarray:
+    """Tangential impulses or forces as the tangent blocks of the stacked rows: (k,) in 2D,
+    the (k, 2) components of 3D as t1's block then t2's, shape (2 k,)."""
+    return tangent if tangent.ndim == 1 else tangent.T.ravel()
 
 
 def _note_indeterminate(solution, rows: np.ndarray, notes: list[str] | None) -> None:
@@ -353,6 +379,32 @@ def _note_indeterminate(solution, rows: np.ndarray, notes: list[str] | None) -> 
         notes.append(f"held contacts {rows.tolist()}: {solution.message}")
 
 
+def _note_unaligned(solution, rows: np.ndarray, notes: list[str] | None) -> None:
+    """Keep the message of a 3D frictional answer whose friction directions did not reach
+    Coulomb's circular law (:data:`flexbody.contact_problems.UNALIGNED`).  It met the normal
+    law (else the caller raised), and its friction lies in each contact's disc (an inscribed
+    square's), but not exactly against the slip: the run goes on with it, and its warnings
+    say where."""
+    if notes is not None and solution.status == "inaccurate" and solution.message.startswith(UNALIGNED):
+        notes.append(f"contacts {rows.tolist()}: {solution.message}")
+
+
+def _turned_back(model, y: np.ndarray, p: np.ndarray, phases, rows: np.ndarray, leaving: np.ndarray,
+                 speed_tolerance: float) -> np.ndarray:
+    """Which sliding 3D contacts ``rows`` (k,) stop here although their slip is not 0: their
+    event fired where their slip, turning, has no part left along its direction at the
+    step's start (the friction's direction through the step).  In 2D a slip that stops
+    crosses 0; in 3D it passes by 0, and what is left across that direction, bool (k,), is
+    what friction held at one direction let through in the last step, not a slide: a
+    flexible body's contact nearly at rest slips at ~1e-5 m/s, turning every few
+    microseconds, and held on sliding it fired that event 551 times in 1.5 ms (two
+    icosahedra stacked).  Stopped like a slow slip (its kinetic energy is in the ledger), it
+    then sticks or slides from rest as the force LCP decides."""
+    vt = model.friction(y, p, phases.held, phases.push)[0][rows]
+    along = np.einsum("kd,kd->k", vt, model.slip_directions(p)[rows])
+    return leaving[rows] & (phases.phase[rows] == SLIDING) & (along <= speed_tolerance)
+
+
 def coupled_friction_phases(model, t: float, y: np.ndarray, p: np.ndarray, phases, leaving: np.ndarray,
                             was_held: np.ndarray, force_tolerance: np.ndarray, speed_tolerance: float,
                             notes: list[str] | None = None):
@@ -360,8 +412,9 @@ def coupled_friction_phases(model, t: float, y: np.ndarray, p: np.ndarray, phase
     or slip decided jointly (the twin of :func:`flexbody.contact.friction_phases` for
     contacts that couple; ``phases`` is updated in place).
 
-    Frictional held contacts slower than ``speed_tolerance`` are stopped along their tangents
-    together (every held contact's normal velocity kept at 0); the others slide on.  The
+    Frictional held contacts slower than ``speed_tolerance`` (and in 3D those whose slip
+    turned back, :func:`_turned_back`) are stopped along their tangents together (every held
+    contact's normal velocity kept at 0); the others slide on.  The
     stopped ones then stick unless Coulomb's LCP in accelerations
     (:func:`flexbody.contact_problems.solve_forces_friction`, the sliding ones' friction at
     ``-mu lam``) has them slip (a tangential acceleration beyond round-off, or at the limit
@@ -386,34 +439,38 @@ def coupled_friction_phases(model, t: float, y: np.ndarray, p: np.ndarray, phase
     rows = np.flatnonzero(phases.on_ground)
     if not len(rows) or not _frictional(model, rows):
         return y, 0.0, []
-    k, mu = len(rows), model.mu[rows]
+    k, mu, dim = len(rows), model.mu[rows], model.dim
     q, u = y[:nq], y[nq : nq + nu]
     J, cols, W, response, bias = _coupling(model, q, u, p, rows, True)
-    slip = J[k:] @ u[cols]
-    slow = (mu > 0.0) & (np.abs(slip) <= speed_tolerance)
+    slip = _slip_rates(J, u[cols], k)
+    slow = (mu > 0.0) & (_speeds(slip) <= speed_tolerance)
+    if dim == 3:
+        slow |= (mu > 0.0) & _turned_back(model, y, p, phases, rows, leaving, speed_tolerance)
     loss = 0.0
     if (slip[slow] != 0.0).any():  # stop the slow slips, holding every normal velocity at 0
-        chosen = np.concatenate([np.arange(k), k + np.flatnonzero(slow)])
-        P = np.zeros(2 * k)
+        chosen = np.concatenate([np.arange(k), *(k * (j + 1) + np.flatnonzero(slow) for j in range(dim - 1))])
+        P = np.zeros(dim * k)
         P[chosen] = contact_solve(W[np.ix_(chosen, chosen)], -(J[chosen] @ u[cols]))
         y = np.array(y, float)
         y[nq : nq + nu] = u + response(P)
         loss = float(model.energies(q, u, p)[0] - model.energies(q, y[nq : nq + nu], p)[0])
         u = y[nq : nq + nu]
         J, cols, W, response, bias = _coupling(model, q, u, p, rows, True)  # the velocity terms are u's
-        slip = J[k:] @ u[cols]
+        slip = _slip_rates(J, u[cols], k)
     free, _ = model.rhs(y, p, np.zeros(model.n_contacts, np.intc), phases.push)
     acc = free[nq : nq + nu][cols]
     a_free = _rounded(J @ acc + bias, J, acc)
     moving = (mu > 0.0) & ~slow
-    solution = solve_forces_friction(W, a_free, mu, np.where(moving, slip, 0.0))
+    solution = solve_forces_friction(W, a_free, mu, np.where(moving[:, None] if dim == 3 else moving, slip, 0.0),
+                                     dim=dim)
     _note_indeterminate(solution, rows, notes)
+    _note_unaligned(solution, rows, notes)
     if not (solution.solved or _within_rounding(solution, a_free[:k])):
         raise CoupledImpactError(f"the friction of held contacts {rows.tolist()} has no solution found: "
                                  f"{solution.message}")
     floor = 1e-10 * max(1.0, float(np.abs(a_free).max()))
-    slack = mu * solution.normal - np.abs(solution.tangent)
-    slips = slow & ((np.abs(solution.tangent_rate) > floor) | (leaving[rows] & (slack <= force_tolerance[rows])))
+    slack = mu * solution.normal - _speeds(solution.tangent)
+    slips = slow & ((_speeds(solution.tangent_rate) > floor) | (leaving[rows] & (slack <= force_tolerance[rows])))
     before = phases.phase[rows].copy()
     after = np.where(moving | slips, SLIDING, HELD)
     after = np.where(mu > 0.0, after, before)

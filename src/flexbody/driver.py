@@ -27,6 +27,7 @@ from .constants import (EVENT, IMPACT, LIFTOFF, NON_FINITE, SINGULAR, SLIP, STEP
 from .assembly import AssembledModel
 from .choices import CHATTER_WINDOW
 from .contact import FREE, HELD, PUSHED, Event, Phases, UnsettledInstant, resolve
+from .contact_problems import UNALIGNED
 from .coupled import CoupledImpactError, project_held
 from .events import EventFunctions, locate
 from .model import Model, couples_contacts, load_model
@@ -199,17 +200,8 @@ def _body_contact_problems(scene: Scene, values: dict) -> list[str]:
     out = []
     for c in scene.contacts:
         first, second = (names[k] for k in c.bodies)
-        who = f"bodies {first!r} and {second!r} may touch each other"
         if first == second:
             out.append(f"body {first!r} may touch itself (self_contact = true): self-contact is not simulated yet")
-        if c.friction > 0.0 and scene.dim == 3:
-            out.append(f"{who} with friction = {c.friction!r}: friction between bodies is simulated in 2D only (in "
-                       "3D a polygonal friction cone is not Coulomb's, so the coupled problem would not be exact); "
-                       "set friction = 0")
-    rough = [j for j, g in enumerate(scene.grounds) if g.friction > 0.0]
-    if rough and scene.dim == 3:
-        out.append(f"grounds {rough} have friction and bodies may touch each other: their contacts couple, and "
-                   "coupled sticking and sliding are simulated in 2D only; make the grounds frictionless")
     if values["impact"] == "thesis":
         out.append("`impact` = 'thesis' with bodies that may touch each other: the window force -m v_n / dT "
                    "(eq. 4.6) takes one particle's mass, not a contact between bodies' effective mass; use "
@@ -261,10 +253,6 @@ def _contact_law_problems(scene: Scene, values: dict) -> list[str]:
     restitution = [j for j, g in enumerate(scene.grounds) if g.restitution > 0.0]
     out = []
     rigid = scene.rigid_bodies
-    if friction and rigid and scene.dim == 3:
-        out.append(f"bodies {rigid} are rigid: grounds {friction} have friction, but a rigid body's contacts couple "
-                   "(J M^-1 J^T is not diagonal), and coupled sticking and sliding are simulated in 2D only (in 3D "
-                   "a polygonal friction cone is not Coulomb's); rigid bodies run on frictionless grounds in 3D")
     if rigid and values["impact"] == "thesis":
         out.append(f"`impact` = 'thesis': bodies {rigid} are rigid, and the thesis's window force -m v_n / dT "
                    "(eq. 4.6) takes the particle's own mass, not the effective mass 1 / (J M^-1 J^T) of a rigid "
@@ -368,7 +356,7 @@ class _Run:
         self.impact_times: dict[int, deque[tuple[float, float, bool]]] = defaultdict(deque)
         self.friction_times: dict[int, deque[float]] = defaultdict(deque)  # stick and slip events, likewise
         self.losses: list[tuple[float, float]] = []
-        self.indeterminate: list[tuple[float, str]] = []  # instants whose contact forces may not be unique
+        self.indeterminate: list[tuple[float, str]] = []  # instants whose contact forces may not be unique or Coulomb's
         self.projections = 0  # held contacts put back on their surfaces (coupled models, SciPy's steppers)
         self.nfev = self.njev = self.steps = self.segments = 0
         self.h_next = 0.0  # the step an explicit stepper proposed where the last segment ended (s)
@@ -852,11 +840,15 @@ class _Run:
         if min_force < -float(self.force_tolerance.max(initial=0.0)):
             out.append(f"a held contact's force turned negative ({min_force:.2g} N) between event checks (a lift-off "
                        "was missed at this tolerance): tighten --rtol/--atol")
-        if self.indeterminate:
-            (t, note), more = self.indeterminate[0], len({t for t, _ in self.indeterminate}) - 1
-            also = f" (and at {more} later instant{'s' if more > 1 else ''})" if more else ""
-            out.append(f"at t = {t:.9g} s{also}, {note.rstrip('.')}: the run went on with the answer found, and "
-                       "another would be as consistent (Painlevé's indeterminate case)")
+        unaligned = [(t, note) for t, note in self.indeterminate if UNALIGNED in note]
+        painleve = [(t, note) for t, note in self.indeterminate if UNALIGNED not in note]
+        for notes, why in ((painleve, "another would be as consistent (Painlevé's indeterminate case)"),
+                           (unaligned, "its friction lies within Coulomb's disc (an inscribed square's) but is not "
+                                       "exactly against the slip")):
+            if notes:
+                (t, note), more = notes[0], len({t for t, _ in notes}) - 1
+                also = f" (and at {more} later instant{'s' if more > 1 else ''})" if more else ""
+                out.append(f"at t = {t:.9g} s{also}, {note.rstrip('.')}: the run went on with the answer found, and {why}")
         if s.rtol > LOOSE_RTOL:
             out.append(f"rtol = {s.rtol:g} is loose: impacts and lift-offs can differ from a tight run's; check the "
                        "event count against a run with a tighter --rtol")

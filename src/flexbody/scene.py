@@ -8,9 +8,8 @@ and raises one :class:`SceneError` listing every problem (field, value, rule).
 Units are SI throughout: m, kg, s, N/m, N·s/m.
 
 Bodies touching each other (DESIGN.md §6; simulated by :mod:`flexbody.body_contact`
-between flexible and rigid bodies, with friction in 2D; what it cannot run yet, such as
-self-contact or friction between bodies in 3D, ``flexbody run`` refuses, naming the
-bodies)::
+between flexible and rigid bodies, with friction; what it cannot run yet, such as
+self-contact, ``flexbody run`` refuses, naming the bodies)::
 
     [[bodies]]
     name = "ball"

@@ -1,0 +1,171 @@
+"""Coulomb friction between bodies and at a rigid body's ground contacts in 3D (coupled stick
+and slip on the circular cone: flexbody.contact_problems, flexbody.coupled,
+flexbody.body_contact).
+
+References: closed forms of rigid bodies sliding under Coulomb's law, along a direction that
+is no axis of any tangent basis (37 degrees): a tetrahedron landing flat on a triangular
+prism that slides on a frictionless ground (the landing's friction impulse mu P_n, then the
+relative speed falls at mu g (1 + m/M) until they stick and move together with the
+momentum's speed), a tetrahedron sliding to rest on a rough ground (stops at v0 / (mu g)
+after v0^2 / (2 mu g), then statics), and conservation laws (two flexible icosahedra
+colliding obliquely in free space with friction keep their momentum and angular momentum).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import flexbody
+
+G = 9.81
+MU = 0.3
+V0 = 1.0
+ALONG = np.radians(37.0)  # the slide's direction in the horizontal plane
+S_HAT = np.array([np.cos(ALONG), np.sin(ALONG), 0.0])
+BASE = np.array([[-0.05, -0.04, 0.0], [0.06, -0.03, 0.0], [0.0, 0.06, 0.0]])
+APEX = np.array([0.0, 0.0, 0.08])
+
+
+def _tetrahedron(lift: float, velocity) -> dict:
+    """A rigid tetrahedron of four 0.1 kg particles, its base flat ``lift`` above z = 0 and
+    its centre of mass over the origin."""
+    points = np.vstack([BASE, APEX])
+    points[:, :2] -= points.mean(axis=0)[:2]
+    points[:, 2] += lift
+    return {"name": "tetra", "rigid": True, "mass": 0.1, "particles": points.tolist(), "position": [0.0, 0.0, 0.0],
+            "links": [[0, 1], [1, 2], [2, 0], [0, 3], [1, 3], [2, 3]],
+            "surface": [[0, 2, 1], [0, 1, 3], [1, 2, 3], [2, 0, 3]], "velocity": list(velocity)}
+
+
+def _prism(height: float) -> dict:
+    """A rigid triangular prism of six 0.5 kg particles (three corners on the ground: no
+    redundant contact), centred on the origin, 0.6 m from its axis to its edges."""
+    corners = [[0.6 * np.cos(a), 0.6 * np.sin(a)] for a in np.radians([90.0, 210.0, 330.0])]
+    return {"name": "block", "rigid": True, "mass": 0.5, "position": [0.0, 0.0, 0.0],
+            "particles": [[x, y, 0.0] for x, y in corners] + [[x, y, height] for x, y in corners],
+            "links": [[0, 1], [1, 2], [2, 0], [3, 4], [4, 5], [5, 3], [0, 3], [1, 4], [2, 5]],
+            "surface": [[0, 2, 1], [3, 4, 5], [0, 1, 4], [0, 4, 3], [1, 2, 5], [1, 5, 4], [2, 0, 3], [2, 3, 5]]}
+
+
+@pytest.fixture(scope="module")
+def landing():
+    """The tetrahedron 2 mm above the prism's top (0.1 m), moving at V0 along S_HAT."""
+    drop, height = 0.002, 0.1
+    table = {"name": "tetra_lands_on_prism", "gravity": [0.0, 0.0, -G],
+             "grounds": [{"point": [0.0, 0.0, 0.0], "normal": [0.0, 0.0, 1.0]}],
+             "bodies": [_prism(height), _tetrahedron(height + drop, V0 * S_HAT)],
+             "contacts": [{"bodies": ["block", "tetra"], "friction": MU}],
+             "simulation": {"t_end": 0.4, "output_dt": 0.005, "rtol": 1e-10, "atol": 1e-12}}
+    return flexbody.simulate(flexbody.load_scene(table)), drop
+
+
+def test_a_tetrahedron_landing_flat_on_a_free_prism_takes_the_closed_form_until_they_stick(landing):
+    """At the landing (v_n = g t_land) the three corners' plastic impact stops the fall and
+    friction takes mu P_n against the slide: the tetrahedron loses mu v_n along S_HAT, the
+    prism gains m/M of it.  Then the relative speed falls at mu g (1 + m/M) until both move
+    at the momentum's speed; nothing turns or leaves the line of S_HAT."""
+    r, drop = landing
+    assert r.status == "success", r.message
+    M, m = r.masses[:6].sum(), r.masses[6:].sum()  # 3.0 and 0.4 kg (the mass is per particle)
+    t_land = np.sqrt(2 * drop / G)
+    dv = MU * G * t_land
+    t_stick = t_land + (V0 - dv * (1 + m / M)) / (MU * G * (1 + m / M))
+    common = m * V0 / (m + M)
+    tetra, block = r.velocities[:, 6:].mean(axis=1), r.velocities[:, :6].mean(axis=1)
+    sliding = (r.t - t_land) * MU * G
+    np.testing.assert_allclose(tetra @ S_HAT, np.where(r.t < t_land, V0, np.where(
+        r.t < t_stick, V0 - dv - sliding, common)), atol=1e-12)
+    np.testing.assert_allclose(block @ S_HAT, np.where(r.t < t_land, 0.0, np.where(
+        r.t < t_stick, (dv + sliding) * m / M, common)), atol=1e-12)
+    assert np.abs(np.cross(S_HAT, tetra)[:, 2]).max() < 1e-12 and np.abs(block[:, 2]).max() < 1e-12
+    impacts, sticks = (r.events_time[r.events_kind == kind] for kind in ("impact", "stick"))
+    assert len(impacts) == 3 and np.abs(impacts - t_land).max() < 1e-9  # flat: three corners at once
+    assert len(sticks) == 3 and np.abs(sticks - t_stick).max() < 1e-9
+    assert r.stats["liftoffs"] == 0
+    # what the impact and friction took is the closed form's: the fall's energy and the slide's
+    lost = 0.5 * m * V0**2 + m * G * drop - 0.5 * (m + M) * common**2
+    assert r.impact_loss[-1] + r.friction_work[-1] == pytest.approx(lost, rel=1e-9)
+    assert r.stats["energy_drift_relative"] < 1e-9
+    assert r.stats["max_penetration_m"] < 1e-9
+
+
+def test_the_landed_tetrahedrons_corners_slide_at_coulombs_limit_against_the_slip(landing):
+    """While sliding, each corner's friction force is mu times its normal force, exactly
+    against S_HAT (a polygonal cone would bend it towards its nearest edge), and the
+    corners carry the tetrahedron's weight; once stuck, friction carries nothing."""
+    r, drop = landing
+    corners = [6, 7, 8]  # the tetrahedron's base particles (their contacts with the prism's top)
+    t_land = np.sqrt(2 * drop / G)
+    sliding = (r.t > t_land + 0.01) & (r.t < 0.25)
+    normal = r.contact_force[sliding][:, corners]
+    friction = r.friction_force[sliding][:, corners]
+    np.testing.assert_allclose(friction, -MU * normal[:, :, None] * S_HAT, atol=1e-12)
+    np.testing.assert_allclose(normal.sum(axis=1), r.masses[6:].sum() * G, rtol=1e-12)
+    assert np.abs(r.friction_force[r.t > 0.32]).max() < 1e-9
+
+
+def test_a_rigid_tetrahedron_sliding_on_a_rough_ground_stops_at_the_closed_form_time_on_statics():
+    """Three coupled ground contacts sliding along S_HAT: the body decelerates at mu g, stops
+    at v0 / (mu g) after v0^2 / (2 mu g), friction takes its kinetic energy; at rest each
+    corner carries the weight times its barycentric weight of the centre of mass."""
+    tetra = _tetrahedron(0.0, V0 * S_HAT)
+    del tetra["surface"]
+    table = {"name": "tetra_on_rough_ground", "gravity": [0.0, 0.0, -G],
+             "grounds": [{"point": [0.0, 0.0, 0.0], "normal": [0.0, 0.0, 1.0], "friction": MU}],
+             "bodies": [tetra], "simulation": {"t_end": 0.45, "output_dt": 0.005, "rtol": 1e-10, "atol": 1e-12}}
+    r = flexbody.simulate(flexbody.load_scene(table))
+    assert r.status == "success", r.message
+    stop = V0 / (MU * G)
+    v = r.velocities.mean(axis=1)
+    np.testing.assert_allclose(v, np.maximum(V0 - MU * G * r.t, 0.0)[:, None] * S_HAT, atol=1e-12)
+    travel = r.positions[-1].mean(axis=0) - r.positions[0].mean(axis=0)
+    np.testing.assert_allclose(travel, V0**2 / (2 * MU * G) * S_HAT, atol=1e-12)
+    sticks = r.events_time[r.events_kind == "stick"]
+    assert len(sticks) == 3 and np.abs(sticks - stop).max() < 1e-9
+    m = r.masses.sum()
+    assert r.friction_work[-1] == pytest.approx(0.5 * m * V0**2, rel=1e-9)
+    base, centre = r.positions[-1, :3, :2], r.positions[-1].mean(axis=0)[:2]
+    barycentric = np.linalg.solve(np.vstack([base.T, np.ones(3)]), np.append(centre, 1.0))
+    np.testing.assert_allclose(r.contact_force[-1, :3], m * G * barycentric, rtol=1e-9)
+    assert r.contact_force[-1, 3] == 0.0  # the apex
+
+
+def _icosahedra(friction: float) -> flexbody.SimulationResult:
+    """Two flexible icosahedra (12 particles, axial dampers: central forces) meeting
+    obliquely and off-centre in free space (the ground 10 m away), e = 0.5."""
+    mesh = str(Path(flexbody.__file__).parent / "scenes" / "icosahedron.obj")
+    body = {"shape": "mesh", "file": mesh, "scale": 0.1, "center": True, "mass_total": 0.65, "stiffness": 2000.0,
+            "damping": 0.2, "damper": "axial"}
+    table = {"name": "oblique_icosahedra", "gravity": [0.0, 0.0, 0.0],
+             "grounds": [{"point": [0.0, 0.0, -10.0], "normal": [0.0, 0.0, 1.0]}],
+             "bodies": [{**body, "name": "a", "position": [0.0, 0.0, 0.0], "velocity": [1.0, 0.3, 0.0],
+                         "rotation": [0.1, 0.2, 0.0]},
+                        {**body, "name": "b", "position": [0.25, 0.06, 0.03], "velocity": [-1.0, 0.0, 0.2],
+                         "rotation": [0.0, 0.3, 0.5]}],
+             "contacts": [{"bodies": ["a", "b"], "friction": friction, "restitution": 0.5}],
+             "simulation": {"t_end": 0.2, "output_dt": 0.001, "method": "RK45", "rtol": 1e-8, "atol": 1e-11}}
+    return flexbody.simulate(flexbody.load_scene(table))
+
+
+def test_flexible_bodies_colliding_obliquely_with_friction_keep_momentum_and_angular_momentum():
+    """Contact impulses and forces between bodies act on a particle and, equal and opposite,
+    on the element's material point under it: with friction too, momentum and angular
+    momentum stay as they were (to round-off); friction does work, and the run differs
+    from the frictionless one."""
+    rough, smooth = _icosahedra(0.5), _icosahedra(0.0)
+    assert rough.status == smooth.status == "success", (rough.message, smooth.message)
+    for r in (rough, smooth):
+        momentum = np.einsum("i,tid->td", r.masses, r.velocities)
+        spin = np.einsum("i,tid->td", r.masses, np.cross(r.positions, r.velocities))
+        assert np.abs(momentum - momentum[0]).max() < 1e-12
+        assert np.abs(spin - spin[0]).max() < 1e-10 * np.abs(spin[0]).max()
+        assert r.stats["max_penetration_m"] < 1e-9
+        assert r.stats["energy_drift_relative"] < 1e-7
+        assert r.stats["impacts"] >= 3
+    assert rough.friction_work[-1] > 1e-3 and rough.stats["slips"] + rough.stats["sticks"] >= 1
+    each = [np.einsum("i,id->d", r.masses[:12], np.cross(r.positions[-1, :12], r.velocities[-1, :12]))
+            for r in (rough, smooth)]
+    assert np.abs(each[0] - each[1]).max() > 1e-4  # friction turned the bodies
