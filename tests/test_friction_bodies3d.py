@@ -169,3 +169,29 @@ def test_flexible_bodies_colliding_obliquely_with_friction_keep_momentum_and_ang
     each = [np.einsum("i,id->d", r.masses[:12], np.cross(r.positions[-1, :12], r.velocities[-1, :12]))
             for r in (rough, smooth)]
     assert np.abs(each[0] - each[1]).max() > 1e-4  # friction turned the bodies
+
+
+def test_a_3d_slip_that_turns_back_at_its_event_stops_instead_of_firing_again_and_again():
+    """A flexible icosahedron landing on another that rests on a rough ground: one of its
+    particles, held on the lower one's face and sliding at ~1e-5 m/s, turns its slip by more
+    than 90 degrees within microseconds (the bodies vibrate).  Its event (its slip along the
+    step start's direction reaching 0) fired 551 times in 1.5 ms while it slid on, each time
+    with a new direction; now that event stops it, and it sticks (one segment per event)."""
+    mesh = str(Path(flexbody.__file__).parent / "scenes" / "icosahedron.obj")
+    body = {"shape": "mesh", "file": mesh, "scale": 0.1, "center": True, "mass_total": 0.65, "stiffness": 2000.0,
+            "damping": 0.2}
+    table = {"name": "rough_icosahedra", "gravity": [0.0, 0.0, -G],
+             "grounds": [{"point": [0.0, 0.0, 0.0], "normal": [0.0, 0.0, 1.0], "friction": 0.6}],
+             "bodies": [{**body, "name": "a", "position": [0.0, 0.0, 0.11]},
+                        {**body, "name": "b", "position": [0.03, 0.01, 0.35], "rotation": [0.3, 0.2, 0.1]}],
+             "contacts": [{"bodies": ["a", "b"], "friction": 0.4}],
+             "simulation": {"t_end": 0.17, "output_dt": 0.005}}
+    r = flexbody.simulate(flexbody.load_scene(table))
+    assert r.status == "success", r.message
+    landed = (r.events_kind == "impact") & (r.events_time > 0.14)
+    assert landed.sum() == 1
+    particle = r.events_particle[landed][0]
+    after = r.events_time > 0.14
+    assert list(r.events_kind[after]) == ["impact", "stick"] and r.events_particle[after][1] == particle
+    assert r.stats["segments"] <= r.stats["events"]  # an instant per event: none without one
+    assert r.stats["max_penetration_m"] < 1e-9 and r.stats["energy_drift_relative"] < 1e-6
