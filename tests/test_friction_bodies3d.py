@@ -166,6 +166,7 @@ def test_flexible_bodies_colliding_obliquely_with_friction_keep_momentum_and_ang
         assert r.stats["energy_drift_relative"] < 1e-7
         assert r.stats["impacts"] >= 3
     assert rough.friction_work[-1] > 1e-3 and rough.stats["slips"] + rough.stats["sticks"] >= 1
+    assert np.diff(rough.friction_work).min() >= 0.0  # friction only ever takes energy
     each = [np.einsum("i,id->d", r.masses[:12], np.cross(r.positions[-1, :12], r.velocities[-1, :12]))
             for r in (rough, smooth)]
     assert np.abs(each[0] - each[1]).max() > 1e-4  # friction turned the bodies
@@ -194,4 +195,5 @@ def test_a_3d_slip_that_turns_back_at_its_event_stops_instead_of_firing_again_an
     after = r.events_time > 0.14
     assert list(r.events_kind[after]) == ["impact", "stick"] and r.events_particle[after][1] == particle
     assert r.stats["segments"] <= r.stats["events"]  # an instant per event: none without one
+    assert np.diff(r.friction_work).min() >= 0.0 and r.friction_work[-1] > 0.0
     assert r.stats["max_penetration_m"] < 1e-9 and r.stats["energy_drift_relative"] < 1e-6
