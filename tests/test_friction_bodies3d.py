@@ -197,3 +197,22 @@ def test_a_3d_slip_that_turns_back_at_its_event_stops_instead_of_firing_again_an
     assert r.stats["segments"] <= r.stats["events"]  # an instant per event: none without one
     assert np.diff(r.friction_work).min() >= 0.0 and r.friction_work[-1] > 0.0
     assert r.stats["max_penetration_m"] < 1e-9 and r.stats["energy_drift_relative"] < 1e-6
+
+
+def test_a_3d_friction_answer_off_coulombs_circle_is_kept_with_a_note_not_silently():
+    """The coupled phases keep the message of an answer whose friction directions did not
+    converge (the run's warnings then say when and by how much); a solved answer, or another
+    inaccurate one, leaves no such note."""
+    from flexbody.contact_problems import UNALIGNED, ContactSolution
+    from flexbody.coupled import _note_unaligned
+
+    def answer(status, message):
+        zeros = np.zeros(2)
+        return ContactSolution(zeros, np.zeros((2, 2)), zeros, np.zeros((2, 2)), status, message, "lcp")
+
+    notes: list[str] = []
+    _note_unaligned(answer("inaccurate", f"{UNALIGNED}: after 50 alignment round(s) ... by 0.0016"), np.array([3, 9]),
+                    notes)
+    _note_unaligned(answer("solved", "circular Coulomb friction in 1 alignment round(s)"), np.array([3, 9]), notes)
+    _note_unaligned(answer("inaccurate", "a complementary basis was found, but ..."), np.array([3, 9]), notes)
+    assert notes == [f"contacts [3, 9]: {UNALIGNED}: after 50 alignment round(s) ... by 0.0016"]
