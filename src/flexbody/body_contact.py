@@ -549,13 +549,12 @@ class BodyContactModel(Model):
         least-squares answer in tangential forces scaled by ``sqrt(mu lam_n)``).
         """
         m = drag.shape[1]
+        blocks = [slice(k * (j + 1), k * (j + 2)) for j in range(m)]  # each tangent direction's k rows
         Jn, Sn = r.J[:k], r.scaled[:k]
-        Jt, St = (r.J[k * (j + 1) : k * (j + 2)] for j in range(m)), [r.scaled[k * (j + 1) : k * (j + 2)] for j in range(m)]
-        bias_t = [r.bias[k * (j + 1) : k * (j + 2)][stick] for j in range(m)]
-        C = np.vstack([Jn, *(J[stick] for J in Jt)])  # the constrained rates
-        pushed = Sn + sum(drag[:, j, None] * St[j] for j in range(m))
-        G = np.vstack([pushed, *(S[stick] for S in St)])  # G M^-1: the forces' directions, M^-1
-        b = -(C @ acc[r.columns] + np.concatenate([r.bias[:k], *bias_t]))
+        C = np.vstack([Jn, *(r.J[t][stick] for t in blocks)])  # the constrained rates
+        pushed = Sn + sum(drag[:, j, None] * r.scaled[t] for j, t in enumerate(blocks))
+        G = np.vstack([pushed, *(r.scaled[t][stick] for t in blocks)])  # G M^-1: the forces' directions, M^-1
+        b = -(C @ acc[r.columns] + np.concatenate([r.bias[:k], *(r.bias[t][stick] for t in blocks)]))
         A = _gram(C, G)
         if not (np.all(np.isfinite(A)) and np.all(np.isfinite(b))):  # the driver reports a blow-up
             raise FloatingPointError("the held contacts' forces are not finite (the state diverged)")
@@ -1129,14 +1128,17 @@ class BodyContactModel(Model):
     def _rows(self, ground_rows, slots, q, u, p, tangents: bool = False) -> _Rows:
         """Constraint rows (ground rows, then slots) on the coordinates they move: their
         normal rows, and with ``tangents`` their tangent rows after them (2D: one block
-        along t = (-n_y, n_x); 3D: two, along a ground's :func:`_plane_basis` or an
+        along t = (-n_y, n_x); 3D: two, along a ground's ``ground_3d`` kernel basis or an
         element's t1 = (b - a) / |b - a|, t2 = n x t1, the slip kernel's)."""
         d = self.dim
         x, v = self._coordinates.particles(q, u, p)
         k_g, k = len(ground_rows), len(ground_rows) + len(slots)
         layout = self._layout(ground_rows, slots, tangents)
         normals = self._coordinates.ground_normals(p)[self.inner.contacts[ground_rows, 1]]
-        axes = _plane_basis(normals) if tangents and d == 3 else np.zeros((k_g, 2, d))
+        axes = np.zeros((k_g, 2, d))
+        if tangents and d == 3:  # the derived ground kernel's orthonormal pair (a ground's normal is constant)
+            zeros = np.zeros((d, k_g))
+            axes = self._element.numpy.ground_3d(zeros, zeros, normals.T)[3].transpose(2, 0, 1)
         weights = [np.ones((k_g, 1))]
         bias, slip_bias = np.zeros(k), np.zeros((k, d - 1))
         if len(slots):
@@ -1520,16 +1522,6 @@ def _unit_rows(a: FloatArray) -> FloatArray:
     norm = np.linalg.norm(a, axis=1)
     with np.errstate(invalid="ignore", divide="ignore"):
         return np.where(norm[:, None] > 0.0, a / norm[:, None], 0.0)
-
-
-def _plane_basis(normals: FloatArray) -> FloatArray:
-    """An orthonormal tangent pair of each unit normal (k, 3), shape (k, 2, 3): ``t1`` across
-    the normal's smallest component's axis, ``t2 = n x t1`` (a ground's normal is constant, so
-    its slip rows have no velocity terms)."""
-    axis = np.eye(3)[np.argmin(np.abs(normals), axis=1)]
-    first = np.cross(normals, axis)
-    first /= np.linalg.norm(first, axis=1)[:, None]
-    return np.stack([first, np.cross(normals, first)], axis=1)
 
 
 def _gram(A: FloatArray, B: FloatArray) -> FloatArray:
