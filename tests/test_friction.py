@@ -339,6 +339,67 @@ def test_a_slip_across_a_slope_turns_stops_and_sticks_as_an_independent_integrat
     assert ledger_drift(r) < 1e-10
 
 
+# ----------------------------------------------------------------- 3D: a slow slip at the edge of its cone
+#
+# A slip of 1e-6 m/s on a slope just inside its friction cone (mu = tan(theta) + 1e-3) slows at
+# only D = mu g cos(theta) - g sin(theta) ~ 0.01 m/s^2, while its direction, followed, turns at
+# mu g cos(theta) / |v_t| ~ 2.5e6 rad/s: an explicit step is held to that turn's stability
+# limit.  Followed, the slip crept on for 1.5 million steps and never stopped; held along its
+# direction at the step's start for a step friction alone would end it in, it stops.
+
+SLOPE = np.radians(15.0)
+DOWNHILL = np.array([0.6, 0.8, 0.0])  # the pull's direction: no axis
+EDGE_MU = np.tan(SLOPE) + 1e-3
+
+
+def _edge_of_cone(v0, path):
+    gravity = G * np.sin(SLOPE) * DOWNHILL - [0.0, 0.0, G * np.cos(SLOPE)]
+    return simulate(particle_scene([0.0, 0.0, 0.0], list(v0), gravity=gravity.tolist(), friction=EDGE_MU,
+                                   t_end=0.05), **path)
+
+
+@pytest.mark.parametrize("path", PATHS)
+def test_a_slow_slip_along_its_pull_at_the_edge_of_its_cone_stops_in_closed_form(path):
+    s0 = 1e-6
+    r = _edge_of_cone(s0 * DOWNHILL, path)
+    assert r.success, r.message
+    slowing = EDGE_MU * G * np.cos(SLOPE) - G * np.sin(SLOPE)
+    assert list(r.events_kind) == ["stick"]
+    assert r.events_time[0] == pytest.approx(s0 / slowing, rel=1e-6)
+    np.testing.assert_allclose(r.positions[-1, 0], s0**2 / (2 * slowing) * DOWNHILL, rtol=0, atol=1e-14)
+    assert r.stats["steps"] < 50  # not a benchmark: followed, the turn held the steps to ~1e-9 s
+
+
+@pytest.mark.parametrize("path", PATHS)
+def test_a_slow_slip_across_its_pull_stops_within_its_reach_of_an_independent_integration(path):
+    """Across the pull the slip first turns downhill (at ~2.5e6 rad/s), then slows at D.  SciPy's
+    LSODA integrating the point-mass law alone (stiff-capable) stops it at 5.3e-5 s; the run
+    stops it where a held step's event fires (4.1e-6 s), its slip left across the step's
+    direction taken off as a stop's.  Its rest position is within the reach of that slow slip,
+    s0^2 / (2 D) ~ 5e-11 m, of the reference's, and its ledger closes."""
+    from scipy.integrate import solve_ivp
+
+    s0, across = 1e-6, np.array([0.8, -0.6, 0.0])
+    r = _edge_of_cone(s0 * across, path)
+    assert r.success, r.message
+    assert list(r.events_kind) == ["stick"]
+    pull, slowing = G * np.sin(SLOPE) * DOWNHILL[:2], EDGE_MU * G * np.cos(SLOPE)
+
+    def f(t, s):
+        return np.concatenate([s[2:], pull - slowing * s[2:] / np.linalg.norm(s[2:])])
+
+    def stopped(t, s):
+        return np.linalg.norm(s[2:]) - 1e-13
+
+    stopped.terminal = True
+    ref = solve_ivp(f, (0.0, 1e-3), np.concatenate([[0.0, 0.0], s0 * across[:2]]), method="LSODA", events=stopped,
+                    rtol=1e-10, atol=1e-16)
+    reach = s0**2 / (2 * (slowing - G * np.sin(SLOPE)))
+    assert np.linalg.norm(r.positions[-1, 0, :2] - ref.y_events[0][0][:2]) < reach
+    np.testing.assert_allclose(r.velocities[-1, 0], 0.0, atol=1e-15)
+    assert ledger_drift(r) < 1e-15
+
+
 # ----------------------------------------------------------------- bad input and refusals
 
 

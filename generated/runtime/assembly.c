@@ -39,6 +39,7 @@ typedef struct {
     const double *mass, *gravity, *grounds; /* views into p; grounds (n_grounds, 2, dim) */
     double *laws;      /* (n_grounds, 2): Coulomb mu and Newton e per ground (0: the thesis's ground) */
     double *slip;      /* (nc, 3): each sliding contact's direction at the step's start (FbSystem.slip) */
+    int *slip_held;    /* (nc,): friction kept along slip through the step (FbSystem.slip_held) */
     double *tangential_push; /* (nc, 3): a pushed contact's tangential force (FbSystem.tangential_push) */
     /* Each particle's links (CSR, ascending: the order the right-hand side sums them in) and
      * its stencil, the state entries its force reads: its own q and u, then its neighbours'. */
@@ -78,12 +79,13 @@ Assembly *fb_asm_new(int dim, int n, int n_links, int n_grounds, const int *link
     A->stencil = malloc(sizeof(int) * (2 * (size_t)dim * ((size_t)n + 2 * (size_t)n_links) + 1));
     A->laws = calloc(2 * (size_t)n_grounds + 1, sizeof(double));
     A->slip = calloc(3 * (size_t)n * (size_t)n_grounds + 1, sizeof(double));
+    A->slip_held = calloc((size_t)n * (size_t)n_grounds + 1, sizeof(int));
     A->tangential_push = calloc(3 * (size_t)n * (size_t)n_grounds + 1, sizeof(double));
     A->block_law = malloc(sizeof(int) * ((size_t)n_links / LINK_BLOCK + 1));
     A->link_force = malloc(sizeof(double) * ((size_t)dim * n_links + 1));
     A->block_power = malloc(sizeof(double) * ((size_t)n_links / LINK_BLOCK + 1));
     if (!A->links || !A->axial || !A->p || !A->link_par || !A->inv_mass || !A->adj_start || !A->adj
-        || !A->stencil_start || !A->stencil || !A->laws || !A->slip || !A->tangential_push || !A->block_law
+        || !A->stencil_start || !A->stencil || !A->laws || !A->slip || !A->slip_held || !A->tangential_push || !A->block_law
         || !A->link_force || !A->block_power) {
         fb_asm_free(A);
         return 0;
@@ -143,7 +145,7 @@ void fb_asm_free(Assembly *A)
     if (!A) return;
     free(A->links); free(A->axial); free(A->p); free(A->link_par); free(A->inv_mass);
     free(A->adj_start); free(A->adj); free(A->stencil_start); free(A->stencil); free(A->laws);
-    free(A->slip); free(A->tangential_push); free(A->block_law); free(A->link_force); free(A->block_power);
+    free(A->slip); free(A->slip_held); free(A->tangential_push); free(A->block_law); free(A->link_force); free(A->block_power);
     free(A);
 }
 
@@ -285,13 +287,15 @@ static void free_acceleration_2d(const Assembly *A, const double *y, const doubl
  * v_t points against the contact's direction at the step's start, along that direction: the
  * force is continued smoothly beyond the stop, which the solution never reaches (the stick
  * event cuts it there), so that a step across the stop is smooth and the event is found,
- * instead of steps shrinking forever before a discontinuity).  Writes vt, ft
+ * instead of steps shrinking forever before a discontinuity; along it the whole step where
+ * the integrator holds it, FbSystem.slip_held).  Writes vt, ft
  * (dim) and the sticking slack mu lam - |ft| (N; INFINITY without friction); returns the
  * power friction dissipates (W, >= 0). */
 static double coulomb_2d(const Assembly *A, const double *x, const double *v, int i, int g, int code,
                            double lam, double *acc, double *vt, double *ft, double *slack)
 {
     const double *dir = A->slip + 3 * (i * A->n_grounds + g);
+    const int held_along = A->slip_held[i * A->n_grounds + g];
     const double mu = A->laws[2 * g], m = A->mass[i];
     double gap, J[2], normal[2], tangents[2], vn, speed, an, at[2], pull;
     const double *ground = A->grounds + 2 * 2 * g;
@@ -314,7 +318,8 @@ static double coulomb_2d(const Assembly *A, const double *x, const double *v, in
         ahead += vt[a] * dir[a];
         unit += dir[a] * dir[a];
     }
-    const int past = unit > 0.0 && (ahead < 0.0 || speed == 0.0); /* past the stop, or starting from rest */
+    /* past the stop, starting from rest, or held along the step's start direction */
+    const int past = unit > 0.0 && (ahead < 0.0 || speed == 0.0 || held_along);
     const double *along = past ? dir : (speed > 0.0 ? vt : at);
     const double size = past ? sqrt(unit) : (speed > 0.0 ? speed : pull);
     const double force = mu * fmax(lam, 0.0);
@@ -784,13 +789,15 @@ static void free_acceleration_3d(const Assembly *A, const double *y, const doubl
  * v_t points against the contact's direction at the step's start, along that direction: the
  * force is continued smoothly beyond the stop, which the solution never reaches (the stick
  * event cuts it there), so that a step across the stop is smooth and the event is found,
- * instead of steps shrinking forever before a discontinuity).  Writes vt, ft
+ * instead of steps shrinking forever before a discontinuity; along it the whole step where
+ * the integrator holds it, FbSystem.slip_held).  Writes vt, ft
  * (dim) and the sticking slack mu lam - |ft| (N; INFINITY without friction); returns the
  * power friction dissipates (W, >= 0). */
 static double coulomb_3d(const Assembly *A, const double *x, const double *v, int i, int g, int code,
                            double lam, double *acc, double *vt, double *ft, double *slack)
 {
     const double *dir = A->slip + 3 * (i * A->n_grounds + g);
+    const int held_along = A->slip_held[i * A->n_grounds + g];
     const double mu = A->laws[2 * g], m = A->mass[i];
     double gap, J[3], normal[3], tangents[6], vn, speed, an, at[3], pull;
     const double *ground = A->grounds + 2 * 3 * g;
@@ -813,7 +820,8 @@ static double coulomb_3d(const Assembly *A, const double *x, const double *v, in
         ahead += vt[a] * dir[a];
         unit += dir[a] * dir[a];
     }
-    const int past = unit > 0.0 && (ahead < 0.0 || speed == 0.0); /* past the stop, or starting from rest */
+    /* past the stop, starting from rest, or held along the step's start direction */
+    const int past = unit > 0.0 && (ahead < 0.0 || speed == 0.0 || held_along);
     const double *along = past ? dir : (speed > 0.0 ? vt : at);
     const double size = past ? sqrt(unit) : (speed > 0.0 ? speed : pull);
     const double force = mu * fmax(lam, 0.0);
@@ -1233,6 +1241,7 @@ void fb_asm_system(Assembly *A, FbSystem *s)
     }
     s->stencil = stencil;
     s->slip = A->slip;
+    s->slip_held = A->slip_held;
     s->tangential_push = A->tangential_push;
 }
 

@@ -87,6 +87,11 @@ struct FbSystem {
      * written by the integrator; past the stop (v_t against it) rhs continues the friction
      * force along it, so a step across the stop is smooth and its event is located. */
     double *slip;
+    /* With friction: (nc,) nonzero where rhs keeps a sliding contact's friction along slip[c]
+     * through the whole step, written by the integrator with slip: a 3D slip that friction
+     * alone would stop within the step.  Followed, it turns at up to mu lam / (m |v_t|) rad/s,
+     * which an explicit step cannot follow (steps of 1e-8 s at 1e-7 m/s). */
+    int *slip_held;
     /* Optional (NULL: frictionless): (nc, 3) the thesis impact mode's tangential force on each
      * pushed contact (N), constant over its window like the normal push: Coulomb's impulse
      * min(m |v_t|, mu P_n) against v_t spread over impact_dt; 0 elsewhere.  Written by
@@ -101,7 +106,8 @@ void fb_work_free(FbWork *w);
 
 int fb_integrate(FbWork *w, const FbSystem *s, int method, double t0, const double *y0, double t_bound,
                  const int *phase, const double *push, double *floor, const double *force_tol,
-                 double gap_tol, double rtol, double atol, const double *grid, int n_grid,
+                 const double *masses, double gap_tol, double speed_tol, double rtol, double atol,
+                 const double *grid, int n_grid,
                  double *samples, int *n_sampled, double *t_stop, double *y_stop, int *touching,
                  int *leaving, long *counters, double *min_gap, double *h_next, double max_seconds);
 

@@ -55,7 +55,7 @@ static void layout(FbWork *w, char *base, size_t *size)
     for (size_t k = 0; k < sizeof contacts / sizeof *contacts; ++k) *contacts[k] = carve(&next, c);
     int **flags[] = {&w->held, &w->phase, &w->fired, &w->r_touching, &w->r_impacted, &w->r_settled,
                      &w->r_was_held, &w->r_held, &w->r_hit, &w->r_ending, &w->r_instant, &w->r_stop,
-                     &w->r_visit, &w->r_fresh, &w->r_moved};
+                     &w->r_visit, &w->r_fresh, &w->r_moved, &w->fr_held};
     for (size_t k = 0; k < sizeof flags / sizeof *flags; ++k) *flags[k] = carve(&next, ci);
     *size = (size_t)(next - base);
 }
@@ -94,6 +94,9 @@ typedef struct {
     int failed;
     int any_friction; /* held contacts and a system with friction (FbSystem.friction) */
     double *dir;      /* (nc, 3): each sliding contact's direction at the start of the step */
+    int *dir_held;    /* (nc,): its friction kept along dir through the step (FbSystem.slip_held) */
+    const double *mass; /* (nc,): each contact's particle mass (kg) */
+    double speed_tol, h_next; /* the speed tolerance (m/s); the next step's proposed length (s) */
 } Problem;
 
 typedef struct {
@@ -120,7 +123,13 @@ static double rms(const double *x, const double *scale, int n)
  * tangential pull bends it), so |v_t| never changes sign and a fixed direction may never be
  * crossed: the direction is renewed at every accepted step (renew), where the value is
  * |v_t| > 0, and within one step it turns little.  From rest the contact slides along its
- * pull (-ft): that is its direction then. */
+ * pull (-ft): that is its direction then.  A 3D slip that friction alone would stop within
+ * the next step (|v_t| <= mu lam h / m, or slower than the speed tolerance) turns at up to
+ * mu lam / (m |v_t|) rad/s, faster than the step can follow: an explicit step would be cut
+ * to that turn's stability limit (1e-8 s at 1e-7 m/s, where a slip stays near the edge of
+ * its cone).  Its friction is held along dir through the step (dir_held), at first order
+ * in the turn, and its event fires where the slip no longer runs along dir (the stop;
+ * phases.c stops it there, and sticking or sliding from rest is decided anew). */
 static double friction_event(Problem *P, const double *y, int c, int renew)
 {
     double vt[3], ft[3], slack, lam, along = 0.0;
@@ -139,6 +148,8 @@ static double friction_event(Problem *P, const double *y, int c, int renew)
         }
         for (int a = 0; a < d; ++a)
             dir[a] = speed > 0.0 ? vt[a] / sqrt(speed) : (pull > 0.0 ? -ft[a] / sqrt(pull) : 0.0);
+        const double reach = fmax(P->speed_tol, sqrt(pull) / P->mass[c] * P->h_next); /* |ft| = mu lam */
+        P->dir_held[c] = d == 3 && speed <= reach * reach; /* speed is squared here */
     }
     for (int a = 0; a < d; ++a) along += vt[a] * dir[a];
     return along;
@@ -438,6 +449,8 @@ static int locate(Problem *P, Stepper *S, const double *g_old, double *g_new, do
  *   method: 0 dopri5, 1 dop853; phase[c]: FB_FREE, FB_HELD or FB_PUSHED (force push[c]);
  *   floor[c] (in/out): level of a free contact's gap event; a free contact back above
  *     2 gap_tol is re-armed at the ground (floor 0);
+ *   masses[nc], speed_tol: each contact's particle mass and the speed tolerance, which
+ *     decide which slow 3D slips keep their direction through a step (friction_event);
  *   grid[n_grid]: output times in (t0, t_bound]; samples[n_grid][ny] receives the states
  *     of those reached, *n_sampled how many;
  *   on return: *t_stop, y_stop[ny], touching[nc] and leaving[nc] (the gap events of free
@@ -451,7 +464,8 @@ static int locate(Problem *P, Stepper *S, const double *g_old, double *g_new, do
  * contact matrix was not positive definite, FB_TOO_SLOW after max_seconds of wall time. */
 int fb_integrate(FbWork *w, const FbSystem *s, int method, double t0, const double *y0, double t_bound,
                  const int *phase, const double *push, double *floor, const double *force_tol,
-                 double gap_tol, double rtol, double atol, const double *grid, int n_grid,
+                 const double *masses, double gap_tol, double speed_tol, double rtol, double atol,
+                 const double *grid, int n_grid,
                  double *samples, int *n_sampled, double *t_stop, double *y_stop, int *touching,
                  int *leaving, long *counters, double *min_gap, double *h_next, double max_seconds)
 {
@@ -469,6 +483,10 @@ int fb_integrate(FbWork *w, const FbSystem *s, int method, double t0, const doub
     if (P.any_held) P.n_event = ny;
     P.any_friction = P.any_held && s->friction;
     P.dir = s->slip ? s->slip : w->fr_dir; /* the system's: its rhs continues a slip past the stop along it */
+    P.dir_held = s->slip_held ? s->slip_held : w->fr_held;
+    P.mass = masses;
+    P.speed_tol = speed_tol;
+    P.h_next = *h_next > 0.0 ? *h_next : 0.0;
     S.method = method;
     S.stages = method == 0 ? 6 : 12;
     S.order = method == 0 ? 4 : 7;
@@ -486,11 +504,15 @@ int fb_integrate(FbWork *w, const FbSystem *s, int method, double t0, const doub
     memcpy(S.y, y0, sizeof(double) * ny);
     double *f0 = S.K[S.stages];
     rhs(&P, t, S.y, f0, lam);
+    int holding = 0; /* a slip held along its direction: the right-hand side is the renewed law's */
     for (int c = 0; c < nc; ++c)
         if (P.any_friction && P.held[c] == FB_SLIDING) { /* a direction from an earlier slide is stale */
             for (int a = 0; a < 3; ++a) P.dir[3 * c + a] = 0.0;
+            P.dir_held[c] = 0;
             friction_event(&P, S.y, c, 1);
+            holding |= P.dir_held[c];
         }
+    if (holding) rhs(&P, t, S.y, f0, lam);
     events_from(&P, S.y, lam, g_old, gaps);
     double h_abs, interval = t_bound - t0;
     if (*h_next > 0.0) { /* the step the controller proposed where the last segment ended */
@@ -583,15 +605,22 @@ int fb_integrate(FbWork *w, const FbSystem *s, int method, double t0, const doub
             status = FB_EVENT;
             goto finish;
         }
+        const int was_holding = holding;
+        holding = 0;
         for (int c = 0; c < nc; ++c) { /* gaps: at S.y, from events_from */
             if (gaps[c] < *min_gap) *min_gap = gaps[c];
-            if (P.any_friction && P.held[c] == FB_SLIDING) /* the next step's slip direction */
+            if (P.any_friction && P.held[c] == FB_SLIDING) { /* the next step's slip direction */
+                P.h_next = h_abs;
                 g_new[c] = fmin(lam[c] + force_tol[c], friction_event(&P, S.y, c, 1));
+                holding |= P.dir_held[c];
+            }
             if (P.phase[c] == FB_FREE && floor[c] < 0.0 && gaps[c] >= 2.0 * gap_tol) {
                 floor[c] = 0.0;
                 g_new[c] = gaps[c];
             }
         }
+        if (holding || was_holding) /* the law changed at S.y: the next step's first stage (FSAL) is stale */
+            rhs(&P, t_new, S.y, S.K[S.stages], lam);
         t = t_new;
         memcpy(g_old, g_new, sizeof(double) * nc);
     }

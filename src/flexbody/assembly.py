@@ -70,6 +70,7 @@ class AssembledModel(Model):
         # Contact laws per ground (mu, e): runtime data, not parameters of the derived equations.
         self.laws = np.array([[g.friction, g.restitution] for g in scene.grounds], float).reshape(-1, 2)
         self._slip = np.zeros((self.n_particles * len(scene.grounds), 3))  # the NumPy twin's FbSystem.slip
+        self._slip_held = np.zeros(len(self._slip), np.intc)  # FbSystem.slip_held
         self._tangential_push = np.zeros_like(self._slip)  # and its FbSystem.tangential_push
         self.nq = self.nu = n * self.dim
         self.ny = 2 * self.nq + 2
@@ -86,6 +87,13 @@ class AssembledModel(Model):
         writable view (``FbSystem.slip``): past the stop the friction force continues along it
         (see ``coulomb`` in assembly.c).  Zero it for outputs: then the law is the physical one."""
         return self._slip[:, : self.dim]
+
+    def slips_held(self, p) -> np.ndarray:
+        """Where a sliding contact's friction keeps its slip direction through the whole step,
+        shape (nc,), int, a writable view (``FbSystem.slip_held``): a 3D slip slower than the
+        speed tolerance at the step's start, whose direction is round-off (see
+        ``friction_event`` in integrator.c).  Zero it with the directions for outputs."""
+        return self._slip_held
 
     def tangential_pushes(self, p) -> FloatArray:
         """The thesis impact mode's tangential force on each pushed contact (N), shape (nc, dim),
@@ -196,6 +204,7 @@ class AssembledC(runtime.SystemModel, AssembledModel):
         if not (self.laws[:, 0] > 0.0).any():
             system.friction = None  # no friction anywhere: event location skips it
             system.slip = None
+            system.slip_held = None
             system.tangential_push = None
         system.owner = _AssemblyHandle(lib, handle)
         self._system_cache = (key, system)
@@ -221,6 +230,12 @@ class AssembledC(runtime.SystemModel, AssembledModel):
 
     def slip_directions(self, p) -> FloatArray:
         return self._contact_vectors(self.system(p).slip)
+
+    def slips_held(self, p) -> np.ndarray:
+        address = self.system(p).slip_held
+        if not address:
+            return np.zeros(self.n_contacts, np.intc)
+        return np.frombuffer((ctypes.c_int * self.n_contacts).from_address(address), dtype=np.intc)
 
     def tangential_pushes(self, p) -> FloatArray:
         return self._contact_vectors(self.system(p).tangential_push)
@@ -392,7 +407,8 @@ class AssembledNumpy(AssembledModel):
         speed = np.linalg.norm(vt[i, g], axis=1)
         direction = self._slip[i * G + g, :d]
         unit = np.sum(direction**2, axis=1)
-        past = (unit > 0.0) & ((np.sum(vt[i, g] * direction, axis=1) < 0.0) | (speed == 0.0))
+        past = (unit > 0.0) & ((np.sum(vt[i, g] * direction, axis=1) < 0.0) | (speed == 0.0)
+                               | (self._slip_held[i * G + g] != 0))
         along = np.where(past[:, None], direction, np.where((speed > 0.0)[:, None], vt[i, g], at))
         size = np.where(past, np.sqrt(unit), np.where(speed > 0.0, speed, pull))
         force = mu * np.maximum(lam[i, g], 0.0)

@@ -211,6 +211,7 @@ class BodyContactModel(Model):
                                   np.array(pair_laws, float).reshape(-1, 2)[self.slot_pair, 0]])
         self._ground_friction = bool((self.mu[: self.n_ground_contacts] > 0.0).any())
         self._slip = np.zeros((self.n_contacts, self.dim))
+        self._slip_held = np.zeros(self.n_contacts, np.intc)  # read by the grounds' law alone: coupled rows always hold
         self._frictional = bool((self.mu > 0.0).any())  # else the slip directions change no answer
         self._last: tuple[tuple[np.ndarray, ...], _Solved] | None = None  # the last state's answer (see _dynamics)
         self._swept: dict[bytes, tuple] = {}  # positions -> the whole surface sweep (see _surface_contacts)
@@ -241,6 +242,12 @@ class BodyContactModel(Model):
         writable array (the phase machine renews it): past the stop, friction continues along
         it, as for a ground (:meth:`flexbody.assembly.AssembledModel.slip_directions`)."""
         return self._slip
+
+    def slips_held(self, p) -> np.ndarray:
+        """Where a sliding ground contact keeps its friction along its slip direction through
+        the step, shape (nc,), int, writable (:meth:`flexbody.assembly.AssembledModel.slips_held`);
+        a coupled contact's friction always does."""
+        return self._slip_held
 
     def tangential_pushes(self, p) -> FloatArray:
         return np.zeros((self.n_contacts, self.dim))
@@ -450,6 +457,7 @@ class BodyContactModel(Model):
         friction reads them)."""
         if isinstance(self._coordinates, _ParticleCoordinates) and self._ground_friction:
             self.inner.slip_directions(p)[:] = self._slip[: self.n_ground_contacts]
+            self.inner.slips_held(p)[:] = self._slip_held[: self.n_ground_contacts]
 
     def _dynamics(self, y, p, held, push) -> _Solved:
         """The right-hand side and contact forces at ``y``: the inner model's alone where no
@@ -458,7 +466,7 @@ class BodyContactModel(Model):
         same state (a third of a stack's evaluations)."""
         y = np.asarray(y, float)
         held, push = np.asarray(held, np.intc), np.asarray(push, float)
-        key = (y, np.asarray(p), held, push, self.element_of) + ((self._slip,) if self._frictional else ())
+        key = (y, np.asarray(p), held, push, self.element_of) + ((self._slip, self._slip_held) if self._frictional else ())
         if self._last is not None and all(map(np.array_equal, self._last[0], key)):
             return self._last[1]
         solved = self._solve(y, p, held, push)

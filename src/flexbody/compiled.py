@@ -119,7 +119,8 @@ class CompiledPath:
         """
         status = self.lib.fb_integrate(
             self._work, self._system, method, t0, self._y, t_bound, self._phase, self._push, self._floor, self._force_tol,
-            self.gap_tolerance, rtol, atol, self._grid + 8 * first_sample, self.n_grid - first_sample,
+            self._masses, self.gap_tolerance, self.speed_tolerance, rtol, atol, self._grid + 8 * first_sample,
+            self.n_grid - first_sample,
             self._samples + self._row * first_sample, *self._integrate_out, self._y, *self._integrate_tail,
             max_seconds,
         )

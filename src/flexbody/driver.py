@@ -450,8 +450,10 @@ class _Run:
         self.put_back()
         stepper, rhs = getattr(scipy.integrate, s.method), model.rhs_function(self.p, phases.held, phases.push)
         solver = stepper(rhs, t0, self.y.copy(), t_bound, **options)
-        events = EventFunctions(model, self.p, phases, self.force_tolerance, self.gap_tolerance)
-        events.renew(self.y)
+        events = EventFunctions(model, self.p, phases, self.force_tolerance, self.gap_tolerance, self.speed_tolerance,
+                                None if s.method in IMPLICIT else self.contact_masses)
+        if events.renew(self.y, options.get("first_step", 0.0)):
+            solver.f = solver.fun(solver.t, solver.y)  # the first stage under the renewed law
         g_old = events(self.y)
         try:
             while True:
@@ -474,7 +476,8 @@ class _Run:
                 if hit:
                     return _Stop(t_stop, hit.contacts & events.free, hit.contacts & events.held_mask, True)
                 if events.friction:  # the next step's slip directions
-                    events.renew(solver.y)
+                    if events.renew(solver.y, solver.h_abs):
+                        solver.f = solver.fun(solver.t, solver.y)
                     g_new = events(solver.y)
                 if solver.status == "finished":
                     return _Stop(solver.t, np.zeros_like(events.free), np.zeros_like(events.free), False)
@@ -489,7 +492,8 @@ class _Run:
                     if s.method not in IMPLICIT:
                         options["first_step"] = min(solver.h_abs, t_bound - solver.t)
                     solver = stepper(rhs, solver.t, self.y.copy(), t_bound, **options)
-                    events.renew(self.y)
+                    if events.renew(self.y, options.get("first_step", 0.0)):
+                        solver.f = solver.fun(solver.t, solver.y)
                     g_new = events(self.y)
                 g_old = g_new
                 if self.progress:
@@ -862,6 +866,7 @@ class _Run:
         n = model.n_particles
         if self.friction:  # outputs: the physical law (the directions only continue a slip past its stop)
             model.slip_directions(p)[:] = 0.0
+            model.slips_held(p)[:] = 0
         if self.sample_elements is not None:
             X, V, E, lam = model.trajectory(Y, p, held, push, elements=self.sample_elements[:k])
         else:

@@ -38,9 +38,13 @@ class EventFunctions:
     """The vector of event functions, shape (nc,), for one contact configuration."""
 
     def __init__(self, model: Model, p: np.ndarray, phases: Phases, force_tolerance: np.ndarray,
-                 gap_tolerance: float = 0.0) -> None:
+                 gap_tolerance: float = 0.0, speed_tolerance: float = 0.0,
+                 masses: np.ndarray | None = None) -> None:
         self.model, self.p, self.phases = model, p, phases
         self.force_tolerance, self.gap_tolerance = force_tolerance, gap_tolerance
+        # which slow 3D slips keep their direction through a step (renew): each contact's particle
+        # mass; None (implicit methods, which follow a fast turn) holds none
+        self.speed_tolerance, self.masses = speed_tolerance, masses
         self.free = phases.phase == FREE
         self.held_mask = phases.on_ground
         self.held = phases.held
@@ -54,14 +58,20 @@ class EventFunctions:
         self.direction = model.slip_directions(p) if self.friction else np.zeros((model.n_contacts, model.dim))
         if self.friction:
             self.direction[phases.phase == SLIDING] = 0.0
+            model.slips_held(p)[phases.phase == SLIDING] = 0
         self._coupled: dict[int, np.ndarray] = {}  # each held contact's block (see one)
         self._forces = model.forces_function(p, self.held, phases.push)  # the segment's contact set, laid out once
 
-    def renew(self, y: np.ndarray) -> None:
-        """Take each sliding contact's slip direction at ``y`` (the start of the next step):
-        along its tangential velocity, or from rest along its pull (-ft)."""
+    def renew(self, y: np.ndarray, step: float = 0.0) -> bool:
+        """Take each sliding contact's slip direction at ``y`` (the start of the next step,
+        ``step`` long if known, else 0): along its tangential velocity, or from rest along its
+        pull (-ft).  A 3D slip that friction alone would stop within the step (or slower than
+        the speed tolerance) keeps its friction along it through the step: it turns faster
+        than the step can follow (see ``friction_event`` in integrator.c).  Returns whether a
+        slip is or was held: then the right-hand side at ``y`` changed (a stepper's first
+        stage, kept from the last step, is stale)."""
         if not self.friction:
-            return
+            return False
         vt, ft, _ = self.model.friction(y, self.p, self.held, self.phases.push)
         speed, pull = np.linalg.norm(vt, axis=1), np.linalg.norm(ft, axis=1)
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -69,6 +79,13 @@ class EventFunctions:
                                  np.where((pull > 0.0)[:, None], -ft / pull[:, None], 0.0))
         sliding = self.phases.phase == SLIDING
         self.direction[sliding] = direction[sliding]
+        if self.model.dim != 3 or self.masses is None:
+            return False
+        held = self.model.slips_held(self.p)
+        was = bool(held.any())
+        reach = np.maximum(self.speed_tolerance, pull / self.masses * step)  # |ft| = mu lam: friction's part
+        held[sliding] = (speed <= reach)[sliding]
+        return was or bool(held.any())
 
     def rearm(self, g_mid: np.ndarray, g_new: np.ndarray) -> None:
         """Arm at the ground (floor 0) each free contact armed a hair below it (just released

@@ -25,7 +25,8 @@ class FbSystem(ctypes.Structure):
         ("nq", _int), ("nu", _int), ("nc", _int), ("ny", _int), ("n_particles", _int), ("dim", _int),
         ("data", _ptr), ("rhs", _ptr), ("gaps", _ptr), ("contact_state", _ptr), ("impact", _ptr),
         ("outputs", _ptr), ("project", _ptr), ("contact", _ptr), ("stencil", _ptr),
-        ("friction", _ptr), ("settle", _ptr), ("slip", _ptr), ("tangential_push", _ptr),
+        ("friction", _ptr), ("settle", _ptr), ("slip", _ptr), ("slip_held", _ptr),
+        ("tangential_push", _ptr),
     ]  # fmt: skip
 
 
@@ -33,8 +34,8 @@ class FbSystem(ctypes.Structure):
 SIGNATURES = {
     "fb_work_new": (_ptr, [_int, _int]),
     "fb_work_free": (None, [_ptr]),
-    "fb_integrate": (_int, [_ptr, _ptr, _int, _double, _ptr, _double, _ptr, _ptr, _ptr, _ptr, _double, _double,
-                            _double, _ptr, _int, _ptr, _ptr, _ptr, _ptr, _ptr, _ptr, _ptr, _ptr, _ptr, _double]),
+    "fb_integrate": (_int, [_ptr, _ptr, _int, _double, _ptr, _double, _ptr, _ptr, _ptr, _ptr, _ptr, _double,
+                            _double, _double, _double, _ptr, _int, _ptr, _ptr, _ptr, _ptr, _ptr, _ptr, _ptr, _ptr, _ptr, _double]),
     "fb_resolve": (_int, [_ptr, _ptr, _double, _ptr, _ptr, _ptr, _ptr, _ptr, _ptr, _ptr, _double, _ptr, _ptr,
                           _ptr, _ptr, _ptr, _double, _int, _double, _ptr, _ptr, _ptr, _ptr, _ptr, _ptr, _ptr]),
     "fb_trajectory": (_int, [_ptr, _ptr, _long, _ptr, _ptr, _ptr, _ptr, _ptr, _ptr, _ptr]),
