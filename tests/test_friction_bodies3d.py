@@ -192,14 +192,16 @@ def test_a_3d_slip_that_turns_back_at_its_event_stops_instead_of_firing_again_an
     particles, held on the lower one's face and sliding at ~1e-5 m/s, turns its slip by more
     than 90 degrees within microseconds (the bodies vibrate).  Its event (its slip along the
     step start's direction reaching 0) fired 551 times in 1.5 ms while it slid on, each time
-    with a new direction; now that event stops it, and it sticks (one segment per event)."""
+    with a new direction; now that event stops it, and it sticks (one segment per event).
+    Right after a coupled contact starts sliding from rest, its slip is round-off: taken as
+    its direction, the first step's event fired at once, 8 times at one instant; it takes its
+    pull's direction there instead (the lower icosahedron's particles lifting off at 0.103 s
+    made this run land the upper one earlier, at 0.128 s, than when this test was written)."""
     r = _stacked_icosahedra(0.17)
     assert r.status == "success", r.message
-    landed = (r.events_kind == "impact") & (r.events_time > 0.14)
-    assert landed.sum() == 1
-    particle = r.events_particle[landed][0]
-    after = r.events_time > 0.14
-    assert list(r.events_kind[after]) == ["impact", "stick"] and r.events_particle[after][1] == particle
+    upper = r.events_particle >= 13  # the upper icosahedron's 13 particles follow the lower's
+    assert list(r.events_kind[upper][:2]) == ["impact", "stick"]  # its landing particle slides, then sticks
+    assert r.events_particle[upper][0] == r.events_particle[upper][1]
     assert r.stats["segments"] <= r.stats["events"]  # an instant per event: none without one
     assert np.diff(r.friction_work).min() >= 0.0 and r.friction_work[-1] > 0.0
     assert r.stats["max_penetration_m"] < 1e-9 and r.stats["energy_drift_relative"] < 1e-6
@@ -211,10 +213,14 @@ def test_a_ground_contact_slipping_at_1e_7_m_per_s_at_the_edge_of_its_cone_does_
     friction followed that turn, and RK45 took 7 352 steps of 6e-9 s at 0.190 s (341 s to
     0.25 s); held along the step start's direction where friction alone would stop the slip
     within the step, the run takes a few hundred steps (counted, not timed), and friction
-    still only takes energy."""
+    still only takes energy.  Two particles of the lower one start sliding from rest at
+    0.1031 s and lift off within that step: a slide from rest had its stop event at 0 there,
+    which hid the lift-off, and they were held on to 0.13 s with a normal force down to
+    -14.8 N (an adhesive ground)."""
     r = _stacked_icosahedra(0.25)
     assert r.status == "success", r.message
     assert r.stats["steps"] < 2000
+    assert r.stats["min_held_contact_force_N"] > -1e-9
     assert np.diff(r.friction_work).min() >= 0.0 and r.friction_work[-1] > 0.0
     assert r.stats["max_penetration_m"] < 1e-9 and r.stats["energy_drift_relative"] < 1e-6
 

@@ -55,7 +55,7 @@ static void layout(FbWork *w, char *base, size_t *size)
     for (size_t k = 0; k < sizeof contacts / sizeof *contacts; ++k) *contacts[k] = carve(&next, c);
     int **flags[] = {&w->held, &w->phase, &w->fired, &w->r_touching, &w->r_impacted, &w->r_settled,
                      &w->r_was_held, &w->r_held, &w->r_hit, &w->r_ending, &w->r_instant, &w->r_stop,
-                     &w->r_visit, &w->r_fresh, &w->r_moved, &w->fr_held};
+                     &w->r_visit, &w->r_fresh, &w->r_moved, &w->fr_held, &w->fr_rest};
     for (size_t k = 0; k < sizeof flags / sizeof *flags; ++k) *flags[k] = carve(&next, ci);
     *size = (size_t)(next - base);
 }
@@ -95,6 +95,7 @@ typedef struct {
     int any_friction; /* held contacts and a system with friction (FbSystem.friction) */
     double *dir;      /* (nc, 3): each sliding contact's direction at the start of the step */
     int *dir_held;    /* (nc,): its friction kept along dir through the step (FbSystem.slip_held) */
+    int *from_rest;   /* (nc,): it slides from rest this step: no stop event (friction_event) */
     const double *mass; /* (nc,): each contact's particle mass (kg) */
     double speed_tol, h_next; /* the speed tolerance (m/s); the next step's proposed length (s) */
 } Problem;
@@ -129,7 +130,11 @@ static double rms(const double *x, const double *scale, int n)
  * to that turn's stability limit (1e-8 s at 1e-7 m/s, where a slip stays near the edge of
  * its cone).  Its friction is held along dir through the step (dir_held), at first order
  * in the turn, and its event fires where the slip no longer runs along dir (the stop;
- * phases.c stops it there, and sticking or sliding from rest is decided anew). */
+ * phases.c stops it there, and sticking or sliding from rest is decided anew).  A slide
+ * from rest (from_rest) starts its first step at 0, which no sign change leaves and which
+ * would hide its lift-off: in 2D it has no stop there (INFINITY; its slip grows along its
+ * pull), in 3D it is armed a speed tolerance below (a held friction that outgrows the pull
+ * would drive the slip backwards, unseen, for the whole step). */
 static double friction_event(Problem *P, const double *y, int c, int renew)
 {
     double vt[3], ft[3], slack, lam, along = 0.0;
@@ -146,13 +151,15 @@ static double friction_event(Problem *P, const double *y, int c, int renew)
             speed += vt[a] * vt[a];
             pull += ft[a] * ft[a];
         }
+        P->from_rest[c] = speed == 0.0;
         for (int a = 0; a < d; ++a)
-            dir[a] = speed > 0.0 ? vt[a] / sqrt(speed) : (pull > 0.0 ? -ft[a] / sqrt(pull) : 0.0);
+            dir[a] = !P->from_rest[c] ? vt[a] / sqrt(speed) : (pull > 0.0 ? -ft[a] / sqrt(pull) : 0.0);
         const double reach = fmax(P->speed_tol, sqrt(pull) / P->mass[c] * P->h_next); /* |ft| = mu lam */
         P->dir_held[c] = d == 3 && speed <= reach * reach; /* speed is squared here */
     }
+    if (P->from_rest[c] && d != 3) return INFINITY;
     for (int a = 0; a < d; ++a) along += vt[a] * dir[a];
-    return along;
+    return P->from_rest[c] ? along + P->speed_tol : along;
 }
 
 /* Event functions, positive while nothing happens: gap - floor (free), lam + tol (held),
@@ -484,6 +491,7 @@ int fb_integrate(FbWork *w, const FbSystem *s, int method, double t0, const doub
     P.any_friction = P.any_held && s->friction;
     P.dir = s->slip ? s->slip : w->fr_dir; /* the system's: its rhs continues a slip past the stop along it */
     P.dir_held = s->slip_held ? s->slip_held : w->fr_held;
+    P.from_rest = w->fr_rest;
     P.mass = masses;
     P.speed_tol = speed_tol;
     P.h_next = *h_next > 0.0 ? *h_next : 0.0;

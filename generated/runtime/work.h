@@ -14,7 +14,7 @@ struct FbWork {
     double *y_old, *y, *ys, *tmp, *f1, *scale, *e5, *e3, *zero, *dy, *mid_y, *root_y, *ev_dy, *r_y_new;
     double *lam, *g_old, *g_new, *gaps, *ev_lam, *ev_gaps, *g_mid, *roots, *root_g, *r_gaps, *r_vn, *r_lam;
     double *fr_dir; /* (nc, 3) */
-    int *fr_held;   /* (nc,) */
+    int *fr_held, *fr_rest; /* (nc,) */
     int *held, *phase, *fired;
     /* phases.c */
     int *r_touching, *r_impacted, *r_settled, *r_was_held, *r_held, *r_hit, *r_ending, *r_instant, *r_stop;

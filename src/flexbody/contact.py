@@ -50,11 +50,14 @@ class Phases:
     # a hair below where the contact was released on the ground
     push: np.ndarray  # normal force of PUSHED contacts (N), 0 elsewhere
     push_until: np.ndarray  # end of each PUSHED window (s), inf elsewhere
+    # coupled contacts the last instant set sliding from rest: their slip is round-off, and the
+    # next segment's first step slides them along their pull (EventFunctions, which resets it)
+    started: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
 
     @classmethod
     def all_free(cls, nc: int) -> Phases:
         """Every contact free and armed at the ground itself (floor 0)."""
-        return cls(np.zeros(nc, np.intc), np.zeros(nc), np.zeros(nc), np.full(nc, np.inf))
+        return cls(np.zeros(nc, np.intc), np.zeros(nc), np.zeros(nc), np.full(nc, np.inf), np.zeros(nc, bool))
 
     @property
     def held(self) -> np.ndarray:
@@ -75,16 +78,17 @@ class Phases:
         self.floor[unarmed] = np.minimum(0.0, gaps[unarmed]) - gap_tolerance
 
     def copy(self) -> Phases:
-        return Phases(self.phase.copy(), self.floor.copy(), self.push.copy(), self.push_until.copy())
+        return Phases(self.phase.copy(), self.floor.copy(), self.push.copy(), self.push_until.copy(),
+                      self.started.copy())
 
     def first(self, n: int) -> Phases:
         """The first ``n`` contacts' phases, views of these arrays: what is assigned to them
         (:meth:`assign`) lands here."""
-        return Phases(self.phase[:n], self.floor[:n], self.push[:n], self.push_until[:n])
+        return Phases(self.phase[:n], self.floor[:n], self.push[:n], self.push_until[:n], self.started[:n])
 
     def assign(self, other: Phases) -> None:
         """Take ``other``'s values into these arrays (whose addresses C may hold)."""
-        for name in ("phase", "floor", "push", "push_until"):
+        for name in ("phase", "floor", "push", "push_until", "started"):
             getattr(self, name)[:] = getattr(other, name)
 
 

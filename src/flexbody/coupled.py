@@ -475,6 +475,8 @@ def coupled_friction_phases(model, t: float, y: np.ndarray, p: np.ndarray, phase
     after = np.where(moving | slips, SLIDING, HELD)
     after = np.where(mu > 0.0, after, before)
     phases.phase[rows] = after
+    if len(phases.started):
+        phases.started[rows[slips & (after == SLIDING)]] = True  # from rest: round-off slips
     events = [Event(t, int(c), "stick") for c in rows[(before == SLIDING) & (after == HELD)]]
     events += [Event(t, int(c), "slip") for c in rows[(before == HELD) & (after == SLIDING) & was_held[rows]]]
     return y, loss, events

@@ -56,6 +56,14 @@ class EventFunctions:
         # Each sliding contact's direction at the step's start: the model's own (FbSystem.slip), whose
         # right-hand side continues a slip past its stop along it; one from an earlier slide is stale.
         self.direction = model.slip_directions(p) if self.friction else np.zeros((model.n_contacts, model.dim))
+        # A slide from rest starts its first step at 0, which no sign change leaves, hiding its
+        # lift-off: in 2D it has no stop there, in 3D it is armed a speed tolerance below (see
+        # friction_event in integrator.c).
+        self.from_rest = np.zeros(model.n_contacts, bool)
+        self.started = np.zeros(model.n_contacts, bool)  # taken by the first renew from the phases
+        if len(phases.started) == model.n_contacts:
+            self.started[:] = phases.started
+            phases.started[:] = False
         if self.friction:
             self.direction[phases.phase == SLIDING] = 0.0
             model.slips_held(p)[phases.phase == SLIDING] = 0
@@ -67,17 +75,21 @@ class EventFunctions:
         ``step`` long if known, else 0): along its tangential velocity, or from rest along its
         pull (-ft).  A 3D slip that friction alone would stop within the step (or slower than
         the speed tolerance) keeps its friction along it through the step: it turns faster
-        than the step can follow (see ``friction_event`` in integrator.c).  Returns whether a
+        than the step can follow (see ``friction_event`` in integrator.c).  A contact the
+        last instant set sliding from rest (``Phases.started``) slides from rest in its first
+        step whatever round-off slip it has.  Returns whether a
         slip is or was held: then the right-hand side at ``y`` changed (a stepper's first
         stage, kept from the last step, is stale)."""
         if not self.friction:
             return False
         vt, ft, _ = self.model.friction(y, self.p, self.held, self.phases.push)
         speed, pull = np.linalg.norm(vt, axis=1), np.linalg.norm(ft, axis=1)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            direction = np.where((speed > 0.0)[:, None], vt / speed[:, None],
-                                 np.where((pull > 0.0)[:, None], -ft / pull[:, None], 0.0))
         sliding = self.phases.phase == SLIDING
+        self.from_rest = sliding & ((speed == 0.0) | self.started)
+        self.started = np.zeros_like(self.started)  # the first step's only
+        with np.errstate(divide="ignore", invalid="ignore"):
+            direction = np.where((~self.from_rest)[:, None], vt / speed[:, None],
+                                 np.where((pull > 0.0)[:, None], -ft / pull[:, None], 0.0))
         self.direction[sliding] = direction[sliding]
         if self.model.dim != 3 or self.masses is None:
             return False
@@ -133,7 +145,9 @@ class EventFunctions:
                 vt, _, slack = m.friction(y, self.p, held, self.phases.push)
                 sticking, sliding = mask & (self.phases.phase == HELD), mask & (self.phases.phase == SLIDING)
                 g[sticking] = np.minimum(g[sticking], slack[sticking] + self.force_tolerance[sticking])
-                g[sliding] = np.minimum(g[sliding], np.sum(vt * self.direction, axis=1)[sliding])
+                along = np.sum(vt * self.direction, axis=1)
+                along = np.where(self.from_rest, np.inf if m.dim != 3 else along + self.speed_tolerance, along)
+                g[sliding] = np.minimum(g[sliding], along[sliding])
         return g
 
     def one(self, y: np.ndarray, c: int) -> float:
