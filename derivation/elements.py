@@ -273,6 +273,8 @@ def _surface_kernels(d: int) -> list[Kernel]:
     slip_outputs = {"slip_rate": slip, "slip_bias": slip.jacobian(coordinates) * velocities}
     if d == 2:
         velocity_outputs |= slip_outputs
+    else:  # the rows' tangent directions: the runtime takes them from here, not from a twin
+        slip_outputs["tangents"] = sp.Matrix([t.dot(e) for t in tangents for e in axes])
     return [
         Kernel(name, f"Particle x against the {element} of another body: signed gap (x - a) . n (m, < 0 "
                f"inside), {what}, the outward unit normal n and d gap / d[x, {', '.join(corners)}].",
@@ -289,7 +291,7 @@ def _surface_kernels(d: int) -> list[Kernel]:
     ] + ([] if d == 2 else [
         Kernel(f"{name}_slip", f"Slip rates (m/s) of particle x against the {element}: its velocity relative to "
                "the element's material point under x along the unit tangents t1 = (b - a) / |b - a| and "
-               "t2 = n x t1, and their accelerations' velocity terms (m/s^2), d2 s / dt2 - J_t a.",
+               "t2 = n x t1, their accelerations' velocity terms (m/s^2), d2 s / dt2 - J_t a, and t1, t2.",
                positions + [("v", v)] + [(f"v{c}", V[c]) for c in corners],
                slip_outputs),
     ])

@@ -138,8 +138,8 @@ void fb_kb_triangle_3d_velocity(long n_elements, const double *x, const double *
         fb_k_triangle_3d_velocity(x + e * 3, a + e * 3, b + e * 3, c + e * 3, v + e * 3, va + e * 3, vb + e * 3, vc + e * 3, gap_rate + e * 1, tangential_velocity + e * 3, gap_bias + e * 1);
 }
 
-void fb_kb_triangle_3d_slip(long n_elements, const double *x, const double *a, const double *b, const double *c, const double *v, const double *va, const double *vb, const double *vc, double *slip_rate, double *slip_bias)
+void fb_kb_triangle_3d_slip(long n_elements, const double *x, const double *a, const double *b, const double *c, const double *v, const double *va, const double *vb, const double *vc, double *slip_rate, double *slip_bias, double *tangents)
 {
     for (long e = 0; e < n_elements; ++e)
-        fb_k_triangle_3d_slip(x + e * 3, a + e * 3, b + e * 3, c + e * 3, v + e * 3, va + e * 3, vb + e * 3, vc + e * 3, slip_rate + e * 2, slip_bias + e * 2);
+        fb_k_triangle_3d_slip(x + e * 3, a + e * 3, b + e * 3, c + e * 3, v + e * 3, va + e * 3, vb + e * 3, vc + e * 3, slip_rate + e * 2, slip_bias + e * 2, tangents + e * 6);
 }

@@ -1496,10 +1496,10 @@ def triangle_3d_velocity(x, a, b, c, v, va, vb, vc):
 
 
 def triangle_3d_slip(x, a, b, c, v, va, vb, vc):
-    """Slip rates (m/s) of particle x against the triangle a, b, c: its velocity relative to the element's material point under x along the unit tangents t1 = (b - a) / |b - a| and t2 = n x t1, and their accelerations' velocity terms (m/s^2), d2 s / dt2 - J_t a.
+    """Slip rates (m/s) of particle x against the triangle a, b, c: its velocity relative to the element's material point under x along the unit tangents t1 = (b - a) / |b - a| and t2 = n x t1, their accelerations' velocity terms (m/s^2), d2 s / dt2 - J_t a, and t1, t2.
 
     Inputs: x (3, m), a (3, m), b (3, m), c (3, m), v (3, m), va (3, m), vb (3, m), vc (3, m).
-    Returns: slip_rate (2, m), slip_bias (2, m).
+    Returns: slip_rate (2, m), slip_bias (2, m), tangents (6, m).
     Operations after CSE: 1535.
     """
     x_x, x_y, x_z = x
@@ -1803,4 +1803,11 @@ def triangle_3d_slip(x, a, b, c, v, va, vb, vc):
     slip_bias = numpy.zeros((2,) + batch)
     slip_bias[0] = v_x*(w63*w82 + w66*w80 + w69*w81) + v_y*(w63*w91 + w66*w89 + w69*w90) + v_z*(w100*w63 + w66*w98 + w69*w99) + va_x*(w1*w127 + w102*w2 + w121*w66 + w122*w69 + w123*w63 + w124*w125 - w55) + va_y*(w102*w125 + w124*w5 + w127*w4 + w142*w66 + w143*w69 + w144*w63 - w57) + va_z*(w126*w8 + w156*w66 + w157*w69 + w158*w63 + w159*w7 + w160*w7 - w59) + vb_x*(w0*w127 + w0*w159 + w0*w160 + w175*w66 + w176*w69 + w177*w63 + w55) + vb_y*(w127*w3 + w159*w3 + w160*w3 + w190*w66 + w191*w69 + w192*w63 + w57) + vb_z*(w127*w6 + w159*w6 + w160*w6 + w203*w66 + w204*w69 + w205*w63 + w59) + vc_x*(w217*w66 + w218*w69 + w219*w63) + vc_y*(w230*w66 + w231*w69 + w232*w63) + vc_z*(w242*w66 + w243*w69 + w244*w63)
     slip_bias[1] = v_x*(w65*w81 + w68*w82 + w71*w80) + v_y*(w65*w90 + w68*w91 + w71*w89) + v_z*(w100*w68 + w65*w99 + w71*w98) + va_x*(w121*w71 + w122*w65 + w123*w68 + w54*(w10*w24*w248*w249*w7 + w10*w61*w7*w74 - w247 - w250*w251 + w253 - w70*w72) + w56*(w10*w250*w60 + w18*w256 - w250*w258 - w252*w257 + w255 + w67*w72) + w58*(w1*w101*w23*w4*w61 + w10*w23*w248*w249*w4 - w24*w256 - w250*w260 + w259 - w67*w74)) + va_y*(w142*w71 + w143*w65 + w144*w68 + w54*(w10*w24*w248*w261*w7 + w101*w24*w4*w61*w7 - w18*w245*w5 - w251*w262 - w255 - w70*w84) + w56*(w10*w262*w60 + w247 - w258*w262 + w264 - w64*w73 + w67*w84) + w58*(w10*w23*w248*w261*w4 + w10*w4*w61*w73 + w101*w23*w5*w61 - w125*w24*w245 - w260*w262 - w265)) + va_z*(w156*w71 + w157*w65 + w158*w68 + w54*(w10*w24*w248*w267*w7 + w10*w61*w7*w83 + w101*w24*w61*w8 - w251*w268 - w259 - w266*w7) + w56*(w10*w268*w60 - w23*w245*w8 - w258*w268 + w263*w60 + w265 - w64*w92) + w58*(w10*w23*w248*w267*w4 + w10*w4*w61*w92 - w253 - w260*w268 - w264 - w67*w83)) + vb_x*(w175*w71 + w176*w65 + w177*w68 + w54*(w0*w101*w24*w61*w7 - w0*w266 + w10*w20*w61*w7 + w10*w24*w248*w269*w7 - w13*w70 - w251*w270) + w56*(w10*w270*w60 + w14*w62 + w254 - w257*w271 - w258*w270 + w271*w60) + w58*(w0*w101*w23*w4*w61 + w10*w23*w248*w269*w4 - w20*w67 - w252*w95 - w259 - w260*w270)) + vb_y*(w190*w71 + w191*w65 + w192*w68 + w54*(w10*w24*w248*w272*w7 + w101*w24*w3*w61*w7 - w16*w70 - w246*w77 - w251*w273 - w254) + w56*(w16*w67 - w21*w64 + w252*w77 - w257*w275 - w258*w273 + w274*w60) + w58*(w22*w62 - w260*w273 + w265 + w274*w96 + w275*w96 - w276*w3)) + vb_z*(w203*w71 + w204*w65 + w205*w68 + w54*(w10*w278*w78 + w17*w62*w7 + w245*w6*w78 - w251*w278 + w259 - w266*w6) + w56*(w1*w10*w18*w248*w277 + w1*w101*w18*w6*w61 - w12*w64 - w258*w278 - w263*w87 - w265) + w58*(w10*w12*w4*w61 + w10*w23*w248*w277*w4 + w101*w23*w4*w6*w61 - w17*w67 - w260*w278 - w276*w6)) + vc_x*(w217*w71 + w218*w65 + w219*w68 + w54*(w10*w24*w248*w279*w7 + w10*w61*w8 - w251*w280 - w3*w70) + w56*(w10*w280*w60 - w258*w280 + w3*w67) + w58*(w10*w23*w248*w279*w4 - w260*w280 - w67*w7)) + vc_y*(w230*w71 + w231*w65 + w232*w68 + w54*(w10*w24*w248*w281*w7 - w251*w282 - w4*w67) + w56*(w2*w62 - w258*w282 + w283*w60 - w6*w64) + w58*(-w260*w282 + w283*w96 + w6*w70)) + vc_z*(w242*w71 + w243*w65 + w244*w68 + w54*(w0*w64 + w10*w285*w78 - w251*w285) + w56*(w1*w10*w18*w248*w284 - w258*w285 - w7*w70) + w58*(-w0*w67 + w10*w23*w248*w284*w4 + w10*w5*w61 - w260*w285))
-    return slip_rate, slip_bias
+    tangents = numpy.zeros((6,) + batch)
+    tangents[0] = w66
+    tangents[1] = w69
+    tangents[2] = w63
+    tangents[3] = w71
+    tangents[4] = w65
+    tangents[5] = w68
+    return slip_rate, slip_bias, tangents

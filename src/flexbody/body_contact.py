@@ -1158,10 +1158,9 @@ class BodyContactModel(Model):
                 slip_bias[k_g:, 0] = terms.slip_bias
             elif tangents:
                 points = self._slot_points(slots)
-                slip_bias[k_g:] = self._element.slip_bias([x[i] for i in points.T], [v[i] for i in points.T])
-                first = x[points[:, 2]] - x[points[:, 1]]
-                first /= np.linalg.norm(first, axis=1)[:, None]
-                axes = np.concatenate([axes, np.stack([first, np.cross(terms.normal, first)], axis=1)])
+                slip_bias[k_g:], element_axes = self._element.slip_terms([x[i] for i in points.T],
+                                                                         [v[i] for i in points.T])
+                axes = np.concatenate([axes, element_axes])
         if not tangents:
             directions = [normals]
         elif d == 2:
@@ -1450,7 +1449,7 @@ class ElementKernels:
             self.c[1].argtypes = [ctypes.c_long] + [ctypes.c_void_p] * (2 * (dim + 1) + self.velocity_outputs)
             if dim == 3:
                 self._slip_c = lib.fb_kb_triangle_3d_slip
-                self._slip_c.argtypes = [ctypes.c_long] + [ctypes.c_void_p] * (2 * (dim + 1) + 2)
+                self._slip_c.argtypes = [ctypes.c_long] + [ctypes.c_void_p] * (2 * (dim + 1) + 3)
             self._grow(16)
 
     def _grow(self, k: int) -> None:
@@ -1488,16 +1487,19 @@ class ElementKernels:
         slip_terms = (slip[0][0], slip[1][0]) if d == 2 else (None, None)
         return ElementTerms(gap[0], weights, normal.T, rate[0], bias[0], *slip_terms)
 
-    def slip_bias(self, points: list[FloatArray], rates: list[FloatArray]) -> FloatArray:
+    def slip_terms(self, points: list[FloatArray], rates: list[FloatArray]) -> tuple[FloatArray, FloatArray]:
         """3D: the velocity terms (k, 2) of the slip rates' accelerations along the
-        triangle's t1, t2 (the ``triangle_3d_slip`` kernel; only friction asks for them)."""
+        triangle's t1 = (b - a) / |b - a| and t2 = n x t1, and those tangents (k, 2, 3) (the
+        ``triangle_3d_slip`` kernel; only friction asks for them)."""
         k = len(points[0])
         if self.c is not None:
             inputs = [np.ascontiguousarray(z, dtype=float) for z in points + rates]
-            slip, bias = np.empty((k, 2)), np.empty((k, 2))
-            self._slip_c(k, *(z.ctypes.data for z in inputs), slip.ctypes.data, bias.ctypes.data)
-            return bias
-        return self.numpy.triangle_3d_slip(*(z.T for z in points + rates))[1].T
+            slip, bias, tangents = np.empty((k, 2)), np.empty((k, 2)), np.empty((k, 2, 3))
+            self._slip_c(k, *(z.ctypes.data for z in inputs), slip.ctypes.data, bias.ctypes.data,
+                         tangents.ctypes.data)
+            return bias, tangents
+        _, bias, tangents = self.numpy.triangle_3d_slip(*(z.T for z in points + rates))
+        return bias.T, tangents.T.reshape(k, 2, 3)
 
 
 def _kept(store: dict, key, make, size: int):
