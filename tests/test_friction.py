@@ -345,7 +345,9 @@ def test_a_slip_across_a_slope_turns_stops_and_sticks_as_an_independent_integrat
 # only D = mu g cos(theta) - g sin(theta) ~ 0.01 m/s^2, while its direction, followed, turns at
 # mu g cos(theta) / |v_t| ~ 2.5e6 rad/s: an explicit step is held to that turn's stability
 # limit.  Followed, the slip crept on for 1.5 million steps and never stopped; held along its
-# direction at the step's start for a step friction alone would end it in, it stops.
+# direction at the step's start for a step friction alone would end it in (inside its cone),
+# it stops.  Outside its cone (mu < tan(theta)) a slow slip is followed: explicit and implicit
+# methods then agree.
 
 SLOPE = np.radians(15.0)
 DOWNHILL = np.array([0.6, 0.8, 0.0])  # the pull's direction: no axis
@@ -371,12 +373,13 @@ def test_a_slow_slip_along_its_pull_at_the_edge_of_its_cone_stops_in_closed_form
 
 
 @pytest.mark.parametrize("path", PATHS)
-def test_a_slow_slip_across_its_pull_stops_within_its_reach_of_an_independent_integration(path):
+def test_a_slow_slip_across_its_pull_stops_no_later_and_nearer_than_an_independent_integration(path):
     """Across the pull the slip first turns downhill (at ~2.5e6 rad/s), then slows at D.  SciPy's
-    LSODA integrating the point-mass law alone (stiff-capable) stops it at 5.3e-5 s; the run
-    stops it where a held step's event fires (4.1e-6 s), its slip left across the step's
-    direction taken off as a stop's.  Its rest position is within the reach of that slow slip,
-    s0^2 / (2 D) ~ 5e-11 m, of the reference's, and its ledger closes."""
+    LSODA integrating the point-mass law alone (stiff-capable) stops it at 5.3e-5 s.  The run
+    holds the friction along the slip's direction through a step that friction alone ends it
+    in; the pull's part across that direction is then taken off with the stop, so the slide
+    ends no later than the reference's and its rest position lies nearer the reference's than
+    the start does (a run stopped at once, or one creeping on, fails); its ledger closes."""
     from scipy.integrate import solve_ivp
 
     s0, across = 1e-6, np.array([0.8, -0.6, 0.0])
@@ -394,10 +397,26 @@ def test_a_slow_slip_across_its_pull_stops_within_its_reach_of_an_independent_in
     stopped.terminal = True
     ref = solve_ivp(f, (0.0, 1e-3), np.concatenate([[0.0, 0.0], s0 * across[:2]]), method="LSODA", events=stopped,
                     rtol=1e-10, atol=1e-16)
-    reach = s0**2 / (2 * (slowing - G * np.sin(SLOPE)))
-    assert np.linalg.norm(r.positions[-1, 0, :2] - ref.y_events[0][0][:2]) < reach
+    rest = ref.y_events[0][0][:2]
+    assert 0.0 < r.events_time[0] <= ref.t_events[0][0]
+    assert np.linalg.norm(r.positions[-1, 0, :2] - rest) < np.linalg.norm(rest)
     np.testing.assert_allclose(r.velocities[-1, 0], 0.0, atol=1e-15)
     assert ledger_drift(r) < 1e-15
+
+
+@pytest.mark.parametrize("path", PATHS)
+def test_a_slow_slip_outside_its_cone_is_followed_as_an_implicit_method_follows_it(path):
+    """mu < tan(theta): pulled harder than friction holds, a slip of 1e-4 m/s across the slope
+    turns downhill and speeds up.  It is not held (held along stale directions over the long
+    steps its smooth law allows, it ended at 7.9e-4 m/s instead of 3.8e-3 m/s, found in
+    review): the explicit run ends where Radau, which follows the turn, does."""
+    gravity = G * np.sin(SLOPE) * DOWNHILL - [0.0, 0.0, G * np.cos(SLOPE)]
+    scene = particle_scene([0.0, 0.0, 0.0], (1e-4 * np.array([0.8, -0.6, 0.0])).tolist(), gravity=gravity.tolist(),
+                           friction=np.tan(SLOPE) - 0.008, t_end=0.05)
+    r, implicit = simulate(scene, **path), simulate(scene, backend="numpy", method="Radau")
+    assert r.success and implicit.success
+    np.testing.assert_allclose(r.velocities[-1, 0], implicit.velocities[-1, 0], rtol=0, atol=1e-7)
+    assert np.linalg.norm(r.velocities[-1, 0]) > 3e-3
 
 
 # ----------------------------------------------------------------- bad input and refusals

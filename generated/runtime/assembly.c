@@ -288,9 +288,9 @@ static void free_acceleration_2d(const Assembly *A, const double *y, const doubl
  * force is continued smoothly beyond the stop, which the solution never reaches (the stick
  * event cuts it there), so that a step across the stop is smooth and the event is found,
  * instead of steps shrinking forever before a discontinuity; along it the whole step where
- * the integrator holds it, FbSystem.slip_held).  Writes vt, ft
- * (dim) and the sticking slack mu lam - |ft| (N; INFINITY without friction); returns the
- * power friction dissipates (W, >= 0). */
+ * the integrator holds it, FbSystem.slip_held).  Writes vt, ft (dim) and the sticking slack
+ * mu lam - |ft| (N; INFINITY without friction; sliding, the one it would have sticking,
+ * mu lam - m |a_t|: >= 0 inside its cone); returns the power friction dissipates (W, >= 0). */
 static double coulomb_2d(const Assembly *A, const double *x, const double *v, int i, int g, int code,
                            double lam, double *acc, double *vt, double *ft, double *slack)
 {
@@ -328,7 +328,7 @@ static double coulomb_2d(const Assembly *A, const double *x, const double *v, in
         ft[a] = -force * along[a] / size;
         acc[a] += ft[a] / m;
     }
-    *slack = 0.0;
+    *slack = mu * lam - m * pull;
     double power = 0.0; /* -ft . v_t: mu lam |v_t| before the stop */
     for (int a = 0; a < 2; ++a) power -= ft[a] * vt[a];
     return power;
@@ -790,9 +790,9 @@ static void free_acceleration_3d(const Assembly *A, const double *y, const doubl
  * force is continued smoothly beyond the stop, which the solution never reaches (the stick
  * event cuts it there), so that a step across the stop is smooth and the event is found,
  * instead of steps shrinking forever before a discontinuity; along it the whole step where
- * the integrator holds it, FbSystem.slip_held).  Writes vt, ft
- * (dim) and the sticking slack mu lam - |ft| (N; INFINITY without friction); returns the
- * power friction dissipates (W, >= 0). */
+ * the integrator holds it, FbSystem.slip_held).  Writes vt, ft (dim) and the sticking slack
+ * mu lam - |ft| (N; INFINITY without friction; sliding, the one it would have sticking,
+ * mu lam - m |a_t|: >= 0 inside its cone); returns the power friction dissipates (W, >= 0). */
 static double coulomb_3d(const Assembly *A, const double *x, const double *v, int i, int g, int code,
                            double lam, double *acc, double *vt, double *ft, double *slack)
 {
@@ -830,7 +830,7 @@ static double coulomb_3d(const Assembly *A, const double *x, const double *v, in
         ft[a] = -force * along[a] / size;
         acc[a] += ft[a] / m;
     }
-    *slack = 0.0;
+    *slack = mu * lam - m * pull;
     double power = 0.0; /* -ft . v_t: mu lam |v_t| before the stop */
     for (int a = 0; a < 3; ++a) power -= ft[a] * vt[a];
     return power;

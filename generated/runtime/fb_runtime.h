@@ -88,9 +88,10 @@ struct FbSystem {
      * force along it, so a step across the stop is smooth and its event is located. */
     double *slip;
     /* With friction: (nc,) nonzero where rhs keeps a sliding contact's friction along slip[c]
-     * through the whole step, written by the integrator with slip: a 3D slip that friction
-     * alone would stop within the step.  Followed, it turns at up to mu lam / (m |v_t|) rad/s,
-     * which an explicit step cannot follow (steps of 1e-8 s at 1e-7 m/s). */
+     * through the whole step, written by the integrator with slip: a 3D slip slower than the
+     * speed tolerance, or inside its cone and slow enough for friction alone to stop it within
+     * the step.  Followed, it turns at up to mu lam / (m |v_t|) rad/s, which an explicit step
+     * cannot follow (1e-8 s at 1e-7 m/s). */
     int *slip_held;
     /* Optional (NULL: frictionless): (nc, 3) the thesis impact mode's tangential force on each
      * pushed contact (N), constant over its window like the normal push: Coulomb's impulse

@@ -124,13 +124,15 @@ static double rms(const double *x, const double *scale, int n)
  * tangential pull bends it), so |v_t| never changes sign and a fixed direction may never be
  * crossed: the direction is renewed at every accepted step (renew), where the value is
  * |v_t| > 0, and within one step it turns little.  From rest the contact slides along its
- * pull (-ft): that is its direction then.  A 3D slip that friction alone would stop within
- * the next step (|v_t| <= mu lam h / m, or slower than the speed tolerance) turns at up to
- * mu lam / (m |v_t|) rad/s, faster than the step can follow: an explicit step would be cut
- * to that turn's stability limit (1e-8 s at 1e-7 m/s, where a slip stays near the edge of
- * its cone).  Its friction is held along dir through the step (dir_held), at first order
- * in the turn, and its event fires where the slip no longer runs along dir (the stop;
- * phases.c stops it there, and sticking or sliding from rest is decided anew).  A slide
+ * pull (-ft): that is its direction then.  Near its stop a 3D slip turns at up to
+ * mu lam / (m |v_t|) rad/s, faster than a step can follow: an explicit step is cut to that
+ * turn's stability limit (1e-8 s at 1e-7 m/s, where a slip stays near the edge of its
+ * cone).  A slip slower than the speed tolerance, or one inside its cone (its sticking
+ * slack >= 0: it is stopping) that friction alone would stop within the next step
+ * (|v_t| <= mu lam h / m), has its friction held along dir through the step (dir_held), and
+ * its event fires where the slip no longer runs along dir (the stop; phases.c stops it
+ * there, and sticking or sliding from rest is decided anew).  A slip outside its cone
+ * (pulled on harder than friction holds) is followed.  A slide
  * from rest (from_rest) starts its first step at 0, which no sign change leaves and which
  * would hide its lift-off: in 2D it has no stop there (INFINITY; its slip grows along its
  * pull), in 3D it is armed a speed tolerance below (a held friction that outgrows the pull
@@ -154,8 +156,8 @@ static double friction_event(Problem *P, const double *y, int c, int renew)
         P->from_rest[c] = speed == 0.0;
         for (int a = 0; a < d; ++a)
             dir[a] = !P->from_rest[c] ? vt[a] / sqrt(speed) : (pull > 0.0 ? -ft[a] / sqrt(pull) : 0.0);
-        const double reach = fmax(P->speed_tol, sqrt(pull) / P->mass[c] * P->h_next); /* |ft| = mu lam */
-        P->dir_held[c] = d == 3 && speed <= reach * reach; /* speed is squared here */
+        const double reach = slack >= 0.0 ? sqrt(pull) / P->mass[c] * P->h_next : 0.0; /* |ft| = mu lam */
+        P->dir_held[c] = d == 3 && speed <= pow(fmax(P->speed_tol, reach), 2); /* speed is squared here */
     }
     if (P->from_rest[c] && d != 3) return INFINITY;
     for (int a = 0; a < d; ++a) along += vt[a] * dir[a];
@@ -494,7 +496,6 @@ int fb_integrate(FbWork *w, const FbSystem *s, int method, double t0, const doub
     P.from_rest = w->fr_rest;
     P.mass = masses;
     P.speed_tol = speed_tol;
-    P.h_next = *h_next > 0.0 ? *h_next : 0.0;
     S.method = method;
     S.stages = method == 0 ? 6 : 12;
     S.order = method == 0 ? 4 : 7;
@@ -512,16 +513,6 @@ int fb_integrate(FbWork *w, const FbSystem *s, int method, double t0, const doub
     memcpy(S.y, y0, sizeof(double) * ny);
     double *f0 = S.K[S.stages];
     rhs(&P, t, S.y, f0, lam);
-    int holding = 0; /* a slip held along its direction: the right-hand side is the renewed law's */
-    for (int c = 0; c < nc; ++c)
-        if (P.any_friction && P.held[c] == FB_SLIDING) { /* a direction from an earlier slide is stale */
-            for (int a = 0; a < 3; ++a) P.dir[3 * c + a] = 0.0;
-            P.dir_held[c] = 0;
-            friction_event(&P, S.y, c, 1);
-            holding |= P.dir_held[c];
-        }
-    if (holding) rhs(&P, t, S.y, f0, lam);
-    events_from(&P, S.y, lam, g_old, gaps);
     double h_abs, interval = t_bound - t0;
     if (*h_next > 0.0) { /* the step the controller proposed where the last segment ended */
         h_abs = fmin(*h_next, interval);
@@ -537,6 +528,22 @@ int fb_integrate(FbWork *w, const FbSystem *s, int method, double t0, const doub
         double h1 = (d1 <= 1e-15 && d2 <= 1e-15) ? fmax(1e-6, h0 * 1e-3) : pow(0.01 / fmax(d1, d2), 1.0 / (S.order + 1));
         h_abs = fmin(fmin(100.0 * h0, h1), interval);
     }
+    /* The slip directions of the first step, which may hold a slow slip (friction_event), as
+     * SciPy's driver renews them after its stepper chose its first step */
+    P.h_next = h_abs;
+    int holding = 0, held_before = 0; /* a slip held now, or at the last segment's end: f0 is stale */
+    for (int c = 0; c < nc; ++c) {
+        held_before |= P.dir_held[c];
+        P.dir_held[c] = 0;
+    }
+    for (int c = 0; c < nc; ++c)
+        if (P.any_friction && P.held[c] == FB_SLIDING) { /* a direction from an earlier slide is stale */
+            for (int a = 0; a < 3; ++a) P.dir[3 * c + a] = 0.0;
+            friction_event(&P, S.y, c, 1);
+            holding |= P.dir_held[c];
+        }
+    if (holding || held_before) rhs(&P, t, S.y, f0, lam);
+    events_from(&P, S.y, lam, g_old, gaps);
     const double exponent = -1.0 / (S.order + 1);
     /* Step ends, output samples and the event state are moved onto the held constraints
      * (where the model can: its gaps are nonlinear in q); the interpolant between is not. */

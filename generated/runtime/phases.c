@@ -21,9 +21,10 @@ static void add_event(int *contact, int *kind, double *vn, int *n, int c, int k,
 
 /* Coulomb friction of the held contacts once their normal forces are settled (for point
  * masses on flat grounds the tangential problem of each particle is its own, so any order
- * gives the same result).  A sliding contact slower than speed_tol, or in 3D one whose event
- * fired with at most speed_tol left along its step's direction (its slip passed by 0: what
- * is left across it is what friction held along one direction let through), comes to rest (its last
+ * gives the same result).  A sliding contact slower than speed_tol, or in 3D one held along
+ * its step's direction (FbSystem.slip_held) whose event fired with at most speed_tol left
+ * along it (its slip passed by 0: what is left across it is what friction held along one
+ * direction let through), comes to rest (its last
  * tangential velocity zeroed, FB_SETTLE) and sticks if its ground can hold it ("stick"), or
  * keeps sliding along its pull; a sticking contact whose slack mu lam - |ft| is negative, or
  * within its tolerance where its event fired, slides ("slip"); a contact that landed with
@@ -48,10 +49,12 @@ static int friction_phases(FbWork *w, const FbSystem *s, double *y, int *phase, 
         speed = 0.0;
         for (int a = 0; a < d; ++a) speed += vt[a] * vt[a];
         speed = sqrt(speed);
-        double along = 0.0; /* a 3D slip whose event fired: what is left along its step's direction */
-        if (d == 3 && leaving[c] && s->slip)
+        double along = INFINITY; /* a held 3D slip whose event fired: what is left along its step's direction */
+        if (d == 3 && leaving[c] && s->slip_held && s->slip_held[c]) {
+            along = 0.0;
             for (int a = 0; a < 3; ++a) along += vt[a] * s->slip[3 * c + a];
-        if (phase[c] == FB_SLIDING && (speed <= speed_tol || (d == 3 && leaving[c] && along <= speed_tol))) {
+        }
+        if (phase[c] == FB_SLIDING && (speed <= speed_tol || along <= speed_tol)) {
             stop[c] = FB_SETTLE;
             settle = 1;
         } else if (phase[c] == FB_HELD && slack < INFINITY) {

@@ -91,7 +91,7 @@ class AssembledModel(Model):
     def slips_held(self, p) -> np.ndarray:
         """Where a sliding contact's friction keeps its slip direction through the whole step,
         shape (nc,), int, a writable view (``FbSystem.slip_held``): a 3D slip slower than the
-        speed tolerance at the step's start, whose direction is round-off (see
+        speed tolerance at the step's start, or slowing to a stop within the step (see
         ``friction_event`` in integrator.c).  Zero it with the directions for outputs."""
         return self._slip_held
 
@@ -401,7 +401,7 @@ class AssembledNumpy(AssembledModel):
         sticking = held[i, g] != SLIDING
         # Sticking: the tangential force cancels the tangential pull.
         ft[i, g] = np.where(sticking[:, None], -m[:, None] * at, 0.0)
-        slack[i, g] = np.where(sticking, mu * lam[i, g] - m * pull, 0.0)
+        slack[i, g] = mu * lam[i, g] - m * pull  # sliding: the slack it would have sticking (>= 0 inside its cone)
         # Sliding: mu lam against v_t, or against the pull from rest; past the stop (v_t against
         # the step's starting direction) along that direction, as coulomb in assembly.c.
         speed = np.linalg.norm(vt[i, g], axis=1)

@@ -130,8 +130,8 @@ def friction_phases(model: Model, t: float, y: np.ndarray, p: np.ndarray, phases
 
     For point masses on flat grounds each particle's tangential problem is its own, so the
     order does not matter.  A sliding contact slower than ``speed_tolerance`` (in 3D also one
-    whose event fired with no more than that left along its step's direction: its slip passed
-    by 0, see :func:`flexbody.coupled._turned_back`) comes to rest
+    held along its step's direction whose event fired with no more than that left along it:
+    its slip passed by 0, see :func:`flexbody.coupled._turned_back`) comes to rest
     (its tangential velocity is zeroed, SETTLE) and sticks if its ground can hold it
     ("stick"), or slides on along its pull; a sticking contact whose slack ``mu lam - |ft|``
     is negative, or within its tolerance where its event fired, slides ("slip"); a contact
@@ -149,9 +149,10 @@ def friction_phases(model: Model, t: float, y: np.ndarray, p: np.ndarray, phases
     speed = np.linalg.norm(vt, axis=1)
     on = held != 0
     stopping = on & (phases.phase == SLIDING) & (speed <= speed_tolerance)
-    if model.dim == 3:  # a slip whose event fired with nothing left along its step's direction: it stopped
+    if model.dim == 3:  # a held slip whose event fired with nothing left along its step's direction: it stopped
         along = np.einsum("cd,cd->c", vt, model.slip_directions(p))
-        stopping |= on & (phases.phase == SLIDING) & leaving & (along <= speed_tolerance)
+        held_along = model.slips_held(p) != 0
+        stopping |= on & (phases.phase == SLIDING) & leaving & held_along & (along <= speed_tolerance)
     sticking = on & (phases.phase == HELD) & np.isfinite(slack)
     landed = sticking & (speed > speed_tolerance)
     slips = sticking & ~landed & ((slack < 0.0) | (leaving & (slack <= force_tolerance)))

@@ -452,7 +452,7 @@ class _Run:
         solver = stepper(rhs, t0, self.y.copy(), t_bound, **options)
         events = EventFunctions(model, self.p, phases, self.force_tolerance, self.gap_tolerance, self.speed_tolerance,
                                 None if s.method in IMPLICIT else self.contact_masses)
-        if events.renew(self.y, options.get("first_step", 0.0)):
+        if events.renew(self.y, 0.0 if s.method in IMPLICIT else solver.h_abs):
             solver.f = solver.fun(solver.t, solver.y)  # the first stage under the renewed law
         g_old = events(self.y)
         try:
@@ -476,7 +476,7 @@ class _Run:
                 if hit:
                     return _Stop(t_stop, hit.contacts & events.free, hit.contacts & events.held_mask, True)
                 if events.friction:  # the next step's slip directions
-                    if events.renew(solver.y, solver.h_abs):
+                    if events.renew(solver.y, 0.0 if s.method in IMPLICIT else solver.h_abs):
                         solver.f = solver.fun(solver.t, solver.y)
                     g_new = events(solver.y)
                 if solver.status == "finished":
@@ -492,7 +492,7 @@ class _Run:
                     if s.method not in IMPLICIT:
                         options["first_step"] = min(solver.h_abs, t_bound - solver.t)
                     solver = stepper(rhs, solver.t, self.y.copy(), t_bound, **options)
-                    if events.renew(self.y, options.get("first_step", 0.0)):
+                    if events.renew(self.y, 0.0 if s.method in IMPLICIT else solver.h_abs):
                         solver.f = solver.fun(solver.t, solver.y)
                     g_new = events(self.y)
                 g_old = g_new

@@ -42,9 +42,10 @@ class EventFunctions:
                  masses: np.ndarray | None = None) -> None:
         self.model, self.p, self.phases = model, p, phases
         self.force_tolerance, self.gap_tolerance = force_tolerance, gap_tolerance
-        # which slow 3D slips keep their direction through a step (renew): each contact's particle
-        # mass; None (implicit methods, which follow a fast turn) holds none
+        # slow 3D slips keep their direction through a step (renew) with explicit steppers, given
+        # each contact's particle mass; an implicit one (masses None) follows their fast turn
         self.speed_tolerance, self.masses = speed_tolerance, masses
+        self.hold_slips = masses is not None and model.dim == 3
         self.free = phases.phase == FREE
         self.held_mask = phases.on_ground
         self.held = phases.held
@@ -64,25 +65,31 @@ class EventFunctions:
         if len(phases.started) == model.n_contacts:
             self.started[:] = phases.started
             phases.started[:] = False
+        # a slip held when the last segment ended changed the law the stepper's first stage saw
+        self._held_before = False
         if self.friction:
             self.direction[phases.phase == SLIDING] = 0.0
-            model.slips_held(p)[phases.phase == SLIDING] = 0
+            if self.hold_slips:
+                held = model.slips_held(p)
+                self._held_before = bool(held.any())
+                held[:] = 0
         self._coupled: dict[int, np.ndarray] = {}  # each held contact's block (see one)
         self._forces = model.forces_function(p, self.held, phases.push)  # the segment's contact set, laid out once
 
     def renew(self, y: np.ndarray, step: float = 0.0) -> bool:
         """Take each sliding contact's slip direction at ``y`` (the start of the next step,
         ``step`` long if known, else 0): along its tangential velocity, or from rest along its
-        pull (-ft).  A 3D slip that friction alone would stop within the step (or slower than
-        the speed tolerance) keeps its friction along it through the step: it turns faster
-        than the step can follow (see ``friction_event`` in integrator.c).  A contact the
+        pull (-ft).  A 3D slip slower than the speed tolerance, or one inside its cone that
+        friction alone would stop within the step, keeps its friction along it through the
+        step: near its stop it turns faster than the step can follow (see ``friction_event``
+        in integrator.c).  A contact the
         last instant set sliding from rest (``Phases.started``) slides from rest in its first
         step whatever round-off slip it has.  Returns whether a
         slip is or was held: then the right-hand side at ``y`` changed (a stepper's first
         stage, kept from the last step, is stale)."""
         if not self.friction:
             return False
-        vt, ft, _ = self.model.friction(y, self.p, self.held, self.phases.push)
+        vt, ft, slack = self.model.friction(y, self.p, self.held, self.phases.push)
         speed, pull = np.linalg.norm(vt, axis=1), np.linalg.norm(ft, axis=1)
         sliding = self.phases.phase == SLIDING
         self.from_rest = sliding & ((speed == 0.0) | self.started)
@@ -91,12 +98,14 @@ class EventFunctions:
             direction = np.where((~self.from_rest)[:, None], vt / speed[:, None],
                                  np.where((pull > 0.0)[:, None], -ft / pull[:, None], 0.0))
         self.direction[sliding] = direction[sliding]
-        if self.model.dim != 3 or self.masses is None:
+        if not self.hold_slips:
             return False
         held = self.model.slips_held(self.p)
-        was = bool(held.any())
-        reach = np.maximum(self.speed_tolerance, pull / self.masses * step)  # |ft| = mu lam: friction's part
-        held[sliding] = (speed <= reach)[sliding]
+        was, self._held_before = bool(held.any()) or self._held_before, False
+        # inside its cone (sliding, its slack is the one it would have sticking) friction alone
+        # takes |ft| / m = mu lam / m off the slip per second
+        reach = np.where(slack >= 0.0, pull / self.masses * step, 0.0)
+        held[:] = sliding & (speed <= np.maximum(self.speed_tolerance, reach))
         return was or bool(held.any())
 
     def rearm(self, g_mid: np.ndarray, g_new: np.ndarray) -> None:
