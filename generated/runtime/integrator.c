@@ -512,6 +512,11 @@ int fb_integrate(FbWork *w, const FbSystem *s, int method, double t0, const doub
     *n_sampled = 0;
     memcpy(S.y, y0, sizeof(double) * ny);
     double *f0 = S.K[S.stages];
+    for (int c = 0; c < nc; ++c) { /* a direction or hold from an earlier slide is stale: the law follows v_t */
+        P.dir_held[c] = 0;
+        if (P.any_friction && P.held[c] == FB_SLIDING)
+            for (int a = 0; a < 3; ++a) P.dir[3 * c + a] = 0.0;
+    }
     rhs(&P, t, S.y, f0, lam);
     double h_abs, interval = t_bound - t0;
     if (*h_next > 0.0) { /* the step the controller proposed where the last segment ended */
@@ -531,18 +536,13 @@ int fb_integrate(FbWork *w, const FbSystem *s, int method, double t0, const doub
     /* The slip directions of the first step, which may hold a slow slip (friction_event), as
      * SciPy's driver renews them after its stepper chose its first step */
     P.h_next = h_abs;
-    int holding = 0, held_before = 0; /* a slip held now, or at the last segment's end: f0 is stale */
-    for (int c = 0; c < nc; ++c) {
-        held_before |= P.dir_held[c];
-        P.dir_held[c] = 0;
-    }
+    int holding = 0; /* a slip held: f0, the followed law's, is stale */
     for (int c = 0; c < nc; ++c)
-        if (P.any_friction && P.held[c] == FB_SLIDING) { /* a direction from an earlier slide is stale */
-            for (int a = 0; a < 3; ++a) P.dir[3 * c + a] = 0.0;
+        if (P.any_friction && P.held[c] == FB_SLIDING) {
             friction_event(&P, S.y, c, 1);
             holding |= P.dir_held[c];
         }
-    if (holding || held_before) rhs(&P, t, S.y, f0, lam);
+    if (holding) rhs(&P, t, S.y, f0, lam);
     events_from(&P, S.y, lam, g_old, gaps);
     const double exponent = -1.0 / (S.order + 1);
     /* Step ends, output samples and the event state are moved onto the held constraints

@@ -249,6 +249,12 @@ class BodyContactModel(Model):
         a coupled contact's friction always does."""
         return self._slip_held
 
+    def solved_alone(self, y, p, held, push) -> np.ndarray:
+        """Bool (ng,): the held ground contacts whose laws the inner model applies alone (no
+        contact couples to them); their friction follows the slip within a step unless held
+        (:meth:`slips_held`), a coupled row's always keeps the step start's direction."""
+        return self._dynamics(y, p, np.asarray(held, np.intc), np.asarray(push, float)).fast != 0
+
     def tangential_pushes(self, p) -> FloatArray:
         return np.zeros((self.n_contacts, self.dim))
 

@@ -448,10 +448,11 @@ class _Run:
         model.forget_free(phases.phase == FREE)  # a free contact between bodies picks its element at its next instant
         # also at a segment's start: a pile's segments are often one step long, each ending at an event
         self.put_back()
-        stepper, rhs = getattr(scipy.integrate, s.method), model.rhs_function(self.p, phases.held, phases.push)
-        solver = stepper(rhs, t0, self.y.copy(), t_bound, **options)
+        # first: it clears the directions of earlier slides, which the stepper's first stage must not see
         events = EventFunctions(model, self.p, phases, self.force_tolerance, self.gap_tolerance, self.speed_tolerance,
                                 None if s.method in IMPLICIT else self.contact_masses)
+        stepper, rhs = getattr(scipy.integrate, s.method), model.rhs_function(self.p, phases.held, phases.push)
+        solver = stepper(rhs, t0, self.y.copy(), t_bound, **options)
         if events.renew(self.y, 0.0 if s.method in IMPLICIT else solver.h_abs):
             solver.f = solver.fun(solver.t, solver.y)  # the first stage under the renewed law
         g_old = events(self.y)

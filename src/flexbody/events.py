@@ -65,14 +65,10 @@ class EventFunctions:
         if len(phases.started) == model.n_contacts:
             self.started[:] = phases.started
             phases.started[:] = False
-        # a slip held when the last segment ended changed the law the stepper's first stage saw
-        self._held_before = False
-        if self.friction:
+        if self.friction:  # a direction or hold from an earlier slide is stale: the law follows v_t
             self.direction[phases.phase == SLIDING] = 0.0
             if self.hold_slips:
-                held = model.slips_held(p)
-                self._held_before = bool(held.any())
-                held[:] = 0
+                model.slips_held(p)[:] = 0
         self._coupled: dict[int, np.ndarray] = {}  # each held contact's block (see one)
         self._forces = model.forces_function(p, self.held, phases.push)  # the segment's contact set, laid out once
 
@@ -101,7 +97,7 @@ class EventFunctions:
         if not self.hold_slips:
             return False
         held = self.model.slips_held(self.p)
-        was, self._held_before = bool(held.any()) or self._held_before, False
+        was = bool(held.any())
         # inside its cone (sliding, its slack is the one it would have sticking) friction alone
         # takes |ft| / m = mu lam / m off the slip per second
         reach = np.where(slack >= 0.0, pull / self.masses * step, 0.0)
