@@ -164,6 +164,23 @@ static double friction_event(Problem *P, const double *y, int c, int renew)
     return P->from_rest[c] ? along + P->speed_tol : along;
 }
 
+/* Each sliding contact's slip direction for the next step, h_next long, at its start y
+ * (friction_event's renewal), and with g its event function there: the smaller of
+ * lam + tol and the friction event.  Returns whether a slip is held along its direction (the
+ * right-hand side at y is then another than the one that followed it). */
+static int renew_slips(Problem *P, const double *y, double h_next, const double *lam, double *g)
+{
+    int holding = 0;
+    P->h_next = h_next;
+    for (int c = 0; c < P->nc; ++c)
+        if (P->any_friction && P->held[c] == FB_SLIDING) {
+            const double event = friction_event(P, y, c, 1);
+            if (g) g[c] = fmin(lam[c] + P->force_tol[c], event);
+            holding |= P->dir_held[c];
+        }
+    return holding;
+}
+
 /* Event functions, positive while nothing happens: gap - floor (free), lam + tol (held),
  * and with friction the smaller of that and the friction event; the gaps go to gaps. */
 static void events_from(Problem *P, const double *y, const double *lam, double *g, double *gaps)
@@ -535,14 +552,8 @@ int fb_integrate(FbWork *w, const FbSystem *s, int method, double t0, const doub
     }
     /* The slip directions of the first step, which may hold a slow slip (friction_event), as
      * SciPy's driver renews them after its stepper chose its first step */
-    P.h_next = h_abs;
-    int holding = 0; /* a slip held: f0, the followed law's, is stale */
-    for (int c = 0; c < nc; ++c)
-        if (P.any_friction && P.held[c] == FB_SLIDING) {
-            friction_event(&P, S.y, c, 1);
-            holding |= P.dir_held[c];
-        }
-    if (holding) rhs(&P, t, S.y, f0, lam);
+    int holding = renew_slips(&P, S.y, h_abs, lam, 0);
+    if (holding) rhs(&P, t, S.y, f0, lam); /* f0 was the followed law's */
     events_from(&P, S.y, lam, g_old, gaps);
     const double exponent = -1.0 / (S.order + 1);
     /* Step ends, output samples and the event state are moved onto the held constraints
@@ -621,14 +632,9 @@ int fb_integrate(FbWork *w, const FbSystem *s, int method, double t0, const doub
             goto finish;
         }
         const int was_holding = holding;
-        holding = 0;
+        holding = renew_slips(&P, S.y, h_abs, lam, g_new); /* the next step's slip directions */
         for (int c = 0; c < nc; ++c) { /* gaps: at S.y, from events_from */
             if (gaps[c] < *min_gap) *min_gap = gaps[c];
-            if (P.any_friction && P.held[c] == FB_SLIDING) { /* the next step's slip direction */
-                P.h_next = h_abs;
-                g_new[c] = fmin(lam[c] + force_tol[c], friction_event(&P, S.y, c, 1));
-                holding |= P.dir_held[c];
-            }
             if (P.phase[c] == FB_FREE && floor[c] < 0.0 && gaps[c] >= 2.0 * gap_tol) {
                 floor[c] = 0.0;
                 g_new[c] = gaps[c];

@@ -91,8 +91,9 @@ class AssembledModel(Model):
     def slips_held(self, p) -> np.ndarray:
         """Where a sliding contact's friction keeps its slip direction through the whole step,
         shape (nc,), int, a writable view (``FbSystem.slip_held``): a 3D slip slower than the
-        speed tolerance at the step's start, or slowing to a stop within the step (see
-        ``friction_event`` in integrator.c).  Zero it with the directions for outputs."""
+        speed tolerance at the step's start, or inside its cone and slow enough for friction
+        alone to stop it within the step (see ``friction_event`` in integrator.c).  Zero it
+        with the directions for outputs."""
         return self._slip_held
 
     def tangential_pushes(self, p) -> FloatArray:

@@ -453,8 +453,14 @@ class _Run:
                                 None if s.method in IMPLICIT else self.contact_masses)
         stepper, rhs = getattr(scipy.integrate, s.method), model.rhs_function(self.p, phases.held, phases.push)
         solver = stepper(rhs, t0, self.y.copy(), t_bound, **options)
-        if events.renew(self.y, 0.0 if s.method in IMPLICIT else solver.h_abs):
-            solver.f = solver.fun(solver.t, solver.y)  # the first stage under the renewed law
+
+        def renew_slips() -> None:
+            """The next step's slip directions at the stepper's state; where they hold a slip
+            (or held one) the law changed there, and so the stepper's first stage."""
+            if events.renew(solver.y, 0.0 if s.method in IMPLICIT else solver.h_abs):
+                solver.f = solver.fun(solver.t, solver.y)
+
+        renew_slips()
         g_old = events(self.y)
         try:
             while True:
@@ -477,8 +483,7 @@ class _Run:
                 if hit:
                     return _Stop(t_stop, hit.contacts & events.free, hit.contacts & events.held_mask, True)
                 if events.friction:  # the next step's slip directions
-                    if events.renew(solver.y, 0.0 if s.method in IMPLICIT else solver.h_abs):
-                        solver.f = solver.fun(solver.t, solver.y)
+                    renew_slips()
                     g_new = events(solver.y)
                 if solver.status == "finished":
                     return _Stop(solver.t, np.zeros_like(events.free), np.zeros_like(events.free), False)
@@ -493,8 +498,7 @@ class _Run:
                     if s.method not in IMPLICIT:
                         options["first_step"] = min(solver.h_abs, t_bound - solver.t)
                     solver = stepper(rhs, solver.t, self.y.copy(), t_bound, **options)
-                    if events.renew(self.y, 0.0 if s.method in IMPLICIT else solver.h_abs):
-                        solver.f = solver.fun(solver.t, solver.y)
+                    renew_slips()
                     g_new = events(self.y)
                 g_old = g_new
                 if self.progress:

@@ -78,11 +78,10 @@ class EventFunctions:
         pull (-ft).  A 3D slip slower than the speed tolerance, or one inside its cone that
         friction alone would stop within the step, keeps its friction along it through the
         step: near its stop it turns faster than the step can follow (see ``friction_event``
-        in integrator.c).  A contact the
-        last instant set sliding from rest (``Phases.started``) slides from rest in its first
-        step whatever round-off slip it has.  Returns whether a
-        slip is or was held: then the right-hand side at ``y`` changed (a stepper's first
-        stage, kept from the last step, is stale)."""
+        in integrator.c).  A contact the last instant set sliding from rest
+        (``Phases.started``) slides from rest in its first step whatever round-off slip it
+        has.  Returns whether a slip is or was held: then the right-hand side at ``y``
+        changed (a stepper's first stage, kept from the last step, is stale)."""
         if not self.friction:
             return False
         vt, ft, slack = self.model.friction(y, self.p, self.held, self.phases.push)
