@@ -181,21 +181,27 @@ def test_a_3d_rigid_tetrahedron_landing_on_its_base_rests_on_the_barycentric_for
 
 @needs_cc
 def test_a_flexible_and_a_rigid_body_in_one_scene_move_as_each_does_alone():
+    """Side by side (particles formulation: the rigid frame beside the assembled dumbbell) and
+    derived whole (floating formulation)."""
+    formulations, kinds = ("particles", "floating"), {"particles": "mixed", "floating": "derived"}
     flexible = {"name": "dumbbell", "particles": [[-0.1, 0.0], [0.1, 0.0]], "links": [[0, 1]], "mass": 0.05,
                 "stiffness": 2000.0, "damping": 0.5, "position": [2.0, 0.3], "angle": 0.3}
     rigid = {"name": "bar", "rigid": True, "particles": TRIANGLE, "masses": TRIANGLE_MASSES,
              "links": [[0, 1], [1, 2]], "position": [0.0, 0.5], "angle": 0.1}
 
-    def run(*bodies):
+    def run(*bodies, **options):
         return simulate(flexbody.load_scene({"name": "mix", "bodies": list(bodies),
-                                             "simulation": {"t_end": 0.8, "output_dt": 1e-3}}), **TIGHT)
+                                             "simulation": {"t_end": 0.8, "output_dt": 1e-3}}), **TIGHT, **options)
 
-    both, alone_flexible, alone_rigid = run(flexible, rigid), run(flexible), run(rigid)
-    assert both.success and alone_flexible.success and alone_rigid.success
-    # the flexible body alone runs on the assembled particles formulation, in the mix on the floating one
-    np.testing.assert_allclose(both.positions[:, :2], alone_flexible.positions, atol=1e-8)
-    np.testing.assert_allclose(both.positions[:, 2:], alone_rigid.positions, atol=1e-8)
-    assert both.stats["impacts"] == alone_flexible.stats["impacts"] + alone_rigid.stats["impacts"]
+    alone_flexible, alone_rigid = run(flexible), run(rigid)
+    assert alone_flexible.success and alone_rigid.success
+    for formulation in formulations:
+        both = run(flexible, rigid, formulation=formulation)
+        assert both.success and both.stats["model"] == kinds[formulation]
+        # the flexible body alone runs on the assembled particles formulation, in the mix on the one asked
+        np.testing.assert_allclose(both.positions[:, :2], alone_flexible.positions, atol=1e-8)
+        np.testing.assert_allclose(both.positions[:, 2:], alone_rigid.positions, atol=1e-8)
+        assert both.stats["impacts"] == alone_flexible.stats["impacts"] + alone_rigid.stats["impacts"]
 
 
 @needs_cc
@@ -376,26 +382,30 @@ def test_a_tumbling_3d_rigid_box_comes_to_rest_on_a_face(e):
 # ----------------------------------------------------------------- input
 
 
-def test_a_rigid_body_asked_to_run_on_the_particles_formulation_is_refused():
+def test_a_scene_of_rigid_bodies_alone_runs_on_its_frames_whichever_formulation_is_asked():
+    """A rigid body is its frame T in both formulations; with no flexible body the particles
+    formulation has nothing to assemble, so the run is the floating one, bit for bit."""
     scene = rigid_scene(TRIANGLE, TRIANGLE_MASSES, position=[0.0, 0.5])
-    with pytest.raises(InputError, match="only the floating formulation"):
-        simulate(scene, formulation="particles")
+    asked, default = simulate(scene, formulation="particles", t_end=0.4), simulate(scene, t_end=0.4)
+    assert asked.success and asked.stats["formulation"] == "floating" and asked.stats["model"] == "derived"
+    np.testing.assert_array_equal(asked.positions, default.positions)
 
 
-def test_a_rigid_body_beside_a_flexible_body_too_large_for_the_floating_formulation_gets_a_way_out():
-    """The floating formulation, the only one with rigid bodies, is offered up to 40 flexible
-    particles: the error names the rigid body and does not send the user to the particles
-    formulation, which refuses rigid bodies (it did, a loop of two errors)."""
+def test_a_rigid_body_beside_a_flexible_body_too_large_for_the_floating_formulation():
+    """The floating formulation derives the whole scene and is offered up to 40 flexible
+    particles: asked for with 41 it is refused, naming the count and the way out; by default
+    (the particles formulation) the rigid slab's frame runs beside the assembled ring."""
     table = {"name": "r", "bodies": [
         {"name": "slab", "rigid": True, "particles": [[-0.5, 0.0], [0.5, 0.0]], "masses": [0.5, 0.5],
          "links": [[0, 1]], "position": [0.0, 0.1]},
         {"name": "ring", "shape": "ring", "count": 41, "radius": 0.1, "mass": 0.01, "stiffness": 1000.0,
          "damping": 0.1, "position": [0.0, 0.5]}], "simulation": {"t_end": 0.1}}
     with pytest.raises(InputError) as error:
-        simulate(flexbody.load_scene(table))
+        simulate(flexbody.load_scene(table), formulation="floating")
     message = str(error.value)
-    assert "['slab']" in message and "41 particles" in message
-    assert "use the particles formulation" not in message
+    assert "41 particles" in message and "use the particles formulation" in message
+    r = simulate(flexbody.load_scene(table))
+    assert r.success and r.stats["model"] == "mixed" and r.stats["formulation"] == "particles"
 
 
 def test_a_rigid_body_with_particle_velocities_that_are_not_a_rigid_motion_is_refused():

@@ -118,11 +118,13 @@ def test_flexible_bodies_on_frames_collide_as_in_the_particles_formulation():
 
 
 @pytest.mark.slow
-def test_a_rigid_and_a_flexible_icosahedron_colliding_in_space_conserve_momentum():
-    """3D frames: a rigid icosahedron (six coordinates) and a flexible one on the floating
-    formulation (derived whole, ~20 s once) collide off-centre in free space: linear and
-    angular momentum are kept through the impacts (measured 6e-13 at rtol 1e-10), nothing
-    gets inside anything, the ledger closes."""
+@pytest.mark.parametrize("formulation, kind", [("floating", "derived"), ("particles", "mixed")])
+def test_a_rigid_and_a_flexible_icosahedron_colliding_in_space_conserve_momentum(formulation, kind):
+    """3D frames: a rigid icosahedron (six coordinates) and a flexible one, on the floating
+    formulation (derived whole, ~20 s once) and on the particles one (the flexible body
+    assembled beside the rigid frame), collide off-centre in free space: linear and angular
+    momentum are kept through the impacts (measured 6e-13 at rtol 1e-10), nothing gets
+    inside anything, the ledger closes."""
     from pathlib import Path
 
     from tests.test_body_contact import _momenta_3d
@@ -136,9 +138,9 @@ def test_a_rigid_and_a_flexible_icosahedron_colliding_in_space_conserve_momentum
                          "position": [0.15, -0.01, 1.02], "rotation": [0.0, -0.4, 0.1],
                          "velocity": [-1.0, 0.0, 0.0], "angular_velocity": [0.0, 0.0, 3.0]}],
              "simulation": {"t_end": 0.15, "output_dt": 0.005, "rtol": 1e-10, "atol": 1e-12}}
-    r = flexbody.simulate(flexbody.load_scene(table))
+    r = flexbody.simulate(flexbody.load_scene(table), formulation=formulation)
     assert r.status == "success", r.message
-    assert r.stats["formulation"] == "floating" and r.stats["impacts"] >= 1
+    assert r.stats["formulation"] == formulation and r.stats["model"] == kind and r.stats["impacts"] >= 1
     p, L = _momenta_3d(r)
     np.testing.assert_allclose(p - p[0], 0.0, atol=1e-10)
     np.testing.assert_allclose(L - L[0], 0.0, atol=1e-10)
@@ -149,7 +151,8 @@ def test_a_rigid_and_a_flexible_icosahedron_colliding_in_space_conserve_momentum
 @pytest.mark.slow
 def test_the_ring_stack_on_a_rigid_block_stays_at_rest_for_10_s():
     """The issue's stack: the bundled scene (friction 0.5 between the bodies) with its block
-    rigid, derived whole (~40 s once) and run for 10 s (~40 s): at rest from about 2.5 s, no
+    rigid, its frame beside the assembled rings (the default; derived whole, the floating
+    formulation took ~40 s once) and run for 10 s (~40 s): at rest from about 2.5 s, no
     drift, nothing inside anything, the ground carrying everything on the block's two bottom
     corners, the block the two rings, the lower ring the upper one."""
     from tests.test_body_scenes import STACK, bundled, centres, weights
@@ -161,7 +164,7 @@ def test_the_ring_stack_on_a_rigid_block_stays_at_rest_for_10_s():
     block["rigid"] = True
     r = flexbody.simulate(flexbody.load_scene(table))
     assert r.status == "success", r.message
-    assert r.stats["formulation"] == "floating" and r.stats["max_penetration_m"] < 1e-9  # measured 3.0e-12 m
+    assert r.stats["model"] == "mixed" and r.stats["max_penetration_m"] < 1e-9  # measured 3.0e-12 m
     assert r.stats["energy_drift_relative"] < 1e-8  # measured 1.3e-11
     late = r.t >= 3.0
     w, F = weights(r), r.contact_force[late]
@@ -175,8 +178,9 @@ def test_the_ring_stack_on_a_rigid_block_stays_at_rest_for_10_s():
 
 
 def test_held_contacts_that_drift_are_put_back_on_their_surfaces(monkeypatch):
-    """The ring landing on the rigid block at the default tolerances: its held contacts'
-    gaps are not linear in the frames' coordinates, and without a projection they sank
+    """The ring landing on the rigid block at the default tolerances, both on frames (the
+    floating formulation): its held contacts' gaps are not linear in the frames'
+    coordinates, and without a projection they sank
     1.2e-10 m by 0.6 s (and the run said so).  With it (after any step that leaves one more
     than 2 gap tolerances off) they stay within a few gap tolerances.  The projection itself
     puts a held contact exactly back (gap and normal velocity 0) by a change along
@@ -188,15 +192,15 @@ def test_held_contacts_that_drift_are_put_back_on_their_surfaces(monkeypatch):
     table = {"name": "ring_on_rigid_block", "grounds": [FLAT], "bodies": [RING, BLOCK],
              "contacts": [{"bodies": ["ring", "block"]}], "simulation": {"t_end": 0.6, "output_dt": 0.002}}
     scene = flexbody.load_scene(table)
-    kept = flexbody.simulate(scene)
+    kept = flexbody.simulate(scene, formulation="floating")
     assert kept.status == "success" and kept.stats["projections"] > 0
     assert kept.stats["max_penetration_m"] < 1e-11 and not kept.stats["warnings"]
     monkeypatch.setattr(driver, "PROJECT_GAPS", np.inf)
-    drifting = flexbody.simulate(scene)
+    drifting = flexbody.simulate(scene, formulation="floating")
     assert drifting.stats["projections"] == 0 and drifting.stats["max_penetration_m"] > 1e-11
     assert any(w.startswith("a held contact sank") for w in drifting.stats["warnings"])
 
-    model = flexbody.load_model(scene)
+    model = flexbody.load_model(scene, formulation="floating")
     p = model.parameters(scene)
     q, u = initial_coordinates(scene, model)
     corners = np.flatnonzero(model.gaps(q, p)[: model.n_ground_contacts] == 0.0)  # the block's bottom corners

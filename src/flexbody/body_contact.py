@@ -91,6 +91,7 @@ from .constants import FREE, HELD, SLIDING
 from .contact import Phases
 from .dynamics import contact_solve
 from .held_rows import CompiledHeldRows
+from .mixed import MixedModel
 from .model import GeneratedModel, Model
 from .scene import Scene
 from .surface import closure_problem, crossings, edges, piercings, signed_measure
@@ -154,6 +155,7 @@ class BodyContactModel(Model):
         self.nq, self.nu, self.ny, self.n_particles = inner.nq, inner.nu, inner.ny, inner.n_particles
         self.masses, self.n_grounds = scene.masses.copy(), len(scene.grounds)
         self._coordinates = (_ParticleCoordinates(inner, self.masses) if isinstance(inner, AssembledModel)
+                             else _MixedCoordinates(inner) if isinstance(inner, MixedModel)
                              else _FrameCoordinates(inner))
         self.elements, self.element_body = scene.surfaces()
         counts = [b.n_particles for b in scene.bodies]
@@ -461,7 +463,7 @@ class BodyContactModel(Model):
     def _share_slips(self, p) -> None:
         """The inner model's ground contacts slide along this model's slip directions (only
         friction reads them)."""
-        if isinstance(self._coordinates, _ParticleCoordinates) and self._ground_friction:
+        if not isinstance(self._coordinates, _FrameCoordinates) and self._ground_friction:
             self.inner.slip_directions(p)[:] = self._slip[: self.n_ground_contacts]
             self.inner.slips_held(p)[:] = self._slip_held[: self.n_ground_contacts]
 
@@ -589,12 +591,10 @@ class BodyContactModel(Model):
         the graph of contacts and the particles they move (a pile's instant: a few
         contacts, not every held one); the particles of ``jumped`` coordinates are seeds."""
         seeds, among = np.asarray(seeds, bool), np.asarray(among, bool)
+        if isinstance(self._coordinates, _FrameCoordinates) or not seeds.any():
+            return super().coupled_with(q, p, seeds, among)  # a frame moves every particle
         if jumped is not None and jumped.any():
-            touched = np.zeros(self.n_particles, bool)
-            touched[np.flatnonzero(jumped) // self.dim] = True
-            seeds = seeds | (among & self._moves(touched))
-        if not isinstance(self._coordinates, _ParticleCoordinates) or not seeds.any():
-            return super().coupled_with(q, p, seeds, among)
+            seeds = seeds | (among & self._moves(self._coordinates.touched(jumped)))
         ng = self.n_ground_contacts
         nodes = np.flatnonzero(seeds | among)
         grounds, slots = nodes[nodes < ng], nodes[nodes >= ng] - ng
@@ -608,7 +608,9 @@ class BodyContactModel(Model):
 
             node = np.concatenate([np.arange(len(grounds)),
                                    len(grounds) + np.repeat(np.arange(len(slots)), moved.shape[1])])
-            particle = np.concatenate([self.inner.contacts[grounds, 0], moved.ravel()])
+            # a rigid body's particles are one node: its frame moves them all
+            particle = self._coordinates.representative[np.concatenate([self.inner.contacts[grounds, 0],
+                                                                        moved.ravel()])]
             # contacts and particles, one graph: a contact's edges go to the particles it moves
             graph = csr_matrix((np.ones(len(node)), (node, len(nodes) + particle)),
                                shape=(len(nodes) + self.n_particles,) * 2)
@@ -622,6 +624,7 @@ class BodyContactModel(Model):
         """Which contacts (bool (nc,)) move one of ``particles`` (bool (n,)): a ground
         contact its particle, a slot its particle and (if chosen) its element's."""
         ng = self.n_ground_contacts
+        particles = self._coordinates.expand(particles)
         out = particles[self.contacts[:, 0]].copy()
         chosen = np.flatnonzero(self.element_of >= 0)
         out[ng + chosen] = particles[self._slot_points(chosen)].any(axis=1)
@@ -1329,6 +1332,16 @@ class _ParticleCoordinates:
 
     def __init__(self, inner: AssembledModel, masses: FloatArray) -> None:
         self.inner, self.masses = inner, masses
+        #: Each particle is its own block of the mass matrix.
+        self.representative = np.arange(inner.n_particles)
+
+    def expand(self, particles: np.ndarray) -> np.ndarray:
+        """The particles (bool (n,)) that move with ``particles``: the same ones."""
+        return particles
+
+    def touched(self, columns: np.ndarray) -> np.ndarray:
+        """The particles (bool (n,)) whose velocities are the coordinates ``columns`` (bool (nu,))."""
+        return columns.reshape(-1, self.inner.dim).any(axis=1)
 
     def particles(self, q, u, p) -> tuple[FloatArray, FloatArray | None]:
         """Positions and velocities (n, dim) each (velocities None without ``u``)."""
@@ -1351,6 +1364,65 @@ class _ParticleCoordinates:
         d = self.inner.dim
         columns = (particles[:, None] * d + np.arange(d)).ravel()
         return columns, J, J / np.repeat(self.masses[particles], d), bias
+
+
+class _MixedCoordinates:
+    """Flexible bodies on particle coordinates beside rigid frames (:class:`flexbody.mixed.MixedModel`):
+    a row on flexible particles is a row on their coordinates with their masses, as
+    :class:`_ParticleCoordinates`; on a rigid body's particles it maps through its frame
+    (``v = P(q) u``) and the frames' mass matrix, as :class:`_FrameCoordinates`."""
+
+    def __init__(self, inner: MixedModel) -> None:
+        self.inner = inner
+        self.masses = inner.masses
+        #: A flexible particle is its own block of the mass matrix; a rigid body's particles are
+        #: one, named by its first particle.
+        self.representative = inner.representative
+
+    def particles(self, q, u, p) -> tuple[FloatArray, FloatArray | None]:
+        """Positions and velocities (n, dim) each (velocities None without ``u``)."""
+        return self.inner.particle_state(q, u, p)
+
+    def ground_normals(self, p) -> FloatArray:
+        """Each ground's unit normal, shape (n_grounds, dim)."""
+        return self.inner.ground_normals(p)
+
+    def expand(self, particles: np.ndarray) -> np.ndarray:
+        """The particles (bool (n,)) that move with ``particles``: a rigid body's all together."""
+        block = np.zeros(len(particles), bool)
+        block[self.representative[particles]] = True
+        return block[self.representative]
+
+    def touched(self, columns: np.ndarray) -> np.ndarray:
+        """The particles (bool (n,)) whose velocities depend on the coordinates ``columns`` (bool (nu,)):
+        a flexible particle's own, every rigid particle for a frame's (a frame moves its body's)."""
+        inner, d = self.inner, self.inner.dim
+        out = np.zeros(inner.n_particles, bool)
+        out[inner.flexible_part.particles] = columns[: inner.flexible.nu].reshape(-1, d).any(axis=1)
+        out[inner.rigid_particle] |= bool(columns[inner.flexible.nu :].any())
+        return out
+
+    def coupled_grounds(self, held: np.ndarray, moved: np.ndarray) -> np.ndarray:
+        """Which held ground contacts (bool (ng,)) couple with rows moving particles ``moved``
+        (bool (n,)): those of the same particles or rigid bodies, and every one of a rigid body
+        (its contacts couple through its frame)."""
+        return held & (self.expand(moved) | self.inner.rigid_particle)[self.inner.contacts[:, 0]]
+
+    def rows(self, particles: IntArray, J: FloatArray, bias: FloatArray, q, u, p):
+        """``columns, J, J M^-1, bias`` of rows ``J (k, m * dim)`` on ``particles (m,)``: the
+        flexible particles' coordinates, then every rigid frame's."""
+        d, k = self.inner.dim, len(J)
+        on_frame = self.inner.rigid_particle[particles]
+        per_particle = J.reshape(k, len(particles), d)
+        flexible = particles[~on_frame]
+        columns = (self.inner.local[flexible][:, None] * d + np.arange(d)).ravel()
+        J_f = per_particle[:, ~on_frame].reshape(k, -1)
+        scaled_f = J_f / np.repeat(self.masses[flexible], d)
+        if not on_frame.any():
+            return columns, J_f, scaled_f, bias
+        frames, J_r, scaled_r, bias = self.inner.frame_rows(particles[on_frame], per_particle[:, on_frame].reshape(k, -1),
+                                                           bias, q, u, p)
+        return (np.concatenate([columns, frames]), np.hstack([J_f, J_r]), np.hstack([scaled_f, scaled_r]), bias)
 
 
 class _FrameCoordinates:

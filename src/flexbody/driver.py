@@ -30,7 +30,7 @@ from .contact import FREE, HELD, PUSHED, Event, Phases, UnsettledInstant, resolv
 from .contact_problems import UNALIGNED
 from .coupled import CoupledImpactError, project_held
 from .events import EventFunctions, locate
-from .model import Model, couples_contacts, load_model
+from .model import Model, couples_contacts, load_model, resolved_formulation
 from .result import STATUSES, SimulationResult
 from .scene import (
     COMPILED_METHODS,
@@ -104,6 +104,14 @@ def _gimbal_lock(scene: Scene, model: Model, y: np.ndarray, t: float) -> tuple[s
     return None
 
 
+def _model_kind(model: Model) -> str:
+    """How a run's model was made: "assembled" (element kernels), "derived" (whole by Kane) or
+    "mixed" (flexible bodies assembled, rigid frames derived beside them)."""
+    from .mixed import MixedModel
+
+    return "assembled" if isinstance(model, AssembledModel) else "mixed" if isinstance(model, MixedModel) else "derived"
+
+
 def _scipy_version() -> str:
     from importlib.metadata import version
 
@@ -147,14 +155,11 @@ def _settings(scene: Scene, overrides: dict) -> SimulationSettings:
         if value is not None:
             values[key] = value
     problems = []
-    rigid = scene.rigid_bodies
-    if rigid and overrides.get("formulation") == "particles":
-        problems.append(f"`formulation` = 'particles': bodies {rigid} are rigid, frames T without particle "
-                        "coordinates, which only the floating formulation has; drop the option")
-    elif rigid:
-        values["formulation"] = "floating"  # a rigid body is its frame T (DESIGN §6)
+    if values["formulation"] in ("particles", "floating"):  # a scene of rigid bodies alone is its frames T (DESIGN §6)
+        values["formulation"] = resolved_formulation(scene, values["formulation"])
+    coupled = couples_contacts(scene, values["formulation"])
     if values["method"] is None:
-        values["method"] = "dopri5" if values["backend"] == "c" and not couples_contacts(scene) else "RK45"
+        values["method"] = "dopri5" if values["backend"] == "c" and not coupled else "RK45"
     if values["method"] in COMPILED_METHODS and values["backend"] != "c":
         problems.append(f"`method` = {values['method']!r}: is compiled C and needs backend 'c'; with backend "
                         f"{values['backend']!r} use a SciPy method ({', '.join(METHODS[len(COMPILED_METHODS):])})")
@@ -192,9 +197,12 @@ def _settings(scene: Scene, overrides: dict) -> SimulationSettings:
 def _body_contact_problems(scene: Scene, values: dict) -> list[str]:
     """What the scene's contacts between bodies cannot run with yet (one sentence each)."""
     if not scene.contacts:
-        if couples_contacts(scene) and values["method"] in COMPILED_METHODS:
-            return [_scipy_only(values["method"], "a rigid body on a ground with friction runs with SciPy's steppers "
-                                "(the compiled loop does not know coupled sticking and sliding)")]
+        if couples_contacts(scene, values["formulation"]) and values["method"] in COMPILED_METHODS:
+            why = ("a rigid body on a ground with friction runs with SciPy's steppers (the compiled loop does not know "
+                   "coupled sticking and sliding)" if any(g.friction > 0.0 for g in scene.grounds) else
+                   "rigid bodies beside flexible ones on the particles formulation run with SciPy's steppers (the "
+                   "compiled loop knows one model, not the two side by side)")
+            return [_scipy_only(values["method"], why)]
         return []
     names = [b.name for b in scene.bodies]
     out = []
@@ -929,7 +937,7 @@ class _Run:
         result.stats = {
             "scene": self.scene.name, "source": self.scene.source,
             "method": s.method, "rtol": s.rtol, "atol": s.atol, "backend": model.backend,
-            "formulation": model.formulation, "model": "assembled" if isinstance(getattr(model, "inner", model), AssembledModel) else "derived",
+            "formulation": model.formulation, "model": _model_kind(getattr(model, "inner", model)),
             "threads": getattr(model, "inner", model).threads,
             "impact": s.impact, "impact_dt": s.impact_dt, "chatter_impacts": s.chatter_impacts,
             "t_end": s.t_end, "t_reached": float(T[-1]) if len(T) else 0.0,

@@ -481,14 +481,20 @@ def _scene_and_formulation(scene, backend: str, formulation: str | None) -> tupl
         scene = load_scene(scene)
     if backend not in BACKENDS:
         raise InputError(f"`backend` = {backend!r}: must be one of {sorted(BACKENDS)}")
-    rigid = scene.rigid_bodies
-    if rigid and formulation == "particles":
-        raise InputError(f"`formulation` = 'particles': bodies {rigid} are rigid, frames T without particle "
-                         "coordinates, which only the floating formulation has; drop the option")
-    formulation = formulation or ("floating" if rigid else scene.simulation.formulation)
+    formulation = formulation or scene.simulation.formulation
     if formulation not in ("particles", "floating"):
         raise InputError(f"`formulation` = {formulation!r}: must be 'particles' or 'floating'")
-    return scene, formulation
+    return scene, resolved_formulation(scene, formulation)
+
+
+def resolved_formulation(scene: Scene, formulation: str) -> str:
+    """The formulation a scene runs on when ``formulation`` is asked for: a scene of rigid
+    bodies alone is its frames T, derived whole ('floating'), whichever is asked; a scene
+    with a flexible body runs on the one asked (with rigid bodies, 'particles' puts their
+    frames beside the assembled flexible bodies: :class:`flexbody.mixed.MixedModel`)."""
+    if scene.bodies and all(b.rigid for b in scene.bodies):
+        return "floating"
+    return formulation
 
 
 def load_derived_model(scene: Scene | str | Path, backend: str = "c", formulation: str | None = None) -> GeneratedModel:
@@ -515,13 +521,20 @@ def load_model(scene: Scene | str | Path, backend: str = "c", formulation: str |
         Defaults to the scene's ``simulation.formulation``.  ``particles`` is assembled from
         the element kernels at once, for any topology and size; ``floating`` is the
         thesis's frames N and T, derived whole per topology (small bodies only: at most
-        ``FLOATING_MAX_PARTICLES`` particles).
+        ``FLOATING_MAX_PARTICLES`` particles).  Rigid bodies are frames T in both: with
+        ``particles`` they are derived alone and run beside the assembled flexible bodies
+        (:class:`flexbody.mixed.MixedModel`); a scene of rigid bodies alone runs on ``floating``.
     """
     scene, formulation = _scene_and_formulation(scene, backend, formulation)
+    if formulation == "particles" and scene.rigid_bodies:  # flexible bodies assembled, rigid ones frames beside them
+        from .body_contact import BodyContactModel
+        from .mixed import mixed_model
+
+        return BodyContactModel(scene, mixed_model(scene, backend))
     if formulation == "particles":
         from .assembly import assembled_model
 
-        if couples_contacts(scene):  # bodies that may touch each other: their contacts are added
+        if couples_contacts(scene, formulation):  # bodies that may touch each other: their contacts are added
             from .body_contact import BodyContactModel
 
             return BodyContactModel(scene, assembled_model(scene, backend))
@@ -538,26 +551,23 @@ def load_model(scene: Scene | str | Path, backend: str = "c", formulation: str |
     if flexible > FLOATING_MAX_PARTICLES:  # a rigid body costs its frame alone, whatever its particles
         limit = (f"the floating formulation is derived whole per topology and is offered up to "
                  f"{FLOATING_MAX_PARTICLES} of them")
-        if scene.rigid_bodies:  # the particles formulation is no way out: it has no rigid bodies
-            raise InputError(
-                f"bodies {scene.rigid_bodies} are rigid, which only the floating formulation has, and the flexible "
-                f"bodies have {flexible} particles: {limit}; make the flexible bodies smaller, or the rigid ones "
-                "flexible and stiff (the particles formulation runs flexible bodies of any size)"
-            )
         raise InputError(
             f"`formulation` = 'floating' with {flexible} particles in flexible bodies: {limit}; use the particles "
             "formulation (the default), which runs any size at once"
         )
     model = load_derived_model(scene, backend, formulation)
-    if couples_contacts(scene):  # bodies that may touch each other, or a rigid body's contacts with friction
+    if couples_contacts(scene, formulation):  # bodies that may touch each other, or a rigid body's contacts with friction
         from .body_contact import BodyContactModel
 
         return BodyContactModel(scene, model)
     return model
 
 
-def couples_contacts(scene: Scene) -> bool:
+def couples_contacts(scene: Scene, formulation: str | None = None) -> bool:
     """Whether :func:`load_model` adds :class:`flexbody.body_contact.BodyContactModel` to the
-    scene's model, whose coupled contacts the compiled loop does not know: bodies that may
-    touch each other, or a rigid body on a ground with friction (2D)."""
-    return bool(scene.contacts) or bool(scene.rigid_bodies and any(g.friction > 0.0 for g in scene.grounds))
+    scene's model on ``formulation`` (default: the scene's), whose coupled contacts the
+    compiled loop does not know: bodies that may touch each other, a rigid body on a ground
+    with friction, or rigid and flexible bodies on the particles formulation."""
+    formulation = resolved_formulation(scene, formulation or scene.simulation.formulation)
+    return (bool(scene.contacts) or bool(scene.rigid_bodies and any(g.friction > 0.0 for g in scene.grounds))
+            or bool(scene.rigid_bodies and formulation == "particles"))

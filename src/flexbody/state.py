@@ -32,6 +32,11 @@ def initial_coordinates(scene: Scene, model: Model) -> tuple[np.ndarray, np.ndar
         A 3D floating body that starts within ``GIMBAL_MARGIN_DEG`` of its angles' gimbal
         lock (T's z-axis along N's x-axis).
     """
+    from .mixed import MixedModel
+
+    inner = getattr(model, "inner", model)  # a body-contact model wraps it
+    if isinstance(inner, MixedModel):
+        return inner.initial_coordinates(scene)
     x, v = scene.initial_positions(), scene.initial_velocities()
     if model.formulation == "particles":
         return x.ravel().copy(), v.ravel().copy()
