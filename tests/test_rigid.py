@@ -382,6 +382,28 @@ def test_a_tumbling_3d_rigid_box_comes_to_rest_on_a_face(e):
 # ----------------------------------------------------------------- input
 
 
+@pytest.mark.parametrize("x", [-0.15, 0.15])
+def test_a_block_resting_on_three_collinear_points_hit_off_centre_stays_at_rest(x):
+    """A rigid block on three points in a line (one more than its motion needs: one is set
+    free at rest as implied by the others) takes a small square's plastic landing near either
+    end: the ground's impulses keep it still (all three may push, so the LCP finds them), and
+    the square stops on it.  Before, the implied point was left out of the impact, the block
+    tipped about the two held ones and rocked (7 impacts, 3 lift-offs, moving 3e-5 m)."""
+    block = {"name": "block", "shape": "polygon", "rigid": True, "mass": 0.5, "position": [0.0, 0.0],
+             "vertices": [[-0.2, 0.0], [0.0, 0.0], [0.2, 0.0], [0.2, 0.1], [-0.2, 0.1]]}
+    square = {"name": "square", "shape": "polygon", "rigid": True, "mass": 0.05, "position": [x, 0.11],
+              "vertices": [[-0.03, 0.0], [0.03, 0.0], [0.03, 0.06], [-0.03, 0.06]]}
+    r = simulate(flexbody.load_scene({"name": "land_on_3", "bodies": [block, square],
+                                      "contacts": [{"bodies": ["block", "square"]}],
+                                      "simulation": {"t_end": 0.1, "output_dt": 0.001, **TIGHT}}))
+    assert r.success, r.message
+    t1 = np.sqrt(2 * 0.01 / G)
+    assert list(r.events_kind) == ["impact", "impact"] and np.abs(r.events_time - t1).max() < 1e-9
+    assert np.abs(r.velocities[:, :5]).max() < 1e-12  # the block never moves
+    assert np.abs(r.velocities[r.t > t1 + 1e-6]).max() < 1e-12  # nor the square once landed
+    assert r.impact_loss[-1] == pytest.approx(0.5 * r.masses[5:].sum() * (G * t1) ** 2, rel=1e-9)
+
+
 def test_a_scene_of_rigid_bodies_alone_runs_on_its_frames_whichever_formulation_is_asked():
     """A rigid body is its frame T in both formulations; with no flexible body the particles
     formulation has nothing to assemble, so the run is the floating one, bit for bit."""

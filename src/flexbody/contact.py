@@ -53,11 +53,15 @@ class Phases:
     # coupled contacts the last instant set sliding from rest: their slip is round-off, and the
     # next segment's first step slides them along their pull (EventFunctions, which resets it)
     started: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
+    # coupled contacts set free at gap 0 because the others' rows imply theirs (redundant and
+    # unloaded): still touching, so a later impact of their block takes them in its LCP
+    implied: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
 
     @classmethod
     def all_free(cls, nc: int) -> Phases:
         """Every contact free and armed at the ground itself (floor 0)."""
-        return cls(np.zeros(nc, np.intc), np.zeros(nc), np.zeros(nc), np.full(nc, np.inf), np.zeros(nc, bool))
+        return cls(np.zeros(nc, np.intc), np.zeros(nc), np.zeros(nc), np.full(nc, np.inf), np.zeros(nc, bool),
+                   np.zeros(nc, bool))
 
     @property
     def held(self) -> np.ndarray:
@@ -79,16 +83,17 @@ class Phases:
 
     def copy(self) -> Phases:
         return Phases(self.phase.copy(), self.floor.copy(), self.push.copy(), self.push_until.copy(),
-                      self.started.copy())
+                      self.started.copy(), self.implied.copy())
 
     def first(self, n: int) -> Phases:
         """The first ``n`` contacts' phases, views of these arrays: what is assigned to them
         (:meth:`assign`) lands here."""
-        return Phases(self.phase[:n], self.floor[:n], self.push[:n], self.push_until[:n], self.started[:n])
+        return Phases(self.phase[:n], self.floor[:n], self.push[:n], self.push_until[:n], self.started[:n],
+                      self.implied[:n])
 
     def assign(self, other: Phases) -> None:
         """Take ``other``'s values into these arrays (whose addresses C may hold)."""
-        for name in ("phase", "floor", "push", "push_until", "started"):
+        for name in ("phase", "floor", "push", "push_until", "started", "implied"):
             getattr(self, name)[:] = getattr(other, name)
 
 
@@ -266,6 +271,8 @@ def resolve(
     Resolution
     """
     phases = phases.copy()
+    if len(phases.implied) != model.n_contacts:  # phases made without the field (its default)
+        phases.implied = np.zeros(model.n_contacts, bool)
     touching = np.array(touching, bool)  # the compiled path hands its int buffers
     leaving = np.asarray(leaving, bool)
     nc = model.n_contacts
@@ -314,8 +321,12 @@ def resolve(
         instant = hit | (ending & (vn < 0.0))
         if instant.any() and model.coupled:
             # Coupled contacts (a rigid body's, between bodies): one LCP over the touching
-            # contacts coupled to the hit ones
-            touching_now = instant | (phases.on_ground & model.coupled_with(y[: model.nq], p, instant, phases.on_ground))
+            # contacts coupled to the hit ones, those held and those the others held implied at
+            # gap 0 (without them a box resting on 3 of its 4 corners tipped about 2 of them
+            # when hit, its fourth corner going down and rocking it)
+            resting = phases.on_ground | (phases.implied & (phases.phase == FREE) & (gaps <= gap_tolerance))
+            touching_now = instant | (resting & model.coupled_with(y[: model.nq], p, instant, resting))
+            phases.implied[touching_now] = False
             before = _free_accelerations(model, y, p, phases.push)
             out = coupled_impact(model, y, p, touching_now, np.where(hit & rebounds, e, 0.0), slowest, zeno_rise,
                                  notes)
@@ -355,6 +366,7 @@ def resolve(
             pulling, implied = coupled_release(model, y, p, checked, phases.push, leaving,
                                                force_tolerance, phases.held, notes, speed_tolerance)
             phases.phase[implied] = FREE  # redundant and unloaded: the others hold it at gap 0
+            phases.implied[implied] = True
             # armed a band lower than a lift-off: it stays at its gap (the others imply it),
             # and one tolerance down it would count as touching at every later instant, its
             # round-off approach (1e-13 m/s) an impact each time (Zeno-like, "chattering")
@@ -370,6 +382,7 @@ def resolve(
             break
         for c in map(int, released):
             phases.phase[c] = FREE
+            phases.implied[c] = False
             phases.floor[c] = min(0.0, gaps[c]) - gap_tolerance
             if settled[c]:
                 not_held[c] = True  # its (latest) impact did not hold it: it leaves at once
