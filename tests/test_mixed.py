@@ -184,3 +184,14 @@ def test_the_bundled_seesaw_tips_under_the_disc_and_its_wedge_stays():
     assert gap.max() > 1e-3  # the impact throws the plank off the apex for a while (1.7 cm)
     assert r.stats["max_penetration_m"] < 1e-9 and r.stats["energy_drift_relative"] < 1e-6
     assert r.positions.shape[1] == scene.n_particles > 40 + 7
+
+
+def test_a_compiled_method_is_refused_for_rigid_beside_flexible_bodies_with_the_reason():
+    """The compiled loop knows one model, not the two side by side: `dopri5` is refused with
+    the reason and the SciPy methods to use, before anything runs."""
+    scene = flexbody.load_scene({"name": "apart", "bodies": [dict(DISC, count=23, radius=0.1, position=[1.0, 0.5]),
+                                                             BLOCK], "simulation": {"t_end": 0.1}})
+    with pytest.raises(flexbody.InputError, match="rigid bodies beside flexible ones .* use RK45"):
+        flexbody.simulate(scene, method="dopri5")
+    r = flexbody.simulate(scene)  # the default for it: RK45
+    assert r.success and r.stats["method"] == "RK45" and r.stats["model"] == "mixed"
