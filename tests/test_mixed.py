@@ -195,3 +195,27 @@ def test_a_compiled_method_is_refused_for_rigid_beside_flexible_bodies_with_the_
         flexbody.simulate(scene, method="dopri5")
     r = flexbody.simulate(scene)  # the default for it: RK45
     assert r.success and r.stats["method"] == "RK45" and r.stats["model"] == "mixed"
+
+
+def test_a_3d_sphere_of_200_particles_landing_on_a_rigid_box_moves_as_on_a_ground():
+    """3D: the box's six frame coordinates beside a 200-particle sphere (the sphere alone is
+    five times the floating formulation's limit): the box rests on its four bottom corners
+    (one more than its motion needs) and does not move, so the sphere lands on its top as on
+    a ground there (measured 8e-14 m apart, the same 76 impacts)."""
+    sphere = {"name": "sphere", "shape": "sphere", "count": 200, "radius": 0.1, "mass": 0.01, "stiffness": 2000.0,
+              "damping": 0.2, "damper": "axial", "position": [0.02, 0.01, 0.25]}
+    box = {"name": "box", "shape": "box", "rigid": True, "count": [2, 2, 2], "size": [0.4, 0.4, 0.1], "mass": 0.2,
+           "position": [0.0, 0.0, 0.05]}
+    sim = {"t_end": 0.15, "output_dt": 0.005, "rtol": 1e-9, "atol": 1e-12}
+    a = flexbody.simulate(flexbody.load_scene({"name": "sphere_on_box", "gravity": [0.0, 0.0, -G],
+                                               "bodies": [sphere, box], "contacts": [{"bodies": ["sphere", "box"]}],
+                                               "simulation": sim}))
+    b = flexbody.simulate(flexbody.load_scene({"name": "sphere_on_ground", "gravity": [0.0, 0.0, -G],
+                                               "grounds": [{"point": [0.0, 0.0, 0.1], "normal": [0.0, 0.0, 1.0]}],
+                                               "bodies": [sphere], "simulation": sim}), method="RK45")
+    assert a.status == b.status == "success", (a.message, b.message)
+    assert a.stats["model"] == "mixed" and a.stats["impacts"] == b.stats["impacts"] >= 10
+    n = b.positions.shape[1]
+    assert np.abs(a.positions[:, :n] - b.positions).max() < 1e-9
+    assert np.abs(a.positions[:, n:] - a.positions[0, n:]).max() < 1e-12
+    assert a.stats["max_penetration_m"] < 1e-9
