@@ -94,7 +94,7 @@ from .held_rows import CompiledHeldRows
 from .mixed import MixedModel
 from .model import GeneratedModel, Model
 from .scene import Scene
-from .surface import closure_problem, crossings, edges, piercings, signed_measure
+from .surface import closure_problem, crossings, edges, edges_through, piercings, signed_measure
 from .surface_contact import (FACE, CompiledClosestFeatures, SurfaceContact, closest_features, segment_normals,
                               triangle_normals, vertex_elements)
 
@@ -190,6 +190,10 @@ class BodyContactModel(Model):
         self._body_elements = [np.flatnonzero(self.element_body == b) for b in range(len(counts))]
         self._closed: dict[int, bool] = {}  # per body: whether its surface is closed (fold), on first use
         self._neighbour = _neighbours(self.elements)
+        # 3D surface edges (global particles), each one's body and an element it borders (crossed_edges)
+        self._edges = edges(self.elements) if self.dim == 3 else np.zeros((0, 2), np.intp)
+        self._edge_body = self.particle_body[self._edges[:, 0]]
+        self._edge_element = _an_element_of(self._edges, self.elements) if self.dim == 3 else np.zeros(0, np.intp)
         x0 = scene.initial_positions()
         lengths = np.linalg.norm(x0[self.elements[:, 1]] - x0[self.elements[:, 0]], axis=1)
         # Within `margin` of a surface the broad phase finds the closest element, so the
@@ -752,6 +756,44 @@ class BodyContactModel(Model):
             if self._closed[body] and signed_measure(x, mine) <= 0.0:
                 return int(body), f"it encloses no positive {'area' if self.dim == 2 else 'volume'} (turned inside out)"
         return None
+
+    def crossed_edges(self, y, p, depth: float) -> tuple[float, int, int, str] | None:
+        """3D: the deepest crossing of two bodies that may touch whose surfaces cross along
+        edges (an edge of one passes through a triangle of the other by more than ``depth``
+        m, :func:`flexbody.surface.edges_through`): its depth (m), the edge's body, the
+        triangle's and a description; None where none does.  Contacts are a particle against
+        a surface, so two edges meeting (boxes crossed edge on edge, coarse polyhedra
+        colliding) is no contact: the edges pass through each other with no particle inside
+        the other body.  Only elements inside the overlap of two bodies' bounding boxes are
+        tested, in one search."""
+        if self.dim != 3 or not self.n_slots:
+            return None
+        x = self._state(y, p)[0]
+        low, high = x[self.elements].min(axis=1), x[self.elements].max(axis=1)
+        bodies = [b for b in range(len(self._body_elements)) if len(self._body_elements[b])]
+        box = {b: (low[self._body_elements[b]].min(axis=0), high[self._body_elements[b]].max(axis=0)) for b in bodies}
+        near = np.zeros(len(self.elements), bool)
+        for first in bodies:
+            for second in bodies:
+                if second <= first or not self.allowed[first, second]:
+                    continue
+                lo, hi = np.maximum(box[first][0], box[second][0]), np.minimum(box[first][1], box[second][1])
+                if (lo <= hi).all():  # the two bodies' elements in the overlap
+                    mine = np.concatenate([self._body_elements[first], self._body_elements[second]])
+                    near[mine[((high[mine] >= lo) & (low[mine] <= hi)).all(axis=1)]] = True
+        if not near.any():
+            return None
+        triangles = np.flatnonzero(near)
+        segments = np.flatnonzero(near[self._edge_element])  # an edge is tested where an element of it is
+        rows, depths = edges_through(x, self._edges[segments], self.elements[triangles], depth)
+        edge_body, triangle_body = self._edge_body[segments[rows[:, 1]]], self.element_body[triangles[rows[:, 0]]]
+        between = (edge_body != triangle_body) & self.allowed[edge_body, triangle_body]
+        if not between.any():
+            return None
+        k = int(np.flatnonzero(between)[np.argmax(depths[between])])
+        edge, triangle = self._edges[segments[rows[k, 1]]].tolist(), self.elements[triangles[rows[k, 0]]].tolist()
+        return (float(depths[k]), int(edge_body[k]), int(triangle_body[k]),
+                f"its edge {edge} through the other's triangle {triangle}, {depths[k]:.2g} m deep")
 
     def forget_free(self, free: np.ndarray) -> None:
         """Let free slots pick their element afresh at their next instant (``free`` (nc,) bool)."""
@@ -1637,6 +1679,17 @@ def _touched_vertex(contact: SurfaceContact) -> tuple[IntArray, np.ndarray]:
     rows = np.arange(len(contact.particle))
     corner = np.argmax(contact.weights, axis=1)
     return contact.feature[rows, corner], contact.weights[rows, corner] >= 1.0 - AT_VERTEX
+
+
+def _an_element_of(segments: IntArray, elements: IntArray) -> IntArray:
+    """For each edge ``segments (e, 2)`` (sorted pairs) of triangles ``elements (m, 3)``, the
+    index of one triangle it borders, shape (e,)."""
+    pairs = np.concatenate([np.sort(elements[:, [i, j]], axis=1) for i, j in ((0, 1), (1, 2), (2, 0))])
+    owner = np.tile(np.arange(len(elements)), 3)
+    key = pairs[:, 0] * (int(elements.max(initial=0)) + 1) + pairs[:, 1]
+    order = np.argsort(key, kind="stable")
+    wanted = segments[:, 0] * (int(elements.max(initial=0)) + 1) + segments[:, 1]
+    return owner[order][np.searchsorted(key[order], wanted)]
 
 
 def _neighbours(elements: IntArray) -> IntArray:

@@ -83,6 +83,14 @@ def _non_finite(t: float) -> tuple[str, str]:
     return "blow_up", f"the state became non-finite at t = {t:.9g} s; tighten --rtol/--atol or use an implicit method."
 
 
+#: Two 3D bodies' surfaces crossing edge through face by more than this many gap tolerances
+#: are measured and warned of (:meth:`_Run.track_edges`): 1e-9 of the scene's size, the
+#: penetration the tests allow a particle, so that a face resting on a face (edges in the
+#: other's plane to round-off, held contacts drifting by up to 2 gap tolerances) is not one.
+EDGE_DEPTH = 1e3
+#: ... checked this many times per output interval (at the steps' ends: see _Run.track_edges).
+EDGE_CHECKS = 4
+
 #: A step collapse or a singular M with a floating 3D body's angle beta this close to
 #: +-90 deg (its X-Y-Z angles' gimbal lock) is that singularity, reported as such (deg).
 GIMBAL_LOCK_DEG = 1.0
@@ -232,6 +240,13 @@ def _check_apart(scene: Scene, model: Model, q: np.ndarray, p: np.ndarray) -> No
 
     if not model.n_slots:
         return
+    size = max(float(np.abs(scene.initial_positions()).max()), 1.0)
+    crossed = model.crossed_edges(np.concatenate([q, np.zeros(model.nu + 2)]), p, EDGE_DEPTH * 1e-12 * size)
+    if crossed is not None:
+        _, first, second, how = crossed
+        raise InputError(f"invalid scene:\n  - bodies {scene.bodies[first].name!r} and {scene.bodies[second].name!r} "
+                         f"start crossed edge on edge ({scene.bodies[first].name!r}: {how}); bodies that may touch "
+                         "must start apart (or touching)")
     gaps = model.gaps(q, p)[model.n_ground_contacts :]
     inside = gaps < -1e-9 * max(1.0, float(np.abs(scene.initial_positions()).max()))
     if not inside.any():
@@ -333,6 +348,8 @@ class _Run:
         self.phases = Phases.all_free(model.n_contacts)
         size = float(np.abs(scene.initial_positions()).max()) if scene.n_particles else 1.0
         self.gap_tolerance = 1e-12 * max(size, 1.0)
+        self.max_edge_crossing, self.edge_crossing = 0.0, None  # 3D edges through faces (see track_edges)
+        self.t_edges = -np.inf  # the last check of crossed edges (see track_edges)
         # For point masses on flat grounds a contact's effective mass 1 / (J M^-1 J^T) is its particle's.
         self.contact_masses = scene.masses[model.contacts[:, 0]]
         self.force_tolerance = 1e-10 * self.contact_masses * max(float(np.linalg.norm(scene.gravity)), 1.0)
@@ -487,7 +504,7 @@ class _Run:
                 hit = locate(events, dense, solver.t_old, solver.t, g_old, g_new)
                 t_stop = hit.t if hit else solver.t
                 self.y[:] = dense(t_stop) if hit else solver.y
-                self.record(dense, t_stop)
+                self.record(dense, t_stop, solver.t_old)
                 if hit:
                     return _Stop(t_stop, hit.contacts & events.free, hit.contacts & events.held_mask, True)
                 if events.friction:  # the next step's slip directions
@@ -545,14 +562,49 @@ class _Run:
         gaps = self.model.held_gaps(self.y[: self.model.nq], self.p, rows)
         return bool(np.abs(gaps).max() > PROJECT_GAPS * self.gap_tolerance)
 
-    def record(self, dense, t_stop: float) -> None:
-        """Keep the output-grid samples up to ``t_stop`` and track penetration."""
+    def record(self, dense, t_stop: float, t_start: float | None = None) -> None:
+        """Keep the output-grid samples up to ``t_stop`` and track penetration (of particles,
+        and in 3D of edges crossing: :meth:`track_edges`, on the step from ``t_start``)."""
         start = self.n_samples
         stop = max(start, int(np.searchsorted(self.grid, t_stop, side="right")))
         for k in range(start, stop):
             self.Y[k] = dense(self.grid[k])
         self.keep_samples(start, stop)
         self.track_gaps(self.y)
+        if t_start is not None:
+            self.track_edges(dense, t_start, t_stop)
+
+    def track_edges(self, dense, t_start: float, t: float) -> None:
+        """Where two 3D bodies' surfaces cross edge through face (:meth:`flexbody.body_contact.
+        BodyContactModel.crossed_edges`, deeper than ``EDGE_DEPTH`` gap tolerances): their
+        edges met, a contact the model does not have, and passed through each other.
+        Checked at the end ``t`` of a step (dense output ``dense`` from ``t_start``) once per
+        ``EDGE_CHECKS`` of an output interval (a check costs milliseconds in a pile, its
+        steps are many), so crossings shorter than that can go unseen.  The deepest crossing
+        checked and the first are kept for the run's stats and warnings, the first's time
+        found by bisection to 1e-12 s where the last check lies within this step, else
+        between the two checks."""
+        crossed = getattr(self.model, "crossed_edges", None)
+        if crossed is None or t < self.t_edges + self.settings.output_dt / EDGE_CHECKS and t < self.settings.t_end:
+            return
+        depth = EDGE_DEPTH * self.gap_tolerance
+        found = crossed(self.y, self.p, depth)
+        t_before, self.t_edges = self.t_edges, t
+        if found is None:
+            return
+        self.max_edge_crossing = max(self.max_edge_crossing, found[0])
+        if self.edge_crossing is not None:
+            return
+        lo, hi, first = max(t_before, t_start), t, found  # clear at t_before, crossed at hi
+        if lo > t_before and crossed(dense(lo), self.p, depth) is not None:
+            lo, hi = t_before, lo  # crossed at the step's start already: it began between the last check and it
+        else:
+            while hi - lo > 1e-12 * max(1.0, abs(hi)):
+                mid = 0.5 * (lo + hi)
+                at_mid = crossed(dense(mid), self.p, depth)
+                lo, hi, first = (mid, hi, first) if at_mid is None else (lo, mid, at_mid)
+        _, a, b, how = first
+        self.edge_crossing = (lo, hi, self.scene.bodies[a].name, self.scene.bodies[b].name, how)
 
     def track_gaps(self, y: np.ndarray) -> None:
         """Lower the lowest gaps of free and held contacts to those at state ``y``."""
@@ -866,6 +918,15 @@ class _Run:
                 (t, note), more = notes[0], len({t for t, _ in notes}) - 1
                 also = f" (and at {more} later instant{'s' if more > 1 else ''})" if more else ""
                 out.append(f"at t = {t:.9g} s{also}, {note.rstrip('.')}: the run went on with the answer found, and {why}")
+        if self.edge_crossing is not None:
+            lo, hi, first, second, how = self.edge_crossing
+            when = f"from t = {hi:.9g} s" if hi - lo <= 1e-12 * max(1.0, abs(hi)) else \
+                f"from between t = {lo:.9g} and {hi:.9g} s"
+            out.append(f"bodies {first!r} and {second!r} crossed edge on edge {when} ({first!r}: {how}), up to "
+                       f"{self.max_edge_crossing:.2g} m deep where checked ({EDGE_CHECKS} times per output interval): "
+                       "contacts are a particle against a "
+                       "surface, and two edges meeting is not one of them yet, so edges pass through each other unseen; "
+                       "finer surfaces make it rarer (a vertex meets a face first more often)")
         if s.rtol > LOOSE_RTOL:
             out.append(f"rtol = {s.rtol:g} is loose: impacts and lift-offs can differ from a tight run's; check the "
                        "event count against a run with a tighter --rtol")
@@ -950,6 +1011,7 @@ class _Run:
             "sticks": sum(e.kind == "stick" for e in ev), "slips": sum(e.kind == "slip" for e in ev),
             "friction_work_J": float(result.friction_work[-1]) if len(T) else 0.0,
             "max_penetration_m": max(0.0, -self.min_gap, -self.min_held_gap),
+            "max_edge_crossing_m": self.max_edge_crossing,
             "energy_initial_J": float(total[0]) if len(total) else 0.0,
             "energy_drift_J": drift,
             "energy_drift_relative": relative_drift,

@@ -268,6 +268,83 @@ def piercings(points: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     return np.column_stack([tri[hit], ed[hit]])
 
 
+def edges_through(points: np.ndarray, segments: np.ndarray, triangles: np.ndarray,
+                  depth: float) -> tuple[np.ndarray, np.ndarray]:
+    """The edges of one 3D surface that pass through triangles of another by more than
+    ``depth``: on either side of the triangle's plane, through its inside, and more than
+    ``depth`` from not crossing (see ``depths`` below).  Two bodies
+    whose edges cross (the contact between two edges) do this with no vertex inside the
+    other; resting face to face (edges in the other's plane, to round-off) they do not.
+    Only an edge whose midpoint is within reach of a triangle's centre is tested (a k-d
+    tree, ``scipy.spatial.cKDTree``).
+
+    Parameters
+    ----------
+    points : ndarray, shape (n, 3)
+    segments : ndarray of int, shape (e, 2)
+        The edges tested (a surface's: :func:`edges` of its triangles).
+    triangles : ndarray of int, shape (m, 3)
+        The triangles they may pass through (outward: counter-clockwise seen from outside).
+    depth : float
+        How far past touching a crossing must be (m).
+
+    Returns
+    -------
+    rows : ndarray of int, shape (k, 2)
+        ``(triangle, edge)``: a row of ``triangles`` and a row of ``segments``.
+    depths : ndarray, shape (k,)
+        How far each edge must move to stop crossing its triangle (m): the least of its
+        ends' distances to the plane, its crossing point's to the triangle's edges, and the
+        shift along the normal that slides the crossing point out of the triangle (where a
+        flat face is split into triangles, a lower bound on how far the bodies overlap).
+    """
+    from scipy.spatial import cKDTree
+
+    none = np.zeros((0, 2), np.intp), np.zeros(0)
+    triangles, edge = np.asarray(triangles, dtype=np.intp), np.asarray(segments, dtype=np.intp)
+    if len(triangles) == 0 or len(edge) == 0:
+        return none
+    corners, ends = points[triangles], points[edge]
+    centre, middle = corners.mean(axis=1), ends.mean(axis=1)
+    reach = (np.linalg.norm(corners - centre[:, None], axis=2).max()
+             + 0.5 * np.linalg.norm(ends[:, 1] - ends[:, 0], axis=1).max())
+    near = cKDTree(middle).query_ball_point(centre, reach)
+    tri = np.repeat(np.arange(len(triangles)), [len(k) for k in near])
+    if len(tri) == 0:
+        return none
+    ed = np.concatenate([np.asarray(k, np.intp) for k in near])
+    a, b, c = (corners[tri, k] for k in range(3))
+    p, q = ends[ed, 0], ends[ed, 1]
+    normal = np.cross(b - a, c - a)
+    normal /= np.linalg.norm(normal, axis=1, keepdims=True)
+    dp, dq = np.einsum("ij,ij->i", normal, p - a), np.einsum("ij,ij->i", normal, q - a)
+    through = (np.minimum(np.abs(dp), np.abs(dq)) > depth) & (dp * dq < 0.0)
+    crossing = p + (dp / np.where(through, dp - dq, 1.0))[:, None] * (q - p)
+    # How far the edge must move to stop crossing: its ends to the plane (along the normal),
+    # the crossing point to the triangle's edges (in the plane), or, along the normal, until
+    # the crossing point slides out of the triangle: an edge nearly in the plane (a face
+    # pressed flat on another) moves its crossing point a long way for a tiny shift
+    # (tan of its angle to the plane), so it crosses by round-off, not by a depth.
+    direction = (q - p) / np.linalg.norm(q - p, axis=1, keepdims=True)
+    rise = np.abs(np.einsum("ij,ij->i", direction, normal))
+    flat = direction - np.einsum("ij,ij->i", direction, normal)[:, None] * normal  # its run along the plane
+    run = np.linalg.norm(flat, axis=1)
+    inside, slide = np.full(len(tri), np.inf), np.full(len(tri), np.inf)
+    for u, v in ((a, b), (b, c), (c, a)):
+        along = v - u
+        inward = np.cross(normal, along) / np.linalg.norm(along, axis=1, keepdims=True)
+        distance = np.einsum("ij,ij->i", inward, crossing - u)
+        inside = np.minimum(inside, distance)
+        towards = np.abs(np.einsum("ij,ij->i", inward, flat)) / np.maximum(run, 1e-300)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            slide = np.minimum(slide, np.where(towards > 0.0, distance / towards, np.inf))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        tilt = np.where(run > 0.0, rise / run, np.inf)
+    depth_of = np.minimum(np.minimum(inside, np.minimum(np.abs(dp), np.abs(dq))), slide * tilt)
+    hit = through & (inside > 0.0) & (depth_of > depth)
+    return np.column_stack([tri[hit], ed[hit]]), depth_of[hit]
+
+
 def edges(cells: np.ndarray) -> np.ndarray:
     """The distinct edges of cells ``(m, k)`` (triangles, polygons' fans, tetrahedra): every
     two particles of a cell, each pair ascending, the pairs ascending, shape (e, 2)."""
