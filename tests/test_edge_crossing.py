@@ -88,3 +88,14 @@ def test_a_box_resting_face_on_face_on_a_box_crosses_no_edge():
     assert r.success and r.stats["impacts"] >= 4
     assert r.stats["max_edge_crossing_m"] == 0.0 and not any("edge on edge" in w for w in r.stats["warnings"])
     assert r.stats["max_penetration_m"] < 1e-9
+
+
+def test_a_body_starting_inside_another_is_told_so_before_any_edge_crossing():
+    """Particles inside another body are the plainer reason: named first (with their depth)."""
+    table = _crossed_boxes(0.0)
+    for box in table["bodies"]:  # both flat, the upper one's bottom corners 0.02 m into the lower one
+        box["rotation"] = [0.0, 0.0, 0.0]
+    table["bodies"][0]["position"] = [0.0, 0.0, SIDE / 2]
+    table["bodies"][1]["position"] = [0.01, 0.02, 1.5 * SIDE - 0.02]
+    with pytest.raises(flexbody.InputError, match="starts inside"):
+        flexbody.simulate(flexbody.load_scene(table))

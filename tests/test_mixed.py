@@ -219,3 +219,30 @@ def test_a_3d_sphere_of_200_particles_landing_on_a_rigid_box_moves_as_on_a_groun
     assert np.abs(a.positions[:, :n] - b.positions).max() < 1e-9
     assert np.abs(a.positions[:, n:] - a.positions[0, n:]).max() < 1e-12
     assert a.stats["max_penetration_m"] < 1e-9
+
+
+def test_the_whole_scene_derived_model_of_a_mixed_scene_is_the_floating_one():
+    """``load_derived_model`` (the oracle, ``flexbody show``) derives rigid frames whole on the
+    floating formulation: the default for a mixed scene, and 'particles' asked for is refused
+    with the reason, before any derivation."""
+    from flexbody.model import GeneratedModel, load_derived_model
+
+    ring = {"name": "ring", "shape": "ring", "count": 4, "radius": 0.05, "mass": 0.05, "stiffness": 2000.0,
+            "damping": 0.5, "position": [0.0, 0.3]}
+    scene = flexbody.load_scene({"name": "ring_and_block", "bodies": [ring, BLOCK], "simulation": {"t_end": 0.1}})
+    model = load_derived_model(scene, backend="numpy")
+    assert isinstance(model, GeneratedModel) and model.formulation == "floating"
+    with pytest.raises(flexbody.InputError, match="floating formulation only"):
+        load_derived_model(scene, formulation="particles")
+
+
+def test_phases_made_without_the_implied_field_take_an_instants_answer():
+    """``Phases`` built by hand with the five fields of before (no ``implied``): an instant
+    resolved on them is assigned back without a shape error."""
+    from flexbody.contact import Phases
+
+    mine = Phases(np.zeros(3, np.intc), np.zeros(3), np.zeros(3), np.full(3, np.inf), np.zeros(3, bool))
+    answer = Phases.all_free(3)
+    answer.phase[1], answer.implied[2] = 1, True
+    mine.assign(answer)
+    assert mine.phase.tolist() == [0, 1, 0] and len(mine.implied) == 0

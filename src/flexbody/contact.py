@@ -94,7 +94,9 @@ class Phases:
     def assign(self, other: Phases) -> None:
         """Take ``other``'s values into these arrays (whose addresses C may hold)."""
         for name in ("phase", "floor", "push", "push_until", "started", "implied"):
-            getattr(self, name)[:] = getattr(other, name)
+            mine = getattr(self, name)
+            if len(mine) or not len(getattr(other, name)):  # a field these phases were made without stays so
+                mine[:] = getattr(other, name)
 
 
 class UnsettledInstant(RuntimeError):

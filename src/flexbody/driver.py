@@ -240,16 +240,16 @@ def _check_apart(scene: Scene, model: Model, q: np.ndarray, p: np.ndarray) -> No
 
     if not model.n_slots:
         return
-    size = max(float(np.abs(scene.initial_positions()).max()), 1.0)
-    crossed = model.crossed_edges(np.concatenate([q, np.zeros(model.nu + 2)]), p, EDGE_DEPTH * 1e-12 * size)
-    if crossed is not None:
-        _, first, second, how = crossed
-        raise InputError(f"invalid scene:\n  - bodies {scene.bodies[first].name!r} and {scene.bodies[second].name!r} "
-                         f"start crossed edge on edge ({scene.bodies[first].name!r}: {how}); bodies that may touch "
-                         "must start apart (or touching)")
     gaps = model.gaps(q, p)[model.n_ground_contacts :]
     inside = gaps < -1e-9 * max(1.0, float(np.abs(scene.initial_positions()).max()))
     if not inside.any():
+        size = max(float(np.abs(scene.initial_positions()).max()), 1.0)
+        crossed = model.crossed_edges(np.concatenate([q, np.zeros(model.nu + 2)]), p, EDGE_DEPTH * 1e-12 * size)
+        if crossed is not None:  # no particle inside, and yet two surfaces cross
+            _, first, second, how = crossed
+            raise InputError(f"invalid scene:\n  - bodies {scene.bodies[first].name!r} and {scene.bodies[second].name!r}"
+                             f" start crossed edge on edge ({scene.bodies[first].name!r}: {how}); bodies that may touch "
+                             "must start apart (or touching)")
         return
     names = [b.name for b in scene.bodies]
     problems = []

@@ -95,7 +95,7 @@ class MixedModel(Model):
     def __init__(self, scene: Scene, flexible: AssembledModel, rigid: GeneratedModel) -> None:
         self.flexible, self.rigid = flexible, rigid
         self.flexible_part, self.rigid_part = split_scene(scene)
-        self.backend, self.dim, self.threads = flexible.backend, scene.dim, flexible.threads
+        self.backend, self.dim = flexible.backend, scene.dim
         self.n_particles, self.n_grounds = scene.n_particles, len(scene.grounds)
         self.masses = scene.masses.copy()
         f, r = flexible, rigid
@@ -131,6 +131,11 @@ class MixedModel(Model):
         self._n_p_f = len(flexible.parameters(self.flexible_part.scene))
         text = f"{f.digest}|{r.digest}|{self.rigid_part.particles.tolist()}"
         self.digest = hashlib.sha256(f"mixed|{text}".encode()).hexdigest()[:16]
+
+    @property
+    def threads(self) -> int:
+        """Threads of the right-hand side: the flexible part's (set when its system is made)."""
+        return self.flexible.threads
 
     # ------------------------------------------------------------------ splitting and joining
     def parameters(self, scene: Scene) -> FloatArray:

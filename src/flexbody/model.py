@@ -502,8 +502,16 @@ def load_derived_model(scene: Scene | str | Path, backend: str = "c", formulatio
 
     This is the floating formulation's only form, and for the particles formulation the
     oracle that the assembled model is tested against (and what ``flexbody show`` prints).
+    Rigid bodies are frames T, derived whole on the floating formulation only (the default
+    for a scene with one here; :func:`load_model` runs them beside assembled flexible bodies).
     """
-    scene, formulation = _scene_and_formulation(scene, backend, formulation)
+    if not isinstance(scene, Scene):
+        scene = load_scene(scene)
+    rigid = scene.rigid_bodies
+    if rigid and formulation == "particles":
+        raise InputError(f"`formulation` = 'particles': bodies {rigid} are rigid, frames T, which a whole-scene model "
+                         "has on the floating formulation only; load_model runs them beside assembled flexible bodies")
+    scene, formulation = _scene_and_formulation(scene, backend, "floating" if rigid else formulation)
     folder = find_model_dir(scene, formulation) or derive_on_demand(scene, formulation)
     return BACKENDS[backend](folder)
 

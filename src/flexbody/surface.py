@@ -316,7 +316,8 @@ def edges_through(points: np.ndarray, segments: np.ndarray, triangles: np.ndarra
     a, b, c = (corners[tri, k] for k in range(3))
     p, q = ends[ed, 0], ends[ed, 1]
     normal = np.cross(b - a, c - a)
-    normal /= np.linalg.norm(normal, axis=1, keepdims=True)
+    with np.errstate(divide="ignore", invalid="ignore"):  # a degenerate triangle's NaNs make no hit
+        normal /= np.linalg.norm(normal, axis=1, keepdims=True)
     dp, dq = np.einsum("ij,ij->i", normal, p - a), np.einsum("ij,ij->i", normal, q - a)
     through = (np.minimum(np.abs(dp), np.abs(dq)) > depth) & (dp * dq < 0.0)
     crossing = p + (dp / np.where(through, dp - dq, 1.0))[:, None] * (q - p)
@@ -325,14 +326,16 @@ def edges_through(points: np.ndarray, segments: np.ndarray, triangles: np.ndarra
     # the crossing point slides out of the triangle: an edge nearly in the plane (a face
     # pressed flat on another) moves its crossing point a long way for a tiny shift
     # (tan of its angle to the plane), so it crosses by round-off, not by a depth.
-    direction = (q - p) / np.linalg.norm(q - p, axis=1, keepdims=True)
+    with np.errstate(divide="ignore", invalid="ignore"):  # nor a zero-length edge's
+        direction = (q - p) / np.linalg.norm(q - p, axis=1, keepdims=True)
     rise = np.abs(np.einsum("ij,ij->i", direction, normal))
     flat = direction - np.einsum("ij,ij->i", direction, normal)[:, None] * normal  # its run along the plane
     run = np.linalg.norm(flat, axis=1)
     inside, slide = np.full(len(tri), np.inf), np.full(len(tri), np.inf)
     for u, v in ((a, b), (b, c), (c, a)):
         along = v - u
-        inward = np.cross(normal, along) / np.linalg.norm(along, axis=1, keepdims=True)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            inward = np.cross(normal, along) / np.linalg.norm(along, axis=1, keepdims=True)
         distance = np.einsum("ij,ij->i", inward, crossing - u)
         inside = np.minimum(inside, distance)
         towards = np.abs(np.einsum("ij,ij->i", inward, flat)) / np.maximum(run, 1e-300)
