@@ -396,3 +396,20 @@ def test_two_bodies_move_independently(formulation):
     np.testing.assert_allclose(both.positions[:, :2], alone_a.positions, atol=1e-11)
     np.testing.assert_allclose(both.positions[:, 2:], alone_b.positions, atol=1e-11)
     assert sorted(both.events_time) == pytest.approx(sorted(np.r_[alone_a.events_time, alone_b.events_time]), abs=1e-11)
+
+
+def test_a_model_loaded_for_another_scene_is_refused_naming_what_differs():
+    """A model keeps the contact laws and masses of the scene it was loaded for: passed to
+    ``simulate`` with a scene whose ground has another friction it would run with the old
+    one, silently; it is refused, naming the difference.  The same scene with other settings
+    (t_end) reuses it."""
+    import tomllib
+
+    from flexbody.scene import resolve_scene_path
+
+    table = tomllib.loads(resolve_scene_path("ball_on_incline").read_text())
+    rough = flexbody.load_scene(dict(table, grounds=[dict(table["grounds"][0], friction=0.9)] + table["grounds"][1:]))
+    model = flexbody.load_model("ball_on_incline")
+    with pytest.raises(flexbody.InputError, match="other contact laws than"):
+        flexbody.simulate(rough, model=model)
+    assert flexbody.simulate("ball_on_incline", model=model, t_end=0.05).success

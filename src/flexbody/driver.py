@@ -30,7 +30,7 @@ from .contact import FREE, HELD, PUSHED, Event, Phases, UnsettledInstant, resolv
 from .contact_problems import UNALIGNED
 from .coupled import CoupledImpactError, project_held
 from .events import EventFunctions, locate
-from .model import Model, couples_contacts, load_model, resolved_formulation
+from .model import MADE_FOR, Model, couples_contacts, load_model, made_for, resolved_formulation
 from .result import STATUSES, SimulationResult
 from .scene import (
     COMPILED_METHODS,
@@ -1070,6 +1070,12 @@ def simulate(
                                      chatter_impacts=chatter_impacts))
     if model is None:
         model = load_model(scene, backend=settings.backend, formulation=settings.formulation)
+    elif getattr(model, "made_for", None) is not None and model.made_for != made_for(scene):
+        from .errors import InputError
+
+        differ = [name for name, a, b in zip(MADE_FOR, model.made_for, made_for(scene)) if a != b]
+        raise InputError(f"`model`: loaded for a scene with other {', '.join(differ)} than {scene.name!r}, which it "
+                         "keeps from when it was made; load_model(scene) makes this scene's")
     settings = _settings(scene, dict(vars(settings), backend=model.backend, formulation=model.formulation))
     run = _Run(scene, model, settings, progress, max_events, max_wall_time)
     start = time.perf_counter()

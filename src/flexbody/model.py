@@ -534,6 +534,13 @@ def load_model(scene: Scene | str | Path, backend: str = "c", formulation: str |
         (:class:`flexbody.mixed.MixedModel`); a scene of rigid bodies alone runs on ``floating``.
     """
     scene, formulation = _scene_and_formulation(scene, backend, formulation)
+    model = _load_model(scene, backend, formulation)
+    model.made_for = made_for(scene)
+    return model
+
+
+def _load_model(scene: Scene, backend: str, formulation: str) -> Model:
+    """:func:`load_model` on a loaded scene and a resolved formulation."""
     if formulation == "particles" and scene.rigid_bodies:  # flexible bodies assembled, rigid ones frames beside them
         from .body_contact import BodyContactModel
         from .mixed import mixed_model
@@ -569,6 +576,22 @@ def load_model(scene: Scene | str | Path, backend: str = "c", formulation: str |
 
         return BodyContactModel(scene, model)
     return model
+
+
+#: What a model takes from its scene when it is made, beyond the parameters each run passes
+#: it (:func:`made_for`), by name.
+MADE_FOR = ("topology", "contact laws", "masses", "initial positions of bodies that may touch")
+
+
+def made_for(scene: Scene) -> tuple:
+    """What a model loaded for ``scene`` keeps of it, in the order of :data:`MADE_FOR`: the
+    topology, the contact laws (the grounds' and the pairs' friction and restitution), the
+    particle masses and, where bodies may touch, their initial positions (the contact
+    search's reach).  Another scene with the same runs correctly on the same model."""
+    laws = tuple((g.friction, g.restitution) for g in scene.grounds) + tuple(
+        (c.bodies, c.friction, c.restitution) for c in scene.contacts)
+    positions = scene.initial_positions().tobytes() if couples_contacts(scene) else b""
+    return scene.topology(), laws, scene.masses.tobytes(), positions
 
 
 def couples_contacts(scene: Scene, formulation: str | None = None) -> bool:

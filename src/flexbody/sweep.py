@@ -48,7 +48,7 @@ import numpy as np
 from . import __version__
 from .errors import InputError
 from .driver import _settings, simulate
-from .model import Model, couples_contacts, load_model
+from .model import Model, load_model, made_for
 from .result import SimulationResult
 from .scene import (
     OverdampedLinkWarning,
@@ -292,17 +292,11 @@ _MODELS: dict[tuple, Model] = {}
 
 
 def _model_key(scene: Scene) -> tuple:
-    """What a model takes from its scene when it is made, beyond the parameters each run
-    passes it: the topology, formulation and backend, and the contact laws (the grounds' and
-    the pairs' friction and restitution), the particle masses and, where bodies may touch,
-    the initial positions (their contact search's reach).  Keyed on the topology alone, a
-    sweep of a ground's friction ran every scene with the first one's (ball_on_incline: 1.05
-    m off), and one of a mass with the first one's masses in its contacts between bodies."""
-    laws = tuple((g.friction, g.restitution) for g in scene.grounds) + tuple(
-        (c.bodies, c.friction, c.restitution) for c in scene.contacts)
-    positions = scene.initial_positions().tobytes() if couples_contacts(scene) else b""
-    return (scene.topology(), scene.simulation.formulation, scene.simulation.backend, laws, scene.masses.tobytes(),
-            positions)
+    """What a model takes from its scene when it is made (:func:`flexbody.model.made_for`),
+    its formulation and backend.  Keyed on the topology alone, a sweep of a ground's friction
+    ran every scene with the first one's (ball_on_incline: 1.05 m off), and one of a mass
+    with the first one's masses in its contacts between bodies."""
+    return made_for(scene), scene.simulation.formulation, scene.simulation.backend
 
 
 def _model_for(scene: Scene) -> tuple[Model, float]:
