@@ -238,21 +238,12 @@ def piercings(points: np.ndarray, triangles: np.ndarray) -> np.ndarray:
         Rows ``(triangle, edge)``: a triangle's index in ``triangles`` and an edge's particles'
         row in ``edges(triangles)``.
     """
-    from scipy.spatial import cKDTree
-
     triangles = np.asarray(triangles, dtype=np.intp)
     edge = edges(triangles)
     if len(triangles) == 0:
         return np.zeros((0, 2), np.intp)
     corners, ends = points[triangles], points[edge]  # (m, 3, 3), (e, 2, 3)
-    centre, middle = corners.mean(axis=1), ends.mean(axis=1)
-    reach = (np.linalg.norm(corners - centre[:, None], axis=2).max()
-             + 0.5 * np.linalg.norm(ends[:, 1] - ends[:, 0], axis=1).max())
-    near = cKDTree(middle).query_ball_point(centre, reach)
-    tri = np.repeat(np.arange(len(triangles)), [len(k) for k in near])
-    if len(tri) == 0:
-        return np.zeros((0, 2), np.intp)
-    ed = np.concatenate([np.asarray(k, np.intp) for k in near])
+    tri, ed = _within_reach(corners, ends)
     apart = _share_none(triangles[tri], edge[ed])
     tri, ed = tri[apart], ed[apart]
     a, b, c = (corners[tri, k] for k in range(3))
@@ -298,21 +289,14 @@ def edges_through(points: np.ndarray, segments: np.ndarray, triangles: np.ndarra
         shift along the normal that slides the crossing point out of the triangle (where a
         flat face is split into triangles, a lower bound on how far the bodies overlap).
     """
-    from scipy.spatial import cKDTree
-
     none = np.zeros((0, 2), np.intp), np.zeros(0)
     triangles, edge = np.asarray(triangles, dtype=np.intp), np.asarray(segments, dtype=np.intp)
     if len(triangles) == 0 or len(edge) == 0:
         return none
     corners, ends = points[triangles], points[edge]
-    centre, middle = corners.mean(axis=1), ends.mean(axis=1)
-    reach = (np.linalg.norm(corners - centre[:, None], axis=2).max()
-             + 0.5 * np.linalg.norm(ends[:, 1] - ends[:, 0], axis=1).max())
-    near = cKDTree(middle).query_ball_point(centre, reach)
-    tri = np.repeat(np.arange(len(triangles)), [len(k) for k in near])
+    tri, ed = _within_reach(corners, ends)
     if len(tri) == 0:
         return none
-    ed = np.concatenate([np.asarray(k, np.intp) for k in near])
     a, b, c = (corners[tri, k] for k in range(3))
     p, q = ends[ed, 0], ends[ed, 1]
     normal = np.cross(b - a, c - a)
@@ -346,6 +330,22 @@ def edges_through(points: np.ndarray, segments: np.ndarray, triangles: np.ndarra
     depth_of = np.minimum(np.minimum(inside, np.minimum(np.abs(dp), np.abs(dq))), slide * tilt)
     hit = through & (inside > 0.0) & (depth_of > depth)
     return np.column_stack([tri[hit], ed[hit]]), depth_of[hit]
+
+
+def _within_reach(corners: np.ndarray, ends: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The (triangle, edge) pairs that can cross, as index arrays (k,) each: an edge whose
+    midpoint is within reach of a triangle's centre (its largest corner distance plus half
+    the longest edge), found by a k-d tree on the midpoints (``scipy.spatial.cKDTree``).
+    ``corners (m, 3, 3)``, ``ends (e, 2, 3)``."""
+    from scipy.spatial import cKDTree
+
+    centre, middle = corners.mean(axis=1), ends.mean(axis=1)
+    reach = (np.linalg.norm(corners - centre[:, None], axis=2).max()
+             + 0.5 * np.linalg.norm(ends[:, 1] - ends[:, 0], axis=1).max())
+    near = cKDTree(middle).query_ball_point(centre, reach)
+    tri = np.repeat(np.arange(len(corners)), [len(k) for k in near])
+    ed = np.concatenate([np.asarray(k, np.intp) for k in near] + [np.zeros(0, np.intp)])
+    return tri, ed
 
 
 def edges(cells: np.ndarray) -> np.ndarray:
