@@ -148,6 +148,7 @@ def test_the_mixed_model_is_its_parts_side_by_side():
     np.testing.assert_array_equal(inner.contacts[:, 0], np.arange(scene.n_particles))
 
 
+@pytest.mark.slow
 def test_an_implicit_method_runs_the_mixed_model_with_its_jacobian():
     """Radau on a disc of 50 particles landing on the block: the Jacobian is each part's,
     placed on its state entries; the same landing as RK45's."""
@@ -162,6 +163,7 @@ def test_an_implicit_method_runs_the_mixed_model_with_its_jacobian():
     assert np.abs(radau.positions - rk45.positions).max() < 1e-5
 
 
+@pytest.mark.slow
 def test_the_bundled_seesaw_tips_under_the_disc_and_its_wedge_stays():
     """``seesaw``: a 199-particle disc lands on the left end of a rigid plank balanced on a
     rigid wedge (rough contacts): the plank tips left about the apex, held on it, the wedge
@@ -197,6 +199,7 @@ def test_a_compiled_method_is_refused_for_rigid_beside_flexible_bodies_with_the_
     assert r.success and r.stats["method"] == "RK45" and r.stats["model"] == "mixed"
 
 
+@pytest.mark.slow
 def test_a_3d_sphere_of_200_particles_landing_on_a_rigid_box_moves_as_on_a_ground():
     """3D: the box's six frame coordinates beside a 200-particle sphere (the sphere alone is
     five times the floating formulation's limit): the box rests on its four bottom corners
