@@ -240,12 +240,12 @@ def test_the_whole_scene_derived_model_of_a_mixed_scene_is_the_floating_one():
 
 
 def test_phases_made_without_the_implied_field_take_an_instants_answer():
-    """``Phases`` built by hand with the five fields of before (no ``implied``): an instant
-    resolved on them is assigned back without a shape error."""
+    """``Phases`` built by hand with the five fields of before (no ``implied``) get it, none
+    implied: an instant resolved on them is assigned back whole."""
     from flexbody.contact import Phases
 
     mine = Phases(np.zeros(3, np.intc), np.zeros(3), np.zeros(3), np.full(3, np.inf), np.zeros(3, bool))
     answer = Phases.all_free(3)
     answer.phase[1], answer.implied[2] = 1, True
     mine.assign(answer)
-    assert mine.phase.tolist() == [0, 1, 0] and len(mine.implied) == 0
+    assert mine.phase.tolist() == [0, 1, 0] and mine.implied.tolist() == [False, False, True]

@@ -1462,8 +1462,11 @@ class _MixedCoordinates:
         scaled_f = J_f / np.repeat(self.masses[flexible], d)
         if not on_frame.any():
             return columns, J_f, scaled_f, bias
-        frames, J_r, scaled_r, bias = self.inner.frame_rows(particles[on_frame], per_particle[:, on_frame].reshape(k, -1),
-                                                           bias, q, u, p)
+        # the rigid particles' rows on the frames' velocities, after the flexible coordinates
+        on = (self.inner.local[particles[on_frame]][:, None] * d + np.arange(d)).ravel()
+        J_r, scaled_r, bias = _through_frames(self.inner.rigid, on, per_particle[:, on_frame].reshape(k, -1), bias,
+                                              *self.inner.rigid_state(q, u, p))
+        frames = self.inner.flexible.nu + np.arange(self.inner.rigid.nu)
         return (np.concatenate([columns, frames]), np.hstack([J_f, J_r]), np.hstack([scaled_f, scaled_r]), bias)
 
 
@@ -1495,13 +1498,20 @@ class _FrameCoordinates:
         """``columns, J, J M^-1, bias`` of rows ``J (k, m * dim)`` on ``particles (m,)``,
         mapped to every coordinate."""
         d, inner = self.inner.dim, self.inner
-        q = np.asarray(q, float)[: inner.nq]
-        u = np.asarray(u, float)[: inner.nu]
         on = (particles[:, None] * d + np.arange(d)).ravel()
-        Jq = J @ inner.particle_jacobian(q, p)[on]
-        bias = bias + J @ inner.particle_bias(q, u, p).reshape(-1)[on]
-        scaled = np.linalg.solve(inner.mass_matrix(q, p), Jq.T).T  # M symmetric
+        Jq, scaled, bias = _through_frames(inner, on, J, bias, np.asarray(q, float)[: inner.nq],
+                                           np.asarray(u, float)[: inner.nu], p)
         return np.arange(inner.nu), Jq, scaled, bias
+
+
+def _through_frames(model: GeneratedModel, on: IntArray, J: FloatArray, bias: FloatArray, q, u, p):
+    """Rows ``J (k, len(on))`` on the particle velocity components ``on`` of a derived model
+    (``v = P(q) u``) as rows on its ``u``: ``J P (k, nu)``, ``J P M^-1`` and the bias with
+    ``J P' u`` added."""
+    Jq = J @ model.particle_jacobian(q, p)[on]
+    bias = bias + J @ model.particle_bias(q, u, p).reshape(-1)[on]
+    scaled = np.linalg.solve(model.mass_matrix(q, p), Jq.T).T  # M symmetric
+    return Jq, scaled, bias
 
 
 class HandOvers(NamedTuple):
@@ -1686,9 +1696,10 @@ def _an_element_of(segments: IntArray, elements: IntArray) -> IntArray:
     index of one triangle it borders, shape (e,)."""
     pairs = np.concatenate([np.sort(elements[:, [i, j]], axis=1) for i, j in ((0, 1), (1, 2), (2, 0))])
     owner = np.tile(np.arange(len(elements)), 3)
-    key = pairs[:, 0] * (int(elements.max(initial=0)) + 1) + pairs[:, 1]
+    base = int(elements.max(initial=0)) + 1  # a pair (a, b) as the one number a * base + b
+    key = pairs[:, 0] * base + pairs[:, 1]
     order = np.argsort(key, kind="stable")
-    wanted = segments[:, 0] * (int(elements.max(initial=0)) + 1) + segments[:, 1]
+    wanted = segments[:, 0] * base + segments[:, 1]
     return owner[order][np.searchsorted(key[order], wanted)]
 
 

@@ -57,6 +57,10 @@ class Phases:
     # unloaded): still touching, so a later impact of their block takes them in its LCP
     implied: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
 
+    def __post_init__(self) -> None:
+        if len(self.implied) != len(self.phase):  # made without the field: none implied yet
+            self.implied = np.zeros(len(self.phase), bool)
+
     @classmethod
     def all_free(cls, nc: int) -> Phases:
         """Every contact free and armed at the ground itself (floor 0)."""
@@ -94,9 +98,7 @@ class Phases:
     def assign(self, other: Phases) -> None:
         """Take ``other``'s values into these arrays (whose addresses C may hold)."""
         for name in ("phase", "floor", "push", "push_until", "started", "implied"):
-            mine = getattr(self, name)
-            if len(mine) or not len(getattr(other, name)):  # a field these phases were made without stays so
-                mine[:] = getattr(other, name)
+            getattr(self, name)[:] = getattr(other, name)
 
 
 class UnsettledInstant(RuntimeError):
@@ -273,8 +275,6 @@ def resolve(
     Resolution
     """
     phases = phases.copy()
-    if len(phases.implied) != model.n_contacts:  # phases made without the field (its default)
-        phases.implied = np.zeros(model.n_contacts, bool)
     touching = np.array(touching, bool)  # the compiled path hands its int buffers
     leaving = np.asarray(leaving, bool)
     nc = model.n_contacts

@@ -240,10 +240,10 @@ def _check_apart(scene: Scene, model: Model, q: np.ndarray, p: np.ndarray) -> No
 
     if not model.n_slots:
         return
+    size = max(1.0, float(np.abs(scene.initial_positions()).max()))
     gaps = model.gaps(q, p)[model.n_ground_contacts :]
-    inside = gaps < -1e-9 * max(1.0, float(np.abs(scene.initial_positions()).max()))
-    if not inside.any():
-        size = max(float(np.abs(scene.initial_positions()).max()), 1.0)
+    inside = gaps < -1e-9 * size
+    if not inside.any():  # EDGE_DEPTH gap tolerances (1e-12 of the size) deep, as in a run
         crossed = model.crossed_edges(np.concatenate([q, np.zeros(model.nu + 2)]), p, EDGE_DEPTH * 1e-12 * size)
         if crossed is not None:  # no particle inside, and yet two surfaces cross
             _, first, second, how = crossed
@@ -562,7 +562,7 @@ class _Run:
         gaps = self.model.held_gaps(self.y[: self.model.nq], self.p, rows)
         return bool(np.abs(gaps).max() > PROJECT_GAPS * self.gap_tolerance)
 
-    def record(self, dense, t_stop: float, t_start: float | None = None) -> None:
+    def record(self, dense, t_stop: float, t_start: float) -> None:
         """Keep the output-grid samples up to ``t_stop`` and track penetration (of particles,
         and in 3D of edges crossing: :meth:`track_edges`, on the step from ``t_start``)."""
         start = self.n_samples
@@ -571,8 +571,7 @@ class _Run:
             self.Y[k] = dense(self.grid[k])
         self.keep_samples(start, stop)
         self.track_gaps(self.y)
-        if t_start is not None:
-            self.track_edges(dense, t_start, t_stop)
+        self.track_edges(dense, t_start, t_stop)
 
     def track_edges(self, dense, t_start: float, t: float) -> None:
         """Where two 3D bodies' surfaces cross edge through face (:meth:`flexbody.body_contact.
@@ -1070,10 +1069,10 @@ def simulate(
                                      chatter_impacts=chatter_impacts))
     if model is None:
         model = load_model(scene, backend=settings.backend, formulation=settings.formulation)
-    elif getattr(model, "made_for", None) is not None and model.made_for != made_for(scene):
+    elif getattr(model, "made_for", None) is not None and model.made_for != (this := made_for(scene)):
         from .errors import InputError
 
-        differ = [name for name, a, b in zip(MADE_FOR, model.made_for, made_for(scene)) if a != b]
+        differ = [name for name, a, b in zip(MADE_FOR, model.made_for, this) if a != b]
         raise InputError(f"`model`: loaded for a scene with other {', '.join(differ)} than {scene.name!r}, which it "
                          "keeps from when it was made; load_model(scene) makes this scene's")
     settings = _settings(scene, dict(vars(settings), backend=model.backend, formulation=model.formulation))

@@ -198,17 +198,9 @@ class MixedModel(Model):
         p_f, d, k = self._p(p)[0], self.dim, self.n_grounds
         return p_f[len(p_f) - 2 * d * k :].reshape(k, 2, d)[:, 1]
 
-    def frame_rows(self, particles: IntArray, J: FloatArray, bias: FloatArray, q, u, p):
-        """Rows ``J (k, m * dim)`` on rigid ``particles (m,)`` mapped to the rigid frames'
-        velocities: ``columns (nu_r,)`` in u, ``J P (k, nu_r)``, ``J P M_r^-1`` and the bias
-        with ``J P' u`` added."""
-        d = self.dim
-        (_, q_r), (_, u_r), (_, p_r) = self._q(q), self._u(u), self._p(p)
-        on = (self.local[particles][:, None] * d + np.arange(d)).ravel()
-        Jq = J @ self.rigid.particle_jacobian(q_r, p_r)[on]
-        bias = bias + J @ self.rigid.particle_bias(q_r, u_r, p_r).reshape(-1)[on]
-        scaled = np.linalg.solve(self.rigid.mass_matrix(q_r, p_r), Jq.T).T  # M symmetric
-        return self.flexible.nu + np.arange(self.rigid.nu), Jq, scaled, bias
+    def rigid_state(self, q, u, p) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """The rigid part's ``q_r (nq_r,)``, ``u_r (nu_r,)`` and ``p_r`` (its model's order)."""
+        return self._q(q)[1], self._u(u)[1], self._p(p)[1]
 
     def gaps(self, q, p) -> FloatArray:
         (q_f, q_r), (p_f, p_r) = self._q(q), self._p(p)
