@@ -44,6 +44,12 @@ Elements
     and for friction between bodies the slip rates along the element's unit tangents (2D:
     ``t = (-n_y, n_x)``, in ``segment_2d_velocity``; 3D: ``t1 = (b - a) / |b - a|``,
     ``t2 = n x t1``, in ``triangle_3d_slip``) with their accelerations' velocity terms.
+``edge`` (3D)
+    An edge a -> b of one body against an edge c -> d of another (two meshes crossed edge
+    to edge, no vertex on a face): the signed distance ``n . (a - c)`` of their lines along
+    their common unit normal ``n = side (b - a) x (d - c) / |...|``, the closest points'
+    parameters s, t, and the Jacobian ``[(1 - s) n, s n, -(1 - t) n, -t n]``; its
+    ``_velocity`` twin as the surface kernels' (see :func:`edge_kernels`).
 
 Every kernel is a :class:`Kernel`: named inputs (flat arrays of given sizes) and named
 outputs (SymPy matrices of those inputs only).
@@ -297,6 +303,64 @@ def _surface_kernels(d: int) -> list[Kernel]:
     ])
 
 
+def edge_kernels() -> list[Kernel]:
+    """Gap, closest-point parameters, normal and gap Jacobian of an edge a -> b of one 3D
+    body against an edge c -> d of another, both moving; and their gap rate, tangential
+    relative velocity and gap acceleration's velocity term.
+
+    Two triangle meshes also touch edge on edge, with no vertex on a face (two boxes
+    crossed edge to edge).  The lines' common normal is ``(b - a) x (d - c)``, made a
+    unit vector n and turned by ``side`` (+1 or -1, a constant of the contact: the
+    runtime chooses it so that n points out of the second edge's body); the signed gap is
+    ``n . (a - c)``, the distance between the lines, the same as ``n . (p - r)`` between
+    their closest points ``p = a + s (b - a)`` and ``r = c + t (d - c)`` (s, t unclamped:
+    outside [0, 1] the closest points of the edges are an end, a vertex contact's).
+    Its Jacobian is ``[(1 - s) n, s n, -(1 - t) n, -t n]`` on ``[a, b, c, d]`` (the
+    envelope theorem: the lines' distance is a minimum over s and t, so at its minimiser
+    the points' gradients are the weights times n; checked against the gap's own
+    derivative in the tests), the form of the element kernels: with s and t in [0, 1] the
+    forces balance in force and moment.  Written so, not as SymPy's derivative of the
+    normalised cross product, its expression is a fraction as long.
+    """
+    N = ReferenceFrame("N")
+    X = {c: _vector_symbols(c, 3) for c in "abcd"}
+    V = {c: _vector_symbols(f"v{c}", 3) for c in "abcd"}
+    side = sp.Symbol("side", real=True)
+    a, b, c, d = (_frame_vector(N, X[k]) for k in "abcd")
+    u, w, r = b - a, d - c, a - c
+    common = u.cross(w)
+    normal = side * common / sp.sqrt(common.dot(common))
+    uu, uw, ww, ur, wr = u.dot(u), u.dot(w), w.dot(w), u.dot(r), w.dot(r)
+    den = uu * ww - uw * uw  # |u x w|^2 > 0 for edges that are not parallel
+    s = (uw * wr - ww * ur) / den
+    t = (uu * wr - uw * ur) / den
+    gap = sp.Matrix([normal.dot(r)])
+    n = [normal.dot(e) for e in (N.x, N.y, N.z)]
+    weights = [1 - s, s, -(1 - t), -t]
+    jacobian = sp.Matrix([[wk * nk for wk in weights for nk in n]])
+    coordinates = [q for k in "abcd" for q in X[k]]
+    velocities = sp.Matrix([q for k in "abcd" for q in V[k]])
+    rate = jacobian * velocities
+    relative = ((1 - s) * _frame_vector(N, V["a"]) + s * _frame_vector(N, V["b"])
+                - (1 - t) * _frame_vector(N, V["c"]) - t * _frame_vector(N, V["d"]))
+    tangential = relative - relative.dot(normal) * normal
+    positions = [(k, X[k]) for k in "abcd"] + [("side", [side])]
+    return [
+        Kernel("edge_3d", "Edge a -> b of one body against edge c -> d of another: the signed distance "
+               "n . (a - c) of their lines (m, < 0 crossed), n = side (b - a) x (d - c) / |(b - a) x (d - c)|, "
+               "the closest points' parameters s (on a -> b) and t (on c -> d), unclamped, n, and "
+               "d gap / d[a, b, c, d].",
+               positions,
+               {"gap": gap, "parameters": sp.Matrix([s, t]), "normal": sp.Matrix(n), "gap_jacobian": jacobian}),
+        Kernel("edge_3d_velocity", "Gap rate (m/s) of edge a -> b against edge c -> d: the gap Jacobian times "
+               "the velocities; the tangential part (m/s) of the velocity of the first edge's closest point "
+               "relative to the second's; and the gap acceleration's velocity term (m/s^2), d2 gap / dt2 - J a.",
+               positions + [(f"v{k}", V[k]) for k in "abcd"],
+               {"gap_rate": rate, "tangential_velocity": sp.Matrix([tangential.dot(e) for e in (N.x, N.y, N.z)]),
+                "gap_bias": rate.jacobian(coordinates) * velocities}),
+    ]
+
+
 def all_kernels() -> list[Kernel]:
     """Every element kernel, in the order they are generated."""
     kernels: list[Kernel] = []
@@ -306,4 +370,4 @@ def all_kernels() -> list[Kernel]:
         kernels += [particle_kernel(d), ground_kernel(d), split_kernel(d)]
     for d in DIMENSIONS:  # after the round-1 kernels: their generated text does not move
         kernels += _surface_kernels(d)
-    return kernels
+    return kernels + edge_kernels()  # last: the kernels before keep their generated text
