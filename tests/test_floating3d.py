@@ -55,7 +55,8 @@ def space_scene(shape: str, **overrides) -> flexbody.Scene:
 
 @pytest.fixture(scope="module")
 def models():
-    """{(shape, formulation): whole-scene derived NumPy model}, derived once per test run (cached)."""
+    """{(shape, formulation): whole-scene derived NumPy model}, derived once per test run (cached);
+    its tests are ``slow``: with a cold cache (CI's) the four derivations take 45 s."""
     return {(shape, f): load_derived_model(space_scene(shape), "numpy", f)
             for shape in SHAPES for f in ("particles", "floating")}
 
@@ -94,6 +95,7 @@ def test_collinear_bodies_are_refused_in_3d_floating():
 
 # -------------------------------------------------------------------- initial state
 @pytest.mark.parametrize("shape", SHAPES)
+@pytest.mark.slow  # four whole-scene derivations (45 s with a cold cache)
 def test_initial_coordinates_place_and_move_every_particle_as_the_scene_says(models, shape):
     scene, model = space_scene(shape), models[shape, "floating"]
     q, u = initial_coordinates(scene, model)
@@ -126,6 +128,7 @@ def particle_accelerations(model, q, u, p, held):
 
 
 @pytest.mark.parametrize("shape", SHAPES)
+@pytest.mark.slow  # four whole-scene derivations (45 s with a cold cache)
 def test_floating_and_particles_give_the_same_accelerations_and_contact_forces(models, shape, rng):
     scene = space_scene(shape)
     particles, floating = models[shape, "particles"], models[shape, "floating"]
@@ -161,6 +164,7 @@ def test_a_3d_drop_gives_the_same_events_and_motion_in_both_formulations():
 
 
 # --------------------------------------------------------------------- gimbal lock
+@pytest.mark.slow  # four whole-scene derivations (45 s with a cold cache)
 def test_the_mass_matrix_is_singular_only_at_the_gimbal_lock(models):
     """beta = +-90 deg: the angles' rates no longer span every spin, so M loses rank."""
     scene, model = space_scene("tetrahedron"), models["tetrahedron", "floating"]
@@ -173,6 +177,7 @@ def test_the_mass_matrix_is_singular_only_at_the_gimbal_lock(models):
         assert (eig.min() <= 1e-12 * eig.max()) == singular, (angle, eig.min() / eig.max())
 
 
+@pytest.mark.slow  # four whole-scene derivations (45 s with a cold cache)
 def test_a_body_starting_at_the_gimbal_lock_is_refused(models):
     """Turn the tetrahedron so that T's z-axis is N's x-axis: a clear error, not a bad run."""
     points, _ = tetrahedron()
