@@ -1,0 +1,156 @@
+"""Edges of two 3D surfaces touching edge on edge (flexbody.edge_contact).
+
+References: closed forms (two cubes crossed edge to edge a height apart, one falling
+through the other at a known speed), an inside test of a convex body (the gap's sign
+against where the closest point is), and a brute-force search over every pair of edges
+(the k-d tree's candidates).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from flexbody.edge_contact import edge_candidates, edge_contacts
+from flexbody.scene import rotation_matrix
+from flexbody.surface import hull
+from flexbody.surface_contact import edge_pseudonormals, triangle_normals
+
+CUBE = np.array([[i, j, k] for i in (0.0, 1.0) for j in (0.0, 1.0) for k in (0.0, 1.0)])
+
+
+def two_bodies(second_points: np.ndarray, first_points: np.ndarray = CUBE):
+    """Positions (16, 3) of two convex bodies (the first's 8 points, then the second's) and
+    each one's edges (global indices) with their pseudo-normals."""
+    x = np.vstack([first_points, second_points])
+    out = []
+    for offset, points in ((0, first_points), (len(first_points), second_points)):
+        triangles = hull(points)
+        edges, normals = edge_pseudonormals(points, triangles)
+        out += [edges + offset, normals]
+    return x, *out
+
+
+def crossed_cubes(height: float):
+    """A cube turned 45 deg about y, its lowest edge along y at x = 0.5, ``height`` above
+    the top front edge (along x at y = 0, z = 1) of the unit cube: they cross at the
+    middle of both edges."""
+    turned = CUBE @ rotation_matrix([0.0, np.pi / 4, 0.0]).T
+    lowest = turned[:, 2].min()
+    bottom = turned[np.isclose(turned[:, 2], lowest)]
+    shift = np.array([0.5 - bottom[:, 0].mean(), -bottom[:, 1].mean(), 1.0 + height - lowest])
+    return two_bodies(turned + shift)
+
+
+def test_two_cubes_crossed_edge_to_edge_touch_once_at_the_middle_of_both_edges():
+    """Their lowest and top front edges are the only pair: gap = the height (+ above, -
+    once moved through), n = +z out of the lower cube, s = t = 1/2."""
+    for height in (0.01, -0.01):
+        x, edges_a, normals_a, edges_b, normals_b = crossed_cubes(height)
+        # the upper cube's edges against the lower's: the upper one is "first"
+        pairs = edge_candidates(x, edges_b, edges_a, reach=0.05)
+        found = edge_contacts(x, edges_b, normals_b, edges_a, normals_a, pairs, reach=0.05)
+        assert len(found.gap) == 1
+        assert found.gap[0] == pytest.approx(height, rel=1e-12)
+        np.testing.assert_allclose(found.normal[0], [0.0, 0.0, 1.0], atol=1e-12)
+        np.testing.assert_allclose(found.parameters[0], [0.5, 0.5], atol=1e-12)
+        lower_edge = edges_a[found.pair[0, 1]]
+        np.testing.assert_allclose(np.sort(x[lower_edge][:, 0]), [0.0, 1.0])  # along x, at y = 0, z = 1
+        np.testing.assert_allclose(x[lower_edge][:, 1:], [[0.0, 1.0], [0.0, 1.0]])
+        # seen the other way round: the same contact, n out of the upper cube (-z), the same gap
+        other = edge_contacts(x, edges_a, normals_a, edges_b, normals_b, pairs[:, ::-1], reach=0.05)
+        assert len(other.gap) == 1 and other.gap[0] == pytest.approx(height, rel=1e-12)
+        np.testing.assert_allclose(other.normal[0], [0.0, 0.0, -1.0], atol=1e-12)
+
+
+def test_a_cube_falling_onto_a_crossed_edge_reaches_it_when_the_closed_form_says():
+    """Falling at 2 m/s from 0.03 m above, the gap is 0.03 - 2 t: zero at t = 0.015 s, and
+    linear in t on both sides (the event function an impact would be located on)."""
+    x0, edges_a, normals_a, edges_b, normals_b = crossed_cubes(0.03)
+    fall = np.zeros_like(x0)
+    fall[8:, 2] = -2.0
+    for t in np.linspace(0.0, 0.03, 7):
+        x = x0 + fall * t
+        found = edge_contacts(x, edges_b, normals_b, edges_a, normals_a, edge_candidates(x, edges_b, edges_a, 0.05),
+                              reach=0.05)
+        assert found.gap[0] == pytest.approx(0.03 - 2.0 * t, abs=1e-13)
+
+
+def test_the_gaps_sign_says_whether_the_first_edge_is_inside_the_second_body(rng):
+    """An edge laid across a cube's edge at a random point, along a random direction across
+    it, offset by g along a random normal inside the cube's normal cone there: the gap is
+    g, and its closest point is inside the cube (every face plane's distance < 0) exactly
+    where g < 0."""
+    triangles = hull(CUBE)
+    edges, normals = edge_pseudonormals(CUBE, triangles)
+    face_normals, face_points = triangle_normals(CUBE, triangles), CUBE[triangles[:, 0]]
+    checked = 0
+    for _ in range(200):
+        k = rng.integers(len(edges))
+        c, d = CUBE[edges[k]]
+        faces = np.flatnonzero([set(edges[k]) <= set(t) for t in triangles])
+        n1, n2 = face_normals[faces]
+        if np.allclose(n1, n2):  # a face's diagonal: no edge of the body
+            continue
+        weights = rng.uniform(0.2, 1.0, size=2)
+        n = weights[0] * n1 + weights[1] * n2
+        n /= np.linalg.norm(n)
+        along = np.cross(n, d - c)
+        turn = rng.uniform(-0.6, 0.6)  # up to ~35 deg off square across the edge
+        direction = np.cos(turn) * along / np.linalg.norm(along) + np.sin(turn) * (d - c) / np.linalg.norm(d - c)
+        g = rng.uniform(-0.01, 0.01)
+        t, s, length = rng.uniform(0.1, 0.9), rng.uniform(0.1, 0.9), rng.uniform(0.3, 1.0)
+        p = c + t * (d - c) + g * n
+        a, b = p - s * length * direction, p + (1 - s) * length * direction
+        x = np.vstack([CUBE, a, b])
+        found = edge_contacts(x, np.array([[8, 9]]), -n[None, :], edges, normals,
+                              np.column_stack([np.zeros(len(edges), np.intp), np.arange(len(edges))]), reach=0.05)
+        mine = found.pair[:, 1] == k
+        assert mine.sum() == 1
+        assert found.gap[mine][0] == pytest.approx(g, abs=1e-12)
+        np.testing.assert_allclose(found.parameters[mine][0], [s, t], atol=1e-9)
+        inside = (np.einsum("fd,fd->f", face_normals, p - face_points) < 0.0).all()
+        assert inside == (g < 0.0)
+        checked += 1
+    assert checked > 100
+
+
+def test_ends_parallel_edges_and_far_pairs_are_not_edge_contacts():
+    """Closest points past an edge's end (a vertex's contact), parallel edges (no common
+    normal) and pairs farther than the reach are left out."""
+    x = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0],  # first edge along x
+                  [1.5, -0.5, 0.01], [1.5, 0.5, 0.01],  # beyond its end: s = 1.5
+                  [0.5, 0.0, 0.01], [0.7, 0.0, 0.01],  # parallel, just above it
+                  [0.5, -0.5, 0.2], [0.5, 0.5, 0.2],  # crossing, 0.2 away
+                  [0.5, -0.5, 0.01], [0.5, 0.5, 0.01]])  # crossing, 0.01 away: the one kept
+    first, second = np.array([[0, 1]]), np.array([[2, 3], [4, 5], [6, 7], [8, 9]])
+    up = np.array([[0.0, 0.0, -1.0]])
+    found = edge_contacts(x, first, up, second, np.tile([0.0, 0.0, 1.0], (4, 1)),
+                          np.array([[0, 0], [0, 1], [0, 2], [0, 3]]), reach=0.05)
+    assert found.pair.tolist() == [[0, 3]]
+    assert found.gap[0] == pytest.approx(-0.01)  # the first edge is below the second: inside its body
+
+
+def sphere_points(count: int, radius: float, centre) -> np.ndarray:
+    """``count`` points spread over a sphere (a Fibonacci lattice), shape (count, 3)."""
+    k = np.arange(count) + 0.5
+    polar, azimuth = np.arccos(1 - 2 * k / count), np.pi * (1 + 5**0.5) * k
+    return radius * np.column_stack([np.sin(polar) * np.cos(azimuth), np.sin(polar) * np.sin(azimuth),
+                                     np.cos(polar)]) + centre
+
+
+def test_candidates_hold_every_pair_within_reach(rng):
+    """The k-d tree's candidates hold every pair of edges of two 60-point spheres, close and
+    turned at random, whose segments come within the reach (brute force: the edge contacts
+    of every pair), and leave most pairs out."""
+    for _ in range(5):
+        turn = rotation_matrix(rng.normal(size=3))
+        points_b = sphere_points(60, 0.3, [0.0, 0.0, 0.0]) @ turn.T + [0.6 + rng.uniform(-0.03, 0.03), 0.0, 0.0]
+        x, edges_a, normals_a, edges_b, normals_b = two_bodies(points_b, sphere_points(60, 0.3, [0.0, 0.0, 0.0]))
+        reach = 0.05
+        every = np.array([(i, j) for i in range(len(edges_a)) for j in range(len(edges_b))])
+        near = edge_contacts(x, edges_a, normals_a, edges_b, normals_b, every, reach)
+        candidates = {tuple(p) for p in edge_candidates(x, edges_a, edges_b, reach).tolist()}
+        assert len(near.pair) > 0
+        assert {tuple(p) for p in near.pair.tolist()} <= candidates
+        assert len(candidates) < 0.1 * len(every)
