@@ -331,7 +331,7 @@ def edge_kernels() -> list[Kernel]:
     common = u.cross(w)
     normal = side * common / sp.sqrt(common.dot(common))
     uu, uw, ww, ur, wr = u.dot(u), u.dot(w), w.dot(w), u.dot(r), w.dot(r)
-    den = uu * ww - uw * uw  # |u x w|^2 > 0 for edges that are not parallel
+    den = common.dot(common)  # uu ww - uw^2 as |u x w|^2: no cancellation for nearly parallel edges
     s = (uw * wr - ww * ur) / den
     t = (uu * wr - uw * ur) / den
     gap = sp.Matrix([normal.dot(r)])
