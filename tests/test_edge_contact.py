@@ -11,24 +11,28 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from flexbody.edge_contact import edge_candidates, edge_contacts
+from flexbody.edge_contact import convex_edges, edge_candidates, edge_contacts, surface_edges
 from flexbody.scene import rotation_matrix
 from flexbody.surface import hull
-from flexbody.surface_contact import edge_pseudonormals, triangle_normals
+from flexbody.surface_contact import triangle_normals
 
 CUBE = np.array([[i, j, k] for i in (0.0, 1.0) for j in (0.0, 1.0) for k in (0.0, 1.0)])
 
 
+def convex_hull_edges(points: np.ndarray, offset: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """The convex edges of the hull of ``points`` (global indices from ``offset``) and their
+    two triangles' unit normals, (e, 2) and (e, 2, 3)."""
+    triangles = hull(points)
+    edges, faces = surface_edges(triangles)
+    convex = convex_edges(points, triangles, edges, faces)
+    return edges[convex] + offset, triangle_normals(points, triangles)[faces[convex]]
+
+
 def two_bodies(second_points: np.ndarray, first_points: np.ndarray = CUBE):
-    """Positions (16, 3) of two convex bodies (the first's 8 points, then the second's) and
-    each one's edges (global indices) with their pseudo-normals."""
+    """Positions of two convex bodies (the first's points, then the second's) and each
+    one's convex edges (global indices) with their triangles' normals."""
     x = np.vstack([first_points, second_points])
-    out = []
-    for offset, points in ((0, first_points), (len(first_points), second_points)):
-        triangles = hull(points)
-        edges, normals = edge_pseudonormals(points, triangles)
-        out += [edges + offset, normals]
-    return x, *out
+    return x, *convex_hull_edges(first_points), *convex_hull_edges(second_points, len(first_points))
 
 
 def crossed_cubes(height: float):
@@ -82,16 +86,14 @@ def test_the_gaps_sign_says_whether_the_first_edge_is_inside_the_second_body(rng
     g, and its closest point is inside the cube (every face plane's distance < 0) exactly
     where g < 0."""
     triangles = hull(CUBE)
-    edges, normals = edge_pseudonormals(CUBE, triangles)
+    edges, normals = convex_hull_edges(CUBE)
+    assert len(edges) == 12  # the face diagonals are no edges of the cube
     face_normals, face_points = triangle_normals(CUBE, triangles), CUBE[triangles[:, 0]]
     checked = 0
     for _ in range(200):
         k = rng.integers(len(edges))
         c, d = CUBE[edges[k]]
-        faces = np.flatnonzero([set(edges[k]) <= set(t) for t in triangles])
-        n1, n2 = face_normals[faces]
-        if np.allclose(n1, n2):  # a face's diagonal: no edge of the body
-            continue
+        n1, n2 = normals[k]
         weights = rng.uniform(0.2, 1.0, size=2)
         n = weights[0] * n1 + weights[1] * n2
         n /= np.linalg.norm(n)
@@ -103,7 +105,10 @@ def test_the_gaps_sign_says_whether_the_first_edge_is_inside_the_second_body(rng
         p = c + t * (d - c) + g * n
         a, b = p - s * length * direction, p + (1 - s) * length * direction
         x = np.vstack([CUBE, a, b])
-        found = edge_contacts(x, np.array([[8, 9]]), -n[None, :], edges, normals,
+        # the first edge's own faces: their normals 40 deg either side of -n, about the edge
+        axis = direction / np.linalg.norm(direction)
+        own = np.array([[rotation_matrix(axis * angle) @ -n for angle in (-0.7, 0.7)]])
+        found = edge_contacts(x, np.array([[8, 9]]), own, edges, normals,
                               np.column_stack([np.zeros(len(edges), np.intp), np.arange(len(edges))]), reach=0.05)
         mine = found.pair[:, 1] == k
         assert mine.sum() == 1
@@ -124,8 +129,11 @@ def test_ends_parallel_edges_and_far_pairs_are_not_edge_contacts():
                   [0.5, -0.5, 0.2], [0.5, 0.5, 0.2],  # crossing, 0.2 away
                   [0.5, -0.5, 0.01], [0.5, 0.5, 0.01]])  # crossing, 0.01 away: the one kept
     first, second = np.array([[0, 1]]), np.array([[2, 3], [4, 5], [6, 7], [8, 9]])
-    up = np.array([[0.0, 0.0, -1.0]])
-    found = edge_contacts(x, first, up, second, np.tile([0.0, 0.0, 1.0], (4, 1)),
+    # the first edge is a body's bottom edge (its faces face down), the others a body's top edges
+    down = np.array([[[0.0, -0.6, -0.8], [0.0, 0.6, -0.8]]])
+    up = np.array([[[-0.6, 0.0, 0.8], [0.6, 0.0, 0.8]]] * 4)  # edges along y
+    up[1] = [[0.0, -0.6, 0.8], [0.0, 0.6, 0.8]]  # the parallel one, along x
+    found = edge_contacts(x, first, down, second, up,
                           np.array([[0, 0], [0, 1], [0, 2], [0, 3]]), reach=0.05)
     assert found.pair.tolist() == [[0, 3]]
     assert found.gap[0] == pytest.approx(-0.01)  # the first edge is below the second: inside its body
@@ -141,16 +149,22 @@ def sphere_points(count: int, radius: float, centre) -> np.ndarray:
 
 def test_candidates_hold_every_pair_within_reach(rng):
     """The k-d tree's candidates hold every pair of edges of two 60-point spheres, close and
-    turned at random, whose segments come within the reach (brute force: the edge contacts
-    of every pair), and leave most pairs out."""
-    for _ in range(5):
+    turned at random, whose segments come within the reach (brute force: 21 x 21 points
+    along every pair of segments), and leave most pairs out."""
+    along = np.linspace(0.0, 1.0, 21)
+    for _ in range(3):
         turn = rotation_matrix(rng.normal(size=3))
-        points_b = sphere_points(60, 0.3, [0.0, 0.0, 0.0]) @ turn.T + [0.6 + rng.uniform(-0.03, 0.03), 0.0, 0.0]
-        x, edges_a, normals_a, edges_b, normals_b = two_bodies(points_b, sphere_points(60, 0.3, [0.0, 0.0, 0.0]))
+        points_b = sphere_points(60, 0.3, [0.0, 0.0, 0.0]) @ turn.T + [rng.uniform(0.56, 0.62), 0.0, 0.0]
+        x, edges_a, _, edges_b, _ = two_bodies(points_b, sphere_points(60, 0.3, [0.0, 0.0, 0.0]))
         reach = 0.05
-        every = np.array([(i, j) for i in range(len(edges_a)) for j in range(len(edges_b))])
-        near = edge_contacts(x, edges_a, normals_a, edges_b, normals_b, every, reach)
+        on_a = x[edges_a[:, 0], None] + along[None, :, None] * (x[edges_a[:, 1]] - x[edges_a[:, 0]])[:, None]
+        on_b = x[edges_b[:, 0], None] + along[None, :, None] * (x[edges_b[:, 1]] - x[edges_b[:, 0]])[:, None]
+        closest = np.full((len(edges_a), len(edges_b)), np.inf)
+        for i in range(len(edges_a)):
+            gaps = np.linalg.norm(on_a[i][None, :, None] - on_b[:, None, :, :], axis=3)  # (eb, 21, 21)
+            closest[i] = gaps.min(axis=(1, 2))
+        within = {tuple(p) for p in np.argwhere(closest <= reach).tolist()}
         candidates = {tuple(p) for p in edge_candidates(x, edges_a, edges_b, reach).tolist()}
-        assert len(near.pair) > 0
-        assert {tuple(p) for p in near.pair.tolist()} <= candidates
-        assert len(candidates) < 0.1 * len(every)
+        assert len(within) > 0
+        assert within <= candidates
+        assert len(candidates) < 0.1 * closest.size

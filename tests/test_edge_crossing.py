@@ -1,13 +1,15 @@
-"""Edges crossing in 3D: measured and said, never passed over in silence.
+"""Edges crossing in 3D: held where edge contacts are modelled, else measured and said.
 
-A contact between bodies is a particle against a surface, so two edges that meet (boxes
-crossed edge on edge, coarse polyhedra colliding) make no contact and pass through each
-other with no particle inside the other body.  Until edge-edge contacts exist every 3D run
-measures how deep surfaces cross that way (``stats["max_edge_crossing_m"]``) and warns.
+Two edges that meet (boxes crossed edge on edge, coarse polyhedra colliding) touch with
+no particle on a surface.  For a pair with ``edges = true`` (3D, frictionless) they are
+edge contacts (:class:`flexbody.edge_contact.EdgeSlots`): an impact, a held row, a
+lift-off.  Otherwise they pass through each other with no particle inside the other body:
+every 3D run measures how deep surfaces cross that way (``stats["max_edge_crossing_m"]``)
+and warns.
 
 References: geometry by hand (an edge through a triangle by a known depth; a triangle
 pressed flat on a plane, crossing by round-off only), the free fall of a box onto a box
-crossed under it (the crossing starts at sqrt(2 h / g)).
+crossed under it (they meet at sqrt(2 h / g)), statics (the upper box's weight on the edge).
 """
 
 from __future__ import annotations
@@ -41,23 +43,67 @@ def test_an_edge_through_a_triangle_is_as_deep_as_the_least_move_that_frees_it()
     assert len(edges_through(points, np.array([[3, 4]]), triangle, 1e-8)[0]) == 0
 
 
-def _crossed_boxes(lift: float) -> dict:
+def _crossed_boxes(lift: float, friction: float = 0.0, edges: bool = False) -> dict:
     """Box ``a`` on the ground on one edge (along x), box ``b`` over it on an edge along y,
-    ``lift`` above it: they meet edge on edge, crossed."""
+    ``lift`` above it: they meet edge on edge, crossed (``friction`` between them; edge
+    contacts with ``edges``)."""
     a = {"name": "a", "shape": "box", "rigid": True, "count": [2, 2, 2], "size": [SIDE] * 3, "mass": 0.1,
          "position": [0.0, 0.0, SIDE * np.sqrt(2) / 2], "rotation": [np.pi / 4, 0.0, 0.0]}
     b = {"name": "b", "shape": "box", "rigid": True, "count": [2, 2, 2], "size": [SIDE] * 3, "mass": 0.1,
          "position": [0.0, 0.0, 1.5 * SIDE * np.sqrt(2) + lift], "rotation": [0.0, np.pi / 4, 0.0]}
     return {"name": "crossed_boxes", "gravity": [0.0, 0.0, -G], "bodies": [a, b],
             "grounds": [{"point": [0.0, 0.0, 0.0], "normal": [0.0, 0.0, 1.0]}],
-            "contacts": [{"bodies": ["a", "b"]}], "simulation": {"t_end": 0.1, "output_dt": 0.002}}
+            "contacts": [{"bodies": ["a", "b"], "friction": friction, "edges": edges}],
+            "simulation": {"t_end": 0.1, "output_dt": 0.002}}
 
 
-def test_boxes_meeting_edge_on_edge_pass_through_each_other_and_the_run_says_so():
-    """The upper box falls DROP onto the lower one's edge, crossed: no vertex meets a face,
-    so no contact is made; the run measures the crossing (from sqrt(2 DROP / g), as deep as
+def test_boxes_meeting_edge_on_edge_hit_when_the_fall_says_and_rest_there():
+    """The upper box falls DROP onto the lower one's edge, crossed, no vertex on a face: an
+    edge contact, hit at sqrt(2 DROP / g) and then held (balanced on the crossing point);
+    nothing crosses, and the lower box's ground contacts carry both weights, the edge
+    contact the upper box's."""
+    r = flexbody.simulate(flexbody.load_scene(_crossed_boxes(DROP, edges=True)))
+    assert r.success and r.stats["impacts"] == 1 and r.stats["liftoffs"] == 0
+    assert abs(r.events_time[0] - np.sqrt(2 * DROP / G)) < 1e-9
+    assert r.stats["max_edge_crossing_m"] == 0.0 and not any("edge on edge" in w for w in r.stats["warnings"])
+    assert r.stats["max_penetration_m"] < 1e-9
+    upper = r.positions[-1, 8:, 2]
+    assert upper.min() == pytest.approx(SIDE * np.sqrt(2), abs=1e-9)  # resting on the lower box's top edge
+    lower, upper = r.masses[:8].sum() * G, r.masses[8:].sum() * G
+    # the ground carries both weights, the edge contact the upper box's
+    assert r.contact_force[-1].sum() == pytest.approx(lower + 2 * upper, rel=1e-9)
+    assert r.contact_force[-1, 8:].sum() == 0.0  # the edge contact's force is reported on the lower box's edge
+
+
+def test_flexible_boxes_crossed_edge_to_edge_stay_apart_with_edge_contacts_and_cross_without():
+    """The same boxes flexible (8 particles, 3000 N/m, axial dampers), to 0.3 s: with edge
+    contacts the upper one lands on the lower one's edge (the first impact a hair after the
+    rigid boxes' sqrt(2 DROP / g): the lower box settles on the ground meanwhile), no edge
+    crosses, nothing is inside anything and the ledger closes; without them the upper box
+    falls 2 cm through the edge (measured 0.020 m) before its corners hit the faces."""
+    runs = {}
+    for edges in (True, False):
+        table = _crossed_boxes(DROP, edges=edges)
+        for box in table["bodies"]:
+            box.pop("rigid")
+            box.update({"stiffness": 3000.0, "damping": 0.3, "damper": "axial"})
+        table["simulation"]["t_end"] = 0.3
+        runs[edges] = r = flexbody.simulate(flexbody.load_scene(table))
+        assert r.success, r.message
+        assert r.stats["max_penetration_m"] < 1e-9 and r.stats["energy_drift_relative"] < 1e-6
+    held = runs[True]
+    assert 0.0 <= held.events_time[0] - np.sqrt(2 * DROP / G) < 1e-3
+    assert held.stats["max_edge_crossing_m"] == 0.0
+    assert runs[False].stats["max_edge_crossing_m"] > 0.01
+    assert runs[False].events_time[0] > 2 * held.events_time[0]
+
+
+@pytest.mark.parametrize("friction", [0.0, 0.5])
+def test_edges_of_a_pair_without_edge_contacts_pass_through_each_other_and_the_run_says_so(friction):
+    """Without ``edges = true`` (the default; with friction edge contacts are not modelled
+    yet) the edges cross; the run measures the crossing (from sqrt(2 DROP / g), as deep as
     the fall past it by the end) and warns, naming both bodies."""
-    r = flexbody.simulate(flexbody.load_scene(_crossed_boxes(DROP)))
+    r = flexbody.simulate(flexbody.load_scene(_crossed_boxes(DROP, friction=friction)))
     assert r.success and r.stats["impacts"] == 0
     t_meet = np.sqrt(2 * DROP / G)
     fall = 0.5 * G * r.t[-1] ** 2 - DROP  # how far past the touch the upper edge is at the end: 0.039 m
@@ -70,9 +116,36 @@ def test_boxes_meeting_edge_on_edge_pass_through_each_other_and_the_run_says_so(
     assert abs(start - t_meet) < 1e-8
 
 
-def test_bodies_that_start_crossed_edge_on_edge_are_refused():
+@pytest.mark.parametrize("edges", [False, True])
+def test_bodies_that_start_crossed_edge_on_edge_are_refused(edges):
     with pytest.raises(flexbody.InputError, match="start crossed edge on edge"):
-        flexbody.simulate(flexbody.load_scene(_crossed_boxes(-0.01)))
+        flexbody.simulate(flexbody.load_scene(_crossed_boxes(-0.01, edges=edges)))
+
+
+@pytest.mark.parametrize("change, rule", [
+    ({"edges": 1}, r"contacts\[0\]\.edges.*must be true or false"),
+    ({"edges": True, "friction": 0.3}, r"contacts\[0\]\.edges.*needs friction = 0 .*friction = 0\.3"),
+    ({"edges": True, "ground_friction": 0.2}, r"contacts\[0\]\.edges.*grounds with friction: yes"),
+])
+def test_edge_contacts_asked_for_where_they_cannot_be_are_refused_with_the_rule(change, rule):
+    table = _crossed_boxes(DROP)
+    ground_friction = change.pop("ground_friction", None)
+    table["contacts"][0].update(change)
+    if ground_friction is not None:
+        table["grounds"][0]["friction"] = ground_friction
+    with pytest.raises(flexbody.SceneError, match=rule):
+        flexbody.load_scene(table)
+
+
+def test_edge_contacts_in_2d_are_refused():
+    table = {"name": "rings", "bodies": [
+        {"name": "a", "shape": "ring", "count": 8, "radius": 0.1, "mass": 0.05, "stiffness": 2000.0,
+         "damping": 0.5, "position": [0.0, 0.5]},
+        {"name": "b", "shape": "ring", "count": 8, "radius": 0.1, "mass": 0.05, "stiffness": 2000.0,
+         "damping": 0.5, "position": [0.0, 0.2]}],
+        "contacts": [{"bodies": ["a", "b"], "edges": True}]}
+    with pytest.raises(flexbody.SceneError, match=r"contacts\[0\]\.edges.*3D bodies only"):
+        flexbody.load_scene(table)
 
 
 def test_a_box_resting_face_on_face_on_a_box_crosses_no_edge():

@@ -90,6 +90,7 @@ from .broadphase import CandidateList, slices
 from .constants import FREE, HELD, SLIDING
 from .contact import Phases
 from .dynamics import contact_solve
+from .edge_contact import EdgeSlots, EdgeTerms
 from .held_rows import CompiledHeldRows
 from .mixed import MixedModel
 from .model import GeneratedModel, Model
@@ -115,6 +116,10 @@ DENSE_WIDTH = 64
 #: vertex-to-vertex touch, :meth:`BodyContactModel._made_from_the_other_side`): where the
 #: event locates a touch (to ~1e-15 s), the points meet to round-off of the element's size.
 AT_VERTEX = 1e-9
+#: A free edge contact watches the other body's edges within this fraction of ``margin``
+#: (farther it reads ``margin``): only its sign change at 0 is an event, and a crossing is
+#: seen from a step's end inside it as from one outside.
+EDGE_REACH = 0.25
 #: Whole surface sweeps kept, by the positions they were made at (:meth:`BodyContactModel._surface_contacts`).
 SWEEPS_KEPT = 4
 #: Layouts of held rows kept (:meth:`BodyContactModel._layout`).
@@ -177,6 +182,19 @@ class BodyContactModel(Model):
         self.slot_body = np.tile(np.concatenate(bodies), self.dim).astype(np.intp)
         self.slot_pair = np.tile(np.concatenate(pairs), self.dim).astype(np.intp)
         self.allowed = allowed
+        x0 = scene.initial_positions()
+        #: Then the edge contacts of the pairs with ``edges = true`` (3D, frictionless): each
+        #: convex surface edge of a pair's first body against the second body's edges, twice
+        #: (``EdgeSlots``), from slot ``first_edge`` on; their particle is the edge's first end.
+        self.first_edge = len(self.slot_particle)
+        pairs = [tuple(c.bodies) for c in scene.contacts if c.edges]  # 3D, frictionless (the scene checks)
+        self._edge_slots = EdgeSlots(self.elements, self.element_body, pairs, x0) if pairs else None
+        if self._edge_slots is not None:
+            es = self._edge_slots
+            self.slot_particle = np.concatenate([self.slot_particle, es.edges[es.own, 0]])
+            self.slot_body = np.concatenate([self.slot_body, es.body])
+            self.slot_pair = np.concatenate([self.slot_pair, es.pair])
+        self.edge_side = np.zeros(len(self.slot_particle) - self.first_edge)  # each edge contact's side, while constrained
         self.n_slots = len(self.slot_particle)
         self.n_contacts = self.n_ground_contacts + self.n_slots
         self.contacts = np.vstack([inner.contacts, np.column_stack([self.slot_particle,
@@ -194,7 +212,6 @@ class BodyContactModel(Model):
         self._edges = edges(self.elements) if self.dim == 3 else np.zeros((0, 2), np.intp)
         self._edge_body = self.particle_body[self._edges[:, 0]]
         self._edge_element = _an_element_of(self._edges, self.elements) if self.dim == 3 else np.zeros(0, np.intp)
-        x0 = scene.initial_positions()
         lengths = np.linalg.norm(x0[self.elements[:, 1]] - x0[self.elements[:, 0]], axis=1)
         # Within `margin` of a surface the broad phase finds the closest element, so the
         # gap is exact; farther, a slot reads `margin` (positive: nothing can happen there).
@@ -274,6 +291,8 @@ class BodyContactModel(Model):
         of the candidates holding its closest element within ``margin``; farther reads
         ``margin``), what locating an impact between bodies evaluates again and again."""
         slot = c - self.n_ground_contacts
+        if slot >= self.first_edge:
+            return float(self._edge_gaps(self._coordinates.particles(q, None, p)[0], np.array([slot - self.first_edge]))[0][0])
         if not 0 <= slot < self.n_primary:
             return super().gap(q, p, c)
         x = self._coordinates.particles(q, None, p)[0]
@@ -294,7 +313,7 @@ class BodyContactModel(Model):
         if grounds.any():
             out[grounds] = self.inner.gaps_of(q, p, contacts[grounds])
         slots = contacts[~grounds] - ng
-        slots = slots[slots < self.n_primary]
+        slots = slots[(slots < self.n_primary) | (slots >= self.first_edge)]  # a corner twin reads margin
         if len(slots):
             x = self._coordinates.particles(q, None, p)[0]
             gaps = self._surface_gaps(x, slots)[0]
@@ -310,7 +329,7 @@ class BodyContactModel(Model):
         if len(slots):
             x = self._coordinates.particles(q, None, p)[0]
             self._constrain_elements(slots, x)
-            out[rows >= ng] = self._element_terms(slots, x, np.zeros_like(x)).gap
+            out[rows >= ng] = self._row_terms(slots, x, np.zeros_like(x)).gap
         return out
 
     def energies(self, q, u, p) -> FloatArray:
@@ -383,7 +402,8 @@ class BodyContactModel(Model):
         held = np.asarray(held)
         ng = self.n_ground_contacts
         slots = np.flatnonzero(held[ng:] != 0)
-        if self._held_rows is None or self._frictional or (self.element_of[slots] < 0).any():
+        if self._held_rows is None or self._frictional or (self.element_of[slots] < 0).any() \
+                or (slots >= self.first_edge).any():  # the C rows are a particle's against an element
             return None
         return self._laid_out(p, held, slots, self._coupled_grounds(held, slots))
 
@@ -478,7 +498,8 @@ class BodyContactModel(Model):
         same state (a third of a stack's evaluations)."""
         y = np.asarray(y, float)
         held, push = np.asarray(held, np.intc), np.asarray(push, float)
-        key = (y, np.asarray(p), held, push, self.element_of) + ((self._slip, self._slip_held) if self._frictional else ())
+        key = (y, np.asarray(p), held, push, self.element_of, self.edge_side) \
+            + ((self._slip, self._slip_held) if self._frictional else ())
         if self._last is not None and all(map(np.array_equal, self._last[0], key)):
             return self._last[1]
         solved = self._solve(y, p, held, push)
@@ -508,7 +529,7 @@ class BodyContactModel(Model):
         stick = (mu > 0.0) & (codes == HELD)
         sliding = (mu > 0.0) & (codes == SLIDING)
         none = np.zeros((k, m))
-        if self._held_rows is not None and not (mu > 0.0).any():
+        if self._held_rows is not None and not (mu > 0.0).any() and not (held_slots >= self.first_edge).any():
             force = self._laid_out(p, held, held_slots, ground_rows).solve(self._held_rows, y, acc)
             if force is not None:  # else a pivot fell below the drop threshold: contact_solve's fallback below
                 lam[rows] = force
@@ -648,7 +669,7 @@ class BodyContactModel(Model):
         rated = np.flatnonzero(near | (held[ng:] != 0))
         if len(rated):
             self._constrain_elements(rated, x, found)
-            vn_s[rated] = self._element_terms(rated, x, v).rate
+            vn_s[rated] = self._row_terms(rated, x, v).rate
         if found is not None:  # a vertex-to-vertex touch is one contact: the other side's
             vn_s[self._made_from_the_other_side(*found, held, x)] = 0.0
         return np.concatenate([gaps_g, gaps_s]), np.concatenate([vn_g, vn_s])
@@ -870,11 +891,16 @@ class BodyContactModel(Model):
         out = np.full(self.n_contacts, np.inf)
         ng = self.n_ground_contacts
         slots = np.flatnonzero(np.asarray(held)[ng:] != 0)
+        edges, slots = slots[slots >= self.first_edge], slots[slots < self.first_edge]
         slots = slots[self._bounded(held, slots)]
-        if len(slots):
+        if len(slots) or len(edges):
             x, v = self._state(np.asarray(y, float), p)
+        if len(slots):
             self._constrain_elements(slots, x)
             out[ng + slots] = self._margins(slots, x, v, held)[1] - self.margin_floor[slots]
+        if len(edges):  # an edge contact's closest points reaching an end of either edge
+            self._constrain_edges(edges, x)
+            out[ng + edges] = self._edge_terms(edges, x, v).margin - self.margin_floor[edges]
         return out
 
     def floor_margins(self, y, p, held: np.ndarray, changed: np.ndarray, gap_tolerance: float) -> None:
@@ -888,14 +914,21 @@ class BodyContactModel(Model):
         by its force) until another row of the corner lifted off (measured: a disc's particle
         resting in a dent of another went 2.3e-7 m through the dent's other flank)."""
         ng = self.n_ground_contacts
-        groups = self._group_rows(np.unique(np.flatnonzero(np.asarray(changed)[ng:]) % self.n_primary)).ravel()
+        changed = np.flatnonzero(np.asarray(changed)[ng:])
+        groups = self._group_rows(np.unique(changed[changed < self.first_edge] % self.n_primary)).ravel()
         slots = groups[np.asarray(held)[ng + groups] != 0]
         slots = slots[self._bounded(held, slots)]
-        if not len(slots):
+        edges = changed[(changed >= self.first_edge) & (np.asarray(held)[ng + changed] != 0)]
+        if not len(slots) and not len(edges):
             return
         x, v = self._state(np.asarray(y, float), p)
-        self._constrain_elements(slots, x)
-        margin = self._margins(slots, x, v, held)[1]
+        margin = np.empty(0)
+        if len(slots):
+            self._constrain_elements(slots, x)
+            margin = self._margins(slots, x, v, held)[1]
+        if len(edges):  # an edge contact held a hair from an end of an edge
+            self._constrain_edges(edges, x)
+            slots, margin = np.concatenate([slots, edges]), np.concatenate([margin, self._edge_terms(edges, x, v).margin])
         low = margin - self.margin_floor[slots] < gap_tolerance
         self.margin_floor[slots[low]] = np.minimum(self.margin_floor[slots[low]], margin[low] - gap_tolerance)
 
@@ -910,10 +943,16 @@ class BodyContactModel(Model):
         """
         ng = self.n_ground_contacts
         slots = np.flatnonzero(np.asarray(held)[ng:] != 0)
+        edges, slots = slots[slots >= self.first_edge], slots[slots < self.first_edge]
         slots = slots[self._bounded(held, slots)]
         empty = np.zeros(0, np.intp)
+        ended = empty
+        if len(edges):  # past an end of either edge the contact is a vertex's: the edge contact is set free
+            x, v = self._state(np.asarray(y, float), p)
+            ended = edges[self._edge_terms(edges, x, v).margin - self.margin_floor[edges] <= gap_tolerance]
+            self.element_of[ended], self.margin_floor[ended] = -1, 0.0
         if not len(slots):
-            return HandOvers(empty, empty, empty, empty, empty, empty.reshape(0, 2))
+            return HandOvers(empty, empty, ng + ended, empty, empty, empty.reshape(0, 2))
         x, v = self._state(np.asarray(y, float), p)
         terms, margins, weights = self._margins(slots, x, v, held)
         past = margins - self.margin_floor[slots]
@@ -928,7 +967,7 @@ class BodyContactModel(Model):
         moving = np.sort(order[first])
         out = slots[moving]
         if not len(out):
-            return HandOvers(empty, empty, empty, empty, empty, empty.reshape(0, 2))
+            return HandOvers(empty, empty, ng + ended, empty, empty, empty.reshape(0, 2))
         # The slot is the group's row that moves (only a slot has a gap to hit): a twin that
         # is to move swaps rows with its slot, which is held too.
         relabel = out[out >= self.n_primary]
@@ -955,8 +994,8 @@ class BodyContactModel(Model):
         self.element_of[twins] = came_from[cornered]
         self.margin_floor[twins] = 0.0
         self._slip[ng + twins] = self._slip[ng + out[cornered]]
-        return HandOvers(ng + out[tangential], ng + out[approach], ng + out[rate > speed_tolerance], ng + twins,
-                         ng + out[cornered], ng + np.column_stack([relabel % self.n_primary, relabel]))
+        return HandOvers(ng + out[tangential], ng + out[approach], ng + np.concatenate([out[rate > speed_tolerance], ended]),
+                         ng + twins, ng + out[cornered], ng + np.column_stack([relabel % self.n_primary, relabel]))
 
     def _swap(self, first: IntArray, second: IntArray) -> None:
         """Exchange the elements, margin floors and slip directions of rows ``first`` and
@@ -996,11 +1035,20 @@ class BodyContactModel(Model):
         """:meth:`_surface_gaps`, and the closest features found with the slot of each of
         their rows (-1: farther than ``margin``), or None where there are none."""
         if slots is not None:
-            return self._sweep(x, slots)
-        # The whole sweep depends on x alone, and an instant asks for it at the same state
-        # several times (the step's end, the instant's resolve, the next segment's start):
-        # the last few answers are kept, read-only.
-        return _kept(self._swept, np.ascontiguousarray(x).tobytes(), lambda: _read_only(self._sweep(x)), SWEEPS_KEPT)
+            slots = np.asarray(slots, np.intp)
+            gaps, near, found = self._sweep(x, slots[slots < self.first_edge])
+            rows = slots[slots >= self.first_edge] - self.first_edge
+        else:
+            # The whole sweep depends on x alone, and an instant asks for it at the same state
+            # several times (the step's end, the instant's resolve, the next segment's start):
+            # the last few answers are kept, read-only.
+            gaps, near, found = _kept(self._swept, np.ascontiguousarray(x).tobytes(), lambda: _read_only(self._sweep(x)),
+                                      SWEEPS_KEPT)
+            rows = np.arange(self.n_slots - self.first_edge)
+        if len(rows):  # the edge contacts': an edge held against another reads that pair's gap
+            gaps, near = gaps.copy(), near.copy()
+            gaps[self.first_edge + rows], near[self.first_edge + rows] = self._edge_gaps(x, rows)
+        return gaps, near, found
 
     def _sweep(self, x, slots: IntArray | None = None) \
             -> tuple[FloatArray, np.ndarray, tuple[SurfaceContact, IntArray] | None]:
@@ -1138,7 +1186,11 @@ class BodyContactModel(Model):
         ``swept``: the whole sweep's closest features at ``x`` with their slots
         (:meth:`_surface_contacts`), if at hand: a slot within ``margin`` has its closest
         feature over the whole surface there (what is not a candidate is farther)."""
-        missing = np.asarray(slots)[self.element_of[slots] < 0]
+        slots = np.asarray(slots, np.intp)
+        if (slots >= self.first_edge).any():
+            self._constrain_edges(slots[slots >= self.first_edge], x)
+            slots = slots[slots < self.first_edge]
+        missing = slots[self.element_of[slots] < 0]
         if not len(missing):
             return
         if swept is not None and np.isin(missing % self.n_primary, swept[1]).all():
@@ -1181,8 +1233,83 @@ class BodyContactModel(Model):
         return self._element([x[i] for i in moved], [v[i] for i in moved])
 
     def _slot_points(self, slots) -> IntArray:
-        """The particles each constrained slot moves, shape (k, 1 + dim): its own, then its element's."""
-        return np.column_stack([self.slot_particle[slots], self.elements[self.element_of[slots]]])
+        """The particles each constrained slot moves, shape (k, 1 + dim): its own, then its
+        element's; an edge contact's, its edge's two ends, then the other edge's."""
+        slots = np.asarray(slots, np.intp)
+        if not (slots >= self.first_edge).any():
+            return np.column_stack([self.slot_particle[slots], self.elements[self.element_of[slots]]])
+        out = np.empty((len(slots), 1 + self.dim), np.intp)
+        edge = slots >= self.first_edge
+        out[~edge] = np.column_stack([self.slot_particle[slots[~edge]], self.elements[self.element_of[slots[~edge]]]])
+        out[edge] = self._edge_slots.points(slots[edge] - self.first_edge, self.element_of[slots[edge]])
+        return out
+
+    # ------------------------------------------------------------------ edge contacts (3D)
+    def _row_terms(self, slots, x, v) -> RowTerms:
+        """Each constrained slot's row (:class:`RowTerms`): a particle against its element
+        (the element kernels) or an edge against the edge it is held on (the edge kernels)."""
+        slots = np.asarray(slots, np.intp)
+        edge = slots >= self.first_edge
+        if not edge.any():  # particles alone (every scene without edge contacts)
+            terms = self._element_terms(slots, x, v)
+            return RowTerms(terms.gap, np.column_stack([np.ones(len(slots)), -terms.weights]), terms.normal,
+                            terms.rate, terms.bias, terms.slip_bias)
+        k = len(slots)
+        out = RowTerms(np.empty(k), np.empty((k, 1 + self.dim)), np.empty((k, self.dim)), np.empty(k), np.empty(k),
+                       np.zeros(k) if self.dim == 2 else None)
+        if (~edge).any():
+            terms = self._element_terms(slots[~edge], x, v)
+            for name in ("gap", "normal", "rate", "bias"):
+                getattr(out, name)[~edge] = getattr(terms, name)
+            out.coefficients[~edge] = np.column_stack([np.ones(len(terms.gap)), -terms.weights])
+            if self.dim == 2:
+                out.slip_bias[~edge] = terms.slip_bias
+        if edge.any():
+            terms = self._edge_terms(slots[edge], x, v)
+            for name in ("gap", "coefficients", "normal", "rate", "bias"):
+                getattr(out, name)[edge] = getattr(terms, name)
+        return out
+
+    def _edge_terms(self, slots, x, v) -> EdgeTerms:
+        """Constrained edge contacts ``slots`` (slot numbering) against their edges."""
+        rows = np.asarray(slots, np.intp) - self.first_edge
+        return self._edge_slots.terms(x, v, rows, self.element_of[self.first_edge + rows], self.edge_side[rows])
+
+    def _edge_gaps(self, x, rows) -> tuple[FloatArray, np.ndarray]:
+        """Gaps of edge contacts ``rows`` (rows of the edge slots, (k,)) and whether each is
+        within ``margin``: one held against an edge, that pair's (its side kept); a free one,
+        its edge's least gap to the other body's edges where both closest points lie on
+        both edges (its twin's edge left out), else ``margin``."""
+        rows = np.asarray(rows, np.intp)
+        against = self.element_of[self.first_edge :]
+        gaps = np.full(len(rows), self.margin)
+        on = against[rows] >= 0
+        if on.any():
+            gaps[on] = self._edge_slots.terms(x, np.zeros_like(x), rows[on], against[rows[on]],
+                                              self.edge_side[rows[on]]).gap
+        if (~on).any():
+            gap, edge, _ = self._edge_slots.closest(x, rows[~on], against, EDGE_REACH * self.margin)
+            gaps[~on] = np.where(edge >= 0, gap, self.margin)
+        return gaps, np.abs(gaps) < self.margin
+
+    def _constrain_edges(self, slots, x) -> None:
+        """Hold each of the edge contacts ``slots`` that has no edge against the other
+        body's edge its edge is closest to (:meth:`flexbody.edge_contact.EdgeSlots.closest`),
+        on the side it is on now."""
+        missing = np.asarray(slots, np.intp)
+        missing = missing[self.element_of[missing] < 0]
+        if not len(missing):
+            return
+        rows = missing - self.first_edge
+        against = self.element_of[self.first_edge :]
+        # a row before its twin: of two free twins, the first takes the closest edge
+        for part in (rows[rows < self._edge_slots.n_primary], rows[rows >= self._edge_slots.n_primary]):
+            if not len(part):
+                continue
+            _, edge, side = self._edge_slots.closest(x, part, against, EDGE_REACH * self.margin)
+            if (edge < 0).any():
+                raise KeyError(f"edge contacts {(self.first_edge + part[edge < 0]).tolist()} touch no edge")
+            against[part], self.edge_side[part] = edge, side
 
     def _rows(self, ground_rows, slots, q, u, p, tangents: bool = False) -> _Rows:
         """Constraint rows (ground rows, then slots) on the coordinates they move: their
@@ -1201,9 +1328,9 @@ class BodyContactModel(Model):
         weights = [np.ones((k_g, 1))]
         bias, slip_bias = np.zeros(k), np.zeros((k, d - 1))
         if len(slots):
-            terms = self._element_terms(slots, x, v)
+            terms = self._row_terms(slots, x, v)
             bias[k_g:] = terms.bias
-            weights.append(np.column_stack([np.ones(len(slots)), -terms.weights]))
+            weights.append(terms.coefficients)
             normals = np.vstack([normals, terms.normal])
             if tangents and d == 2:
                 slip_bias[k_g:, 0] = terms.slip_bias
@@ -1521,7 +1648,8 @@ class HandOvers(NamedTuple):
     ----------
     stay, approach, leave : ndarray of int
         The moved slots that meet their new element tangentially (normal speed within the
-        speed tolerance: still held), approach it (an impact) and leave it.
+        speed tolerance: still held), approach it (an impact) and leave it; ``leave`` also
+        holds the edge contacts set free where their closest points reached an edge's end.
     corners, sources : ndarray of int
         The free corner twins now on the elements that ``sources`` (those of the moved that
         passed a concave vertex or edge: all of ``approach``, and those of ``stay`` there)
@@ -1538,6 +1666,20 @@ class HandOvers(NamedTuple):
     corners: IntArray
     sources: IntArray
     relabelled: IntArray
+
+
+class RowTerms(NamedTuple):
+    """Constrained slots' rows, k of them: gap (k,), the row's coefficients on its points
+    (k, 1 + dim; a particle's ``[1, -w_1, ...]``, an edge's ``[1 - s, s, -(1 - t), -t]``),
+    times the unit normal (k, dim), gap rate (k,), the gap acceleration's velocity term
+    (k,) and, 2D, the slip's (k,; None in 3D)."""
+
+    gap: FloatArray
+    coefficients: FloatArray
+    normal: FloatArray
+    rate: FloatArray
+    bias: FloatArray
+    slip_bias: FloatArray | None
 
 
 class ElementTerms(NamedTuple):

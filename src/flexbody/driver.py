@@ -243,6 +243,7 @@ def _check_apart(scene: Scene, model: Model, q: np.ndarray, p: np.ndarray) -> No
     size = max(1.0, float(np.abs(scene.initial_positions()).max()))
     gaps = model.gaps(q, p)[model.n_ground_contacts :]
     inside = gaps < -1e-9 * size
+    inside[model.first_edge :] = False  # edges crossed, not particles inside: crossed_edges below names them
     if not inside.any():  # EDGE_DEPTH gap tolerances (1e-12 of the size) deep, as in a run
         crossed = model.crossed_edges(np.concatenate([q, np.zeros(model.nu + 2)]), p, EDGE_DEPTH * 1e-12 * size)
         if crossed is not None:  # no particle inside, and yet two surfaces cross
@@ -721,7 +722,7 @@ class _Run:
         recorded is the twin's (the particle left the slot's element, not the body)."""
         model, phases = self.model, self.phases
         first_twin = model.n_ground_contacts + model.n_primary
-        twins = first_twin + np.flatnonzero(phases.on_ground[first_twin:])
+        twins = first_twin + np.flatnonzero(phases.on_ground[first_twin : model.n_ground_contacts + model.first_edge])
         orphans = twins[~phases.on_ground[model.primary(twins)]]
         if not len(orphans):
             return
@@ -923,8 +924,8 @@ class _Run:
                 f"from between t = {lo:.9g} and {hi:.9g} s"
             out.append(f"bodies {first!r} and {second!r} crossed edge on edge {when} ({first!r}: {how}), up to "
                        f"{self.max_edge_crossing:.2g} m deep where checked ({EDGE_CHECKS} times per output interval): "
-                       "contacts are a particle against a "
-                       "surface, and two edges meeting is not one of them yet, so edges pass through each other unseen; "
+                       "two edges meeting are a contact only in 3D scenes without friction (and at most two edges "
+                       "of a body under one edge of another at once), so here edges passed through each other unseen; "
                        "finer surfaces make it rarer (a vertex meets a face first more often)")
         if s.rtol > LOOSE_RTOL:
             out.append(f"rtol = {s.rtol:g} is loose: impacts and lift-offs can differ from a tight run's; check the "

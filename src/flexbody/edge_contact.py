@@ -10,11 +10,13 @@ is the lines' distance along the common normal ``n = ±(b - a) x (d - c) / |...|
 generated ``edge_3d`` kernel's (:mod:`derivation.elements`), which changes sign where one
 edge passes through the other.
 
-The side (the sign of n) is a constant of a contact: n points out of the second edge's
-body and into the first's, chosen by the edges' pseudo-normals (the sums of their two
-triangles' unit normals): ``side`` makes ``n . (N_second - N_first) >= 0``.  Near the
-crossing of two convex edges that is the side that puts the first edge outside the
-second body for a positive gap (tested against inside tests of a convex body).
+Two edges can only touch where n lies in the second edge's cone of outward normals (the
+arc between its two triangles' unit normals) and -n in the first's: the closest points of
+two convex bodies are then on these edges (the edge-edge faces of their Minkowski
+difference, as in the separating-axis test of convex polyhedra).  That fixes the side
+(the sign of n, a constant of a contact: out of the second body and into the first) and
+leaves out pairs of edges whose lines pass close by without being the bodies' closest
+features (tested against inside tests of a convex body).
 
 Outside [0, 1] the closest points of the edges are an end: that is a vertex's contact
 with the other surface, not an edge's.  Parallel edges have no common normal (a face
@@ -26,6 +28,7 @@ rim's edges, which are the contacts.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -33,8 +36,8 @@ FloatArray = np.ndarray
 IntArray = np.ndarray
 
 #: Edges whose directions' cross product is below this fraction of their lengths' product
-#: are parallel: their common normal is undefined.
-PARALLEL = 1e-9
+#: (an angle of 1e-6 rad) are parallel: their common normal is undefined.
+PARALLEL = 1e-6
 #: An edge whose two triangles' unit normals sum to more than ``2 - FLAT`` lies in a flat
 #: face (a box face's diagonal): no edge of the body's shape, and no edge contact.
 FLAT = 1e-9
@@ -56,6 +59,8 @@ class EdgeContact:
         The closest points' s on the first edge and t on the second, in [0, 1].
     normal : ndarray, shape (k, 3)
         n, out of the second edge's body.
+    index : ndarray of int, shape (k,)
+        Each one's row in the candidate pairs given.
     """
 
     pair: IntArray
@@ -63,6 +68,7 @@ class EdgeContact:
     gap: FloatArray
     parameters: FloatArray
     normal: FloatArray
+    index: IntArray
 
 
 def edge_candidates(x: FloatArray, first: IntArray, second: IntArray, reach: float) -> IntArray:
@@ -93,11 +99,12 @@ def edge_candidates(x: FloatArray, first: IntArray, second: IntArray, reach: flo
     return np.column_stack([rows, columns])
 
 
-def edge_contacts(x: FloatArray, first: IntArray, first_normals: FloatArray, second: IntArray,
-                  second_normals: FloatArray, pairs: IntArray, reach: float) -> EdgeContact:
+def edge_contacts(x: FloatArray, first: IntArray, first_faces: FloatArray, second: IntArray,
+                  second_faces: FloatArray, pairs: IntArray, reach: float) -> EdgeContact:
     """The candidate ``pairs`` whose edges touch or cross within ``reach``: not parallel,
-    their lines' closest points on both edges (s, t in [0, 1]), ``|gap| <= reach``, and
-    neither edge inside a flat face (see :data:`FLAT`).
+    neither inside a flat face (see :data:`FLAT`), the common normal in both edges' cones
+    (see the module docstring), their lines' closest points on both edges (s, t in [0, 1])
+    and ``|gap| <= reach``.
 
     Parameters
     ----------
@@ -105,9 +112,8 @@ def edge_contacts(x: FloatArray, first: IntArray, first_normals: FloatArray, sec
         Positions.
     first, second : ndarray of int, shape (e1, 2) and (e2, 2)
         The two surfaces' edges (particle indices; either direction).
-    first_normals, second_normals : ndarray, shape (e1, 3) and (e2, 3)
-        Their pseudo-normals (the sum of each edge's two triangles' outward unit normals,
-        :func:`flexbody.surface_contact.edge_pseudonormals`).
+    first_faces, second_faces : ndarray, shape (e1, 2, 3) and (e2, 2, 3)
+        The outward unit normals of each edge's two triangles.
     pairs : ndarray of int, shape (k, 2)
         Candidate (first row, second row) pairs (:func:`edge_candidates`).
     reach : float
@@ -126,15 +132,274 @@ def edge_contacts(x: FloatArray, first: IntArray, first_normals: FloatArray, sec
     c, d = x[second[pairs[:, 1], 0]], x[second[pairs[:, 1], 1]]
     common = np.cross(b - a, d - c)
     size = np.linalg.norm(b - a, axis=1) * np.linalg.norm(d - c, axis=1)
-    crossing = np.linalg.norm(common, axis=1) > PARALLEL * size
-    for normals, rows in ((first_normals, pairs[:, 0]), (second_normals, pairs[:, 1])):
-        crossing &= np.linalg.norm(normals[rows], axis=1) <= 2.0 - FLAT
-    facing = np.einsum("kd,kd->k", common, second_normals[pairs[:, 1]] - first_normals[pairs[:, 0]])
-    side = np.where(facing >= 0.0, 1.0, -1.0)
-    keep = np.flatnonzero(crossing)
+    length = np.linalg.norm(common, axis=1)
+    crossing = length > PARALLEL * size
+    faces_a, faces_b = first_faces[pairs[:, 0]], second_faces[pairs[:, 1]]
+    for faces in (faces_a, faces_b):
+        crossing &= np.linalg.norm(faces.sum(axis=1), axis=1) <= 2.0 - FLAT
+    n = common / np.where(crossing, length, 1.0)[:, None]
+    forward = _in_cone(n, faces_b) & _in_cone(-n, faces_a)  # n out of the second body, into the first
+    backward = _in_cone(-n, faces_b) & _in_cone(n, faces_a)
+    side = np.where(forward, 1.0, -1.0)
+    keep = np.flatnonzero(crossing & (forward | backward))
     gap, parameters, normal, _ = _kernels_module().edge_3d(a[keep].T, b[keep].T, c[keep].T, d[keep].T,
                                                             side[keep][None, :])
     gap, parameters, normal = gap[0], parameters.T, normal.T
     on_both = (parameters >= 0.0).all(axis=1) & (parameters <= 1.0).all(axis=1) & (np.abs(gap) <= reach)
     keep = keep[on_both]
-    return EdgeContact(pairs[keep], side[keep], gap[on_both], parameters[on_both], normal[on_both])
+    return EdgeContact(pairs[keep], side[keep], gap[on_both], parameters[on_both], normal[on_both], keep)
+
+
+class EdgeTerms(NamedTuple):
+    """Edge contacts against the edges they are held on, k of them (the kernels' outputs).
+
+    ``gap`` (k,) m; ``coefficients`` (k, 4): the row's weights on its points ``[a, b, c,
+    d]``, ``[1 - s, s, -(1 - t), -t]`` (times ``normal`` (k, 3)); ``rate`` (k,) m/s;
+    ``bias`` (k,) m/s^2, the gap acceleration's velocity term; ``margin`` (k,) m: how far
+    the closest points are inside both edges (``min(s, 1 - s) |b - a|`` and ``min(t, 1 - t)
+    |d - c|``, the lesser), 0 where one reaches an end."""
+
+    gap: FloatArray
+    coefficients: FloatArray
+    normal: FloatArray
+    rate: FloatArray
+    bias: FloatArray
+    margin: FloatArray
+
+
+class EdgeSlots:
+    """The edge contacts of a 3D scene: ``PER_EDGE`` rows for each convex surface edge of
+    the first body of a pair that may touch against the second body's convex edges (one
+    way round: an edge pair is one contact).  Two, because one edge can lie across two
+    edges of the other body at once (a bar's edge across a block's two rims).
+
+    Parameters
+    ----------
+    elements : ndarray of int, shape (m, 3)
+        Every body's surface triangles (global particle indices, outward).
+    element_body : ndarray of int, shape (m,)
+    pairs : list of (int, int)
+        The pairs of bodies whose edges touch (scene order); each gets its rows in order.
+    x0 : ndarray, shape (n, 3)
+        The initial positions: the edges convex there are the ones that touch
+        (:func:`convex_edges`; a flat face's diagonals and a body's concave edges never do).
+
+    Attributes
+    ----------
+    edges : ndarray of int, shape (E, 2)
+        The convex edges of the bodies in ``pairs`` (sorted particle indices).
+    edge_body : ndarray of int, shape (E,)
+    own, body, pair : ndarray of int, shape (ns,)
+        Each row's edge (a row of ``edges``), the body it may touch and its pair (index in
+        ``pairs``); row ``j + n_primary`` is row j's twin.
+    """
+
+    PER_EDGE = 2
+
+    def __init__(self, elements: IntArray, element_body: IntArray, pairs: list[tuple[int, int]],
+                 x0: FloatArray) -> None:
+        elements = np.asarray(elements, np.intp)
+        bodies = sorted({b for pair in pairs for b in pair})
+        edges, faces, owner = [], [], []
+        for b in bodies:
+            rows = np.flatnonzero(element_body == b)
+            found, two = surface_edges(elements[rows])
+            convex = convex_edges(x0, elements[rows], found, two)
+            edges.append(found[convex])
+            faces.append(rows[two[convex]])
+            owner.append(np.full(int(convex.sum()), b))
+        self.edges = np.concatenate(edges + [np.zeros((0, 2), np.intp)]).astype(np.intp)
+        self.edge_faces = np.concatenate(faces + [np.zeros((0, 2), np.intp)]).astype(np.intp)  # rows of elements
+        self.edge_body = np.concatenate(owner + [np.zeros(0, np.intp)]).astype(np.intp)
+        own, body, pair = [], [], []
+        for k, (first, second) in enumerate(pairs):
+            mine = np.flatnonzero(self.edge_body == first)
+            own.append(mine)
+            body.append(np.full(len(mine), second))
+            pair.append(np.full(len(mine), k))
+        self.n_primary = sum(len(a) for a in own)
+        self.own = np.tile(np.concatenate(own + [np.zeros(0, np.intp)]), self.PER_EDGE).astype(np.intp)
+        self.body = np.tile(np.concatenate(body + [np.zeros(0, np.intp)]), self.PER_EDGE).astype(np.intp)
+        self.pair = np.tile(np.concatenate(pair + [np.zeros(0, np.intp)]), self.PER_EDGE).astype(np.intp)
+        self._elements = elements
+        self._kept: tuple | None = None  # (reach, the edges' ends when made, start, other): see _candidates
+        self.rebuilds = 0
+        self._body_elements = {b: np.flatnonzero(element_body == b) for b in bodies}
+        self._half = 0.5 * float(np.linalg.norm(x0[self.edges[:, 1]] - x0[self.edges[:, 0]], axis=1).max()) \
+            if len(self.edges) else 0.0
+
+    def __len__(self) -> int:
+        return len(self.own)
+
+    def twins(self, rows: IntArray) -> IntArray:
+        """Each row's other row of the same edge and body, shape (k,)."""
+        return (np.asarray(rows) + self.n_primary) % len(self.own)
+
+    def face_normals(self, x: FloatArray) -> FloatArray:
+        """The outward unit normals of each edge's two triangles at ``x``, (E, 2, 3)."""
+        a, b, c = (x[self._elements[self.edge_faces, k]] for k in range(3))
+        normal = np.cross(b - a, c - a)
+        return normal / np.linalg.norm(normal, axis=2, keepdims=True)
+
+    def points(self, rows: IntArray, against: IntArray) -> IntArray:
+        """The particles each row moves, ``[a, b, c, d]``: its edge, then the edge it is held
+        against (``against`` (k,), rows of ``edges``), shape (k, 4)."""
+        return np.column_stack([self.edges[self.own[rows]], self.edges[against]])
+
+    def closest(self, x: FloatArray, rows: IntArray, against: IntArray, reach: float
+                ) -> tuple[FloatArray, IntArray, FloatArray]:
+        """For each of ``rows`` (k,), the edge of its body its edge touches or crosses with
+        the least gap (:func:`edge_contacts` within ``reach``), leaving out the one its twin
+        holds (``against``: every row's edge held against, -1: none, shape (ns,)); a free
+        twin of a free row leaves out the row's: the row takes the closest edge, the twin
+        the next.
+
+        Returns
+        -------
+        gap : ndarray, shape (k,)
+            ``reach`` where there is none.
+        edge : ndarray of int, shape (k,)
+            A row of ``edges``, -1 where there is none.
+        side : ndarray, shape (k,)
+        """
+        rows = np.asarray(rows, np.intp)
+        gap, edge, side = np.full(len(rows), float(reach)), np.full(len(rows), -1, np.intp), np.zeros(len(rows))
+        if not len(rows) or not len(self.edges):
+            return gap, edge, side
+        left_out = np.asarray(against)[self.twins(rows)].copy()
+        second = (rows >= self.n_primary) & (left_out < 0)
+        if second.any():
+            left_out[second] = self.closest(x, rows[second] - self.n_primary, against, reach)[1]
+        which, other = self._candidates(x, rows % self.n_primary, reach)
+        # the kept list's pairs whose edges' boxes, grown by reach, overlap now (most do not)
+        own, theirs = x[self.edges[self.own[rows[which]]]], x[self.edges[other]]
+        keep = (other != left_out[which]) & (own.min(axis=1) <= theirs.max(axis=1) + reach).all(axis=1) \
+            & (theirs.min(axis=1) <= own.max(axis=1) + reach).all(axis=1)
+        which, other = which[keep], other[keep]
+        normals = self.face_normals(x)
+        found = edge_contacts(x, self.edges, normals, self.edges, normals,
+                              np.column_stack([self.own[rows[which]], other]), reach)
+        which = which[found.index]
+        real = self._crossing_inside(x, found, 1e-6 * reach)
+        found = EdgeContact(*(getattr(found, f)[real] for f in ("pair", "side", "gap", "parameters", "normal", "index")))
+        which = which[real]
+        order = np.lexsort((found.gap, which))  # by row, least gap first
+        first = order[np.r_[True, which[order][1:] != which[order][:-1]]] if len(order) else order
+        gap[which[first]] = found.gap[first]
+        edge[which[first]] = found.pair[first, 1]
+        side[which[first]] = found.side[first]
+        return gap, edge, side
+
+    def _candidates(self, x: FloatArray, primary: IntArray, reach: float) -> tuple[IntArray, IntArray]:
+        """The candidate (i, edge) pairs of rows ``primary`` (k,; rows below ``n_primary``):
+        ``i`` indexes ``primary``, ``edge`` is an edge of its body whose midpoint is within
+        ``reach`` plus both edges' half-lengths (a superset).  From a kept list (a Verlet
+        list, as :class:`flexbody.broadphase.CandidateList`'s): made with a skin of
+        ``reach`` around that and made again once an edge's end has moved half the skin."""
+        from scipy.spatial import cKDTree
+
+        kept = self._kept
+        ends = x[self.edges].reshape(-1, 3)
+        if kept is None or kept[0] != reach or np.max(np.linalg.norm(ends - kept[1], axis=1), initial=0.0) > 0.5 * reach:
+            middle = 0.5 * (x[self.edges[:, 0]] + x[self.edges[:, 1]])
+            own = middle[self.own[: self.n_primary]]
+            near = cKDTree(middle).query_ball_point(own, 2.0 * reach + 2.0 * self._half)
+            row = np.repeat(np.arange(self.n_primary), [len(k) for k in near])
+            other = np.concatenate([np.asarray(k, np.intp) for k in near] + [np.zeros(0, np.intp)])
+            keep = self.edge_body[other] == self.body[row]
+            row, other = row[keep], other[keep]
+            start = np.searchsorted(row, np.arange(self.n_primary + 1))
+            self._kept = kept = (reach, ends.copy(), start, other)
+            self.rebuilds += 1
+        start, other = kept[2], kept[3]
+        counts = start[primary + 1] - start[primary]
+        which = np.repeat(np.arange(len(primary)), counts)
+        offset = np.arange(len(which)) - np.repeat(np.cumsum(counts) - counts, counts)
+        return which, other[np.repeat(start[primary], counts) + offset]
+
+    def _crossing_inside(self, x: FloatArray, found: EdgeContact, slack: float) -> np.ndarray:
+        """Which of the ``found`` pairs are apart (gap >= 0) or crossed where neither closest
+        point is outside the other edge's body by more than ``slack`` (m; round-off of a
+        crossing just begun), bool (k,).  A negative distance of two lines is a crossing
+        only there: with their common normal in both edges' cones, two edges of bodies far
+        apart along it (a block's rim under a small tetrahedron's far side) also read one,
+        as deep as the bodies are across."""
+        from .surface_contact import closest_features
+
+        out = found.gap >= 0.0
+        crossed = np.flatnonzero(~out)
+        if not len(crossed):
+            return out
+        s, t = found.parameters[crossed].T
+        first, second = self.edges[found.pair[crossed, 0]], self.edges[found.pair[crossed, 1]]
+        points = [x[first[:, 0]] + s[:, None] * (x[first[:, 1]] - x[first[:, 0]]),
+                  x[second[:, 0]] + t[:, None] * (x[second[:, 1]] - x[second[:, 0]])]
+        inside = np.ones(len(crossed), bool)
+        for point, other_edge in zip(points, (found.pair[crossed, 1], found.pair[crossed, 0])):
+            for k, edge in enumerate(other_edge):  # each point against the whole surface of the other body
+                elements = self._body_elements[int(self.edge_body[edge])]
+                pairs = np.column_stack([np.zeros(len(elements), np.intp), elements])
+                inside[k] &= closest_features(point[k : k + 1], x, self._elements, pairs).gap[0] <= slack
+        out[crossed] = inside
+        return out
+
+    def terms(self, x: FloatArray, v: FloatArray, rows: IntArray, against: IntArray, side: FloatArray) -> EdgeTerms:
+        """``rows`` (k,) against the edges ``against`` (k,) on the sides ``side`` (k,)."""
+        from .assembly import _kernels_module
+
+        kernels = _kernels_module()
+        points = self.points(rows, against)
+        ends = [x[points[:, j]].T for j in range(4)]
+        rates = [v[points[:, j]].T for j in range(4)]
+        sides = np.asarray(side, float)[None, :]
+        gap, parameters, normal, _ = kernels.edge_3d(*ends, sides)
+        rate, _, bias = kernels.edge_3d_velocity(*ends, sides, *rates)
+        s, t = parameters
+        coefficients = np.column_stack([1.0 - s, s, -(1.0 - t), -t])
+        lengths = [np.linalg.norm(x[points[:, 1 + 2 * j]] - x[points[:, 2 * j]], axis=1) for j in range(2)]
+        margin = np.minimum(np.minimum(s, 1.0 - s) * lengths[0], np.minimum(t, 1.0 - t) * lengths[1])
+        return EdgeTerms(gap[0], coefficients, normal.T, rate[0], bias[0], margin)
+
+
+def _in_cone(n: FloatArray, faces: FloatArray) -> np.ndarray:
+    """Whether each unit vector ``n`` (k, 3), normal to an edge, lies in the arc between its
+    two triangles' unit normals ``faces`` (k, 2, 3): ``n = alpha n1 + beta n2`` with alpha
+    and beta >= 0 (solved by dot products, up to the positive 1 / (1 - (n1 . n2)^2)), bool (k,)."""
+    n1, n2 = faces[:, 0], faces[:, 1]
+    c = np.einsum("kd,kd->k", n1, n2)
+    a1, a2 = np.einsum("kd,kd->k", n, n1), np.einsum("kd,kd->k", n, n2)
+    return (a1 - c * a2 >= 0.0) & (a2 - c * a1 >= 0.0) & (a1 + a2 > 0.0)
+
+
+def surface_edges(triangles: IntArray) -> tuple[IntArray, IntArray]:
+    """The edges of a closed triangle surface and the two triangles of each.
+
+    Returns
+    -------
+    edges : ndarray of int, shape (e, 2)
+        Sorted particle pairs, the rows sorted.
+    faces : ndarray of int, shape (e, 2)
+        Each edge's two rows of ``triangles``.
+    """
+    triangles = np.asarray(triangles, np.intp)
+    ends = np.sort(np.concatenate([triangles[:, [k, (k + 1) % 3]] for k in range(3)]), axis=1)
+    face = np.tile(np.arange(len(triangles)), 3)
+    order = np.lexsort((ends[:, 1], ends[:, 0]))
+    ends, face = ends[order], face[order]  # each edge twice on a closed surface, side by side
+    return ends[::2].copy(), face.reshape(-1, 2)
+
+
+def convex_edges(x: FloatArray, triangles: IntArray, edges: IntArray, faces: IntArray) -> np.ndarray:
+    """Which ``edges`` (e, 2) of a closed outward surface, with their two triangles ``faces``
+    (e, 2), are convex at ``x``: creased (not in a flat face, :data:`FLAT`) and the second
+    triangle's third vertex below the first's plane, bool (e,)."""
+    triangles = np.asarray(triangles, np.intp)
+    first, second = triangles[faces[:, 0]], triangles[faces[:, 1]]
+    normals = np.cross(x[first[:, 1]] - x[first[:, 0]], x[first[:, 2]] - x[first[:, 0]])
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    other = np.cross(x[second[:, 1]] - x[second[:, 0]], x[second[:, 2]] - x[second[:, 0]])
+    other /= np.linalg.norm(other, axis=1, keepdims=True)
+    third = np.array([row[~np.isin(row, edge)][0] for row, edge in zip(second, edges)], np.intp)
+    below = np.einsum("kd,kd->k", normals, x[third] - x[first[:, 0]]) < 0.0
+    return below & (np.linalg.norm(normals + other, axis=1) <= 2.0 - FLAT)
+

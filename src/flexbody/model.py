@@ -585,11 +585,12 @@ MADE_FOR = ("topology", "contact laws", "masses", "initial positions of bodies t
 
 def made_for(scene: Scene) -> tuple:
     """What a model loaded for ``scene`` keeps of it, in the order of :data:`MADE_FOR`: the
-    topology, the contact laws (the grounds' and the pairs' friction and restitution), the
+    topology, the contact laws (the grounds' and the pairs' friction and restitution, and
+    whether a pair's edges touch), the
     particle masses and, where bodies may touch, their initial positions (the contact
     search's reach).  Another scene with the same runs correctly on the same model."""
     laws = tuple((g.friction, g.restitution) for g in scene.grounds) + tuple(
-        (c.bodies, c.friction, c.restitution) for c in scene.contacts)
+        (c.bodies, c.friction, c.restitution, c.edges) for c in scene.contacts)
     positions = scene.initial_positions().tobytes() if couples_contacts(scene) else b""
     return scene.topology(), laws, scene.masses.tobytes(), positions
 

@@ -24,6 +24,7 @@ self-contact, ``flexbody run`` refuses, naming the bodies)::
     bodies = ["ball", "floor"]   # two body names (the same twice: needs self_contact = true)
     friction = 0.0         # Coulomb mu >= 0, default 0
     restitution = 0.0      # Newton e in [0, 1], default 0
+    edges = false          # default; true (3D, friction 0): edges touch edges too
 
 Pairs that touch: each ``[[contacts]]`` entry (each pair once), then every pair of bodies
 with ``collide = true`` and every body with ``self_contact = true`` not listed there, with
@@ -76,7 +77,7 @@ BODY_KEYS = (
 )  # fmt: skip
 #: Keys of a body that only a flexible body uses (a rigid body has no springs or dampers).
 ELASTIC_KEYS = ("stiffness", "damping", "damper", "rest_lengths")
-CONTACT_KEYS = ("bodies", "friction", "restitution")
+CONTACT_KEYS = ("bodies", "friction", "restitution", "edges")
 SIMULATION_KEYS = (
     "t_end", "output_dt", "method", "rtol", "atol", "impact", "impact_dt", "formulation", "backend",
     "chatter_impacts",
@@ -255,11 +256,16 @@ class BodyContact:
         Coulomb's mu between the two (static = kinetic); default 0.
     restitution : float
         Newton's e between the two, in [0, 1]; default 0 (plastic).
+    edges : bool
+        Whether their surfaces' edges touch each other too (3D, frictionless:
+        :class:`flexbody.edge_contact.EdgeSlots`); default False: only a particle of one
+        touches the other's surface, and edges that meet pass through each other (measured).
     """
 
     bodies: tuple[int, int]
     friction: float = 0.0
     restitution: float = 0.0
+    edges: bool = False
 
 
 @dataclass(frozen=True)
@@ -457,7 +463,8 @@ def _build(data: dict[str, Any], source: str, default_name: str, folder: Path | 
             body = _body(TableReader(table, f"bodies[{b}]", problems, BODY_KEYS), dim, folder)
             if body is not None:
                 bodies.append(body)
-    listed = _listed_contacts(top.raw("contacts", None), raw_bodies, problems)
+    listed = _listed_contacts(top.raw("contacts", None), raw_bodies, problems, dim,
+                              any(g.friction > 0.0 for g in grounds or []))
     simulation = _simulation(TableReader(top.raw("simulation", None), "simulation", problems, SIMULATION_KEYS))
     top.finish()
     total = sum(b.n_particles for b in bodies)
@@ -1017,7 +1024,8 @@ def _overdamped_links(bodies: list[Body]) -> list[str]:
 # --------------------------------------------------------------------------- bodies touching
 
 
-def _listed_contacts(raw: Any, raw_bodies: Any, problems: Problems) -> list[BodyContact] | None:
+def _listed_contacts(raw: Any, raw_bodies: Any, problems: Problems, dim: int,
+                     rough_grounds: bool) -> list[BodyContact] | None:
     """The ``[[contacts]]`` tables, checked against the body names (read from the raw tables,
     so a mistake in a body does not hide one here); None when any is wrong."""
     if raw is None:
@@ -1038,16 +1046,29 @@ def _listed_contacts(raw: Any, raw_bodies: Any, problems: Problems) -> list[Body
         friction = r.number("friction", 0.0, check=lambda v: v >= 0.0, rule="must be >= 0 (Coulomb's mu)")
         restitution = r.number("restitution", 0.0, check=lambda v: 0.0 <= v <= 1.0,
                                rule="must be in [0, 1] (Newton's e: 0 plastic, 1 elastic)")
+        edges = r.boolean("edges", False)
+        if edges and dim != 3:
+            r.fail("edges", edges, "applies to 3D bodies only (edges of triangle surfaces; a 2D boundary's "
+                   "segments meet at particles)")
+            edges = None
+        elif edges and (friction or rough_grounds):
+            r.fail("edges", edges, "needs friction = 0 here and on every ground (edge contacts are frictionless so "
+                   f"far; this pair's friction = {friction}, grounds with friction: {'yes' if rough_grounds else 'no'})")
+            edges = None
         r.finish()
         indices = _contact_bodies(r, pair, names, self_contact)
         if indices is not None and indices in where:
             r.fail("bodies", pair, f"this pair is already listed in contacts[{where[indices]}] (list each pair once)")
             indices = None
-        if indices is None or friction is None or restitution is None:
+        if indices is None or friction is None or restitution is None or edges is None:
+            ok = False
+            continue
+        if edges and indices[0] == indices[1]:
+            r.fail("edges", edges, "applies between two bodies, not to a body's self-contact")
             ok = False
             continue
         where[indices] = k
-        out.append(BodyContact(bodies=indices, friction=friction, restitution=restitution))
+        out.append(BodyContact(bodies=indices, friction=friction, restitution=restitution, edges=edges))
     return out if ok else None
 
 
