@@ -168,3 +168,35 @@ def test_candidates_hold_every_pair_within_reach(rng):
         assert len(within) > 0
         assert within <= candidates
         assert len(candidates) < 0.1 * closest.size
+
+
+def test_an_edge_across_two_rims_is_held_by_its_two_rows():
+    """A bar's bottom edges (along x) lie across a cube's two top rims (along y, at x = 0
+    and 1), 1 cm above: each bottom edge has two rows, the first takes one rim and its twin
+    the other, both 1 cm apart; a row whose rules find no edge (its twin holding the only
+    one in reach) is held against the nearest line, on the side that keeps it apart."""
+    from flexbody.edge_contact import EdgeSlots
+
+    h = 0.01
+    bar = np.array([[x, y, z] for x in (-1.0, 2.0) for y in (0.4, 0.6) for z in (1.0 + h, 1.2)])
+    x = np.vstack([bar, CUBE])
+    elements = np.vstack([hull(bar), hull(CUBE) + 8])
+    element_body = np.repeat([0, 1], [len(hull(bar)), len(hull(CUBE))])
+    slots = EdgeSlots(elements, element_body, [(0, 1)], x)
+    assert slots.n_primary == 12 and len(slots) == 24  # the bar's 12 edges, twice
+    bottom = [r for r in range(12) if np.allclose(x[slots.edges[slots.own[r]], 2], 1.0 + h)
+              and np.ptp(x[slots.edges[slots.own[r]], 0]) == 3.0]
+    assert len(bottom) == 2
+    free = np.full(len(slots), -1)
+    for row in bottom:
+        gap, edge, side = slots.closest(x, np.array([row, row + slots.n_primary]), free, reach=0.05)
+        np.testing.assert_allclose(gap, h, rtol=1e-12)
+        rims = x[slots.edges[edge]]
+        assert sorted(rims[:, 0, 0].tolist()) == [0.0, 1.0] and np.allclose(rims[:, :, 2], 1.0)
+        held = free.copy()
+        held[row] = edge[0]  # the row holds the first rim: its twin finds the other
+        assert slots.closest(x, np.array([row + slots.n_primary]), held, reach=0.05)[1][0] == edge[1]
+        held[row + slots.n_primary] = edge[1]
+        # the twin's rim taken: the row with no strict answer is held on the nearest line, apart
+        lone, lone_side = slots.nearest(x, np.array([row]), held)
+        assert lone[0] == edge[0] and lone_side[0] == side[0]  # the row's own rim, nearest, apart by h

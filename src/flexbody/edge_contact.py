@@ -246,13 +246,15 @@ class EdgeSlots:
         against (``against`` (k,), rows of ``edges``), shape (k, 4)."""
         return np.column_stack([self.edges[self.own[rows]], self.edges[against]])
 
-    def closest(self, x: FloatArray, rows: IntArray, against: IntArray, reach: float
+    def closest(self, x: FloatArray, rows: IntArray, against: IntArray, reach: float, loose: bool = False
                 ) -> tuple[FloatArray, IntArray, FloatArray]:
         """For each of ``rows`` (k,), the edge of its body its edge touches or crosses with
         the least gap (:func:`edge_contacts` within ``reach``), leaving out the one its twin
         holds (``against``: every row's edge held against, -1: none, shape (ns,)); a free
         twin of a free row leaves out the row's: the row takes the closest edge, the twin
-        the next.
+        the next.  ``loose``: only an edge the twin holds is left out, and a crossing needs
+        no inside test (an instant's fall-back for a row that fired but whose edge the
+        strict search no longer finds).
 
         Returns
         -------
@@ -267,7 +269,7 @@ class EdgeSlots:
         if not len(rows) or not len(self.edges):
             return gap, edge, side
         left_out = np.asarray(against)[self.twins(rows)].copy()
-        second = (rows >= self.n_primary) & (left_out < 0)
+        second = (rows >= self.n_primary) & (left_out < 0) & (not loose)
         if second.any():
             left_out[second] = self.closest(x, rows[second] - self.n_primary, against, reach)[1]
         which, other = self._candidates(x, rows % self.n_primary, reach)
@@ -280,7 +282,7 @@ class EdgeSlots:
         found = edge_contacts(x, self.edges, normals, self.edges, normals,
                               np.column_stack([self.own[rows[which]], other]), reach)
         which = which[found.index]
-        real = self._crossing_inside(x, found, 1e-6 * reach)
+        real = np.ones(len(found.gap), bool) if loose else self._crossing_inside(x, found, 1e-6 * reach)
         found = EdgeContact(*(getattr(found, f)[real] for f in ("pair", "side", "gap", "parameters", "normal", "index")))
         which = which[real]
         order = np.lexsort((found.gap, which))  # by row, least gap first
@@ -289,6 +291,35 @@ class EdgeSlots:
         edge[which[first]] = found.pair[first, 1]
         side[which[first]] = found.side[first]
         return gap, edge, side
+
+    def nearest(self, x: FloatArray, rows: IntArray, against: IntArray) -> tuple[IntArray, FloatArray]:
+        """For each of ``rows`` (k,), the edge of its body (not the one its twin holds) whose
+        line is nearest its edge's line with the closest points on both edges (or the
+        nearest line at all), on the side that makes the gap >= 0: a row the rules of
+        :meth:`closest` leave without an edge, held harmlessly apart.  Returns the edges
+        (rows of ``edges``) and sides, shape (k,) each."""
+        from .assembly import _kernels_module
+
+        kernels = _kernels_module()
+        edge, side = np.empty(len(rows), np.intp), np.empty(len(rows))
+        for k, row in enumerate(np.asarray(rows, np.intp).tolist()):
+            others = np.flatnonzero((self.edge_body == self.body[row]) & (np.arange(len(self.edges)) !=
+                                                                             against[self.twins(np.array([row]))[0]]))
+            a, b = (np.repeat(x[self.edges[self.own[row], j]][:, None], len(others), axis=1) for j in (0, 1))
+            c, d = x[self.edges[others, 0]].T, x[self.edges[others, 1]].T
+            common = np.cross((b - a).T, (d - c).T)
+            usable = np.linalg.norm(common, axis=1) > PARALLEL * np.linalg.norm((b - a).T, axis=1) \
+                * np.linalg.norm((d - c).T, axis=1)
+            gap, parameters = np.full(len(others), np.inf), np.zeros((2, len(others)))
+            if usable.any():
+                g, st, _, _ = kernels.edge_3d(a[:, usable], b[:, usable], c[:, usable], d[:, usable],
+                                              np.ones((1, int(usable.sum()))))
+                gap[usable], parameters[:, usable] = g[0], st
+            inside = ((parameters >= 0.0) & (parameters <= 1.0)).all(axis=0)
+            score = np.abs(gap) + np.where(inside, 0.0, np.inf)
+            best = int(np.argmin(score)) if np.isfinite(score).any() else int(np.argmin(np.abs(gap)))
+            edge[k], side[k] = others[best], 1.0 if gap[best] >= 0.0 else -1.0
+        return edge, side
 
     def _candidates(self, x: FloatArray, primary: IntArray, reach: float) -> tuple[IntArray, IntArray]:
         """The candidate (i, edge) pairs of rows ``primary`` (k,; rows below ``n_primary``):
