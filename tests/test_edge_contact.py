@@ -200,3 +200,24 @@ def test_an_edge_across_two_rims_is_held_by_its_two_rows():
         # the twin's rim taken: the row with no strict answer is held on the nearest line, apart
         lone, lone_side = slots.nearest(x, np.array([row]), held)
         assert lone[0] == edge[0] and lone_side[0] == side[0]  # the row's own rim, nearest, apart by h
+
+
+def test_an_edge_lying_nearly_on_a_face_crosses_the_rim_as_an_edge_contact():
+    """An edge laid over a cube's top front rim 2 degrees off lying flat on the top face:
+    the common normal is 2 degrees outside the rim's arc (+z to -y), yet the pair is an edge
+    contact (within CONE_SLACK): gap 1 mm, n the common normal.  Past 5 degrees it is not
+    (the top face's vertices hold such an edge)."""
+    c, d = np.array([0.0, 0.0, 1.0]), np.array([1.0, 0.0, 1.0])  # the rim along x, faces +z (top) and -y (front)
+    faces = np.array([[[0.0, 0.0, 1.0], [0.0, -1.0, 0.0]]])
+    for degrees, found in ((2.0, True), (8.0, False)):
+        tilt = np.radians(degrees)
+        n = np.array([0.0, np.sin(tilt), np.cos(tilt)])  # beyond +z, away from -y
+        along = np.array([0.0, np.cos(tilt), -np.sin(tilt)])
+        p = 0.5 * (c + d) + 1e-3 * n
+        x = np.vstack([c, d, p - 0.02 * along, p + 0.02 * along])
+        own = np.array([[rotation_matrix(along * angle) @ -n for angle in (-0.3, 0.3)]])
+        got = edge_contacts(x, np.array([[2, 3]]), own, np.array([[0, 1]]), faces, np.array([[0, 0]]), reach=0.01)
+        assert (len(got.gap) == 1) == found
+        if found:
+            assert got.gap[0] == pytest.approx(1e-3, rel=1e-9)
+            np.testing.assert_allclose(got.normal[0], n, atol=1e-12)
