@@ -473,7 +473,11 @@ class _Run:
 
         model.forget_free(phases.phase == FREE)  # a free contact between bodies picks its element at its next instant
         # also at a segment's start: a pile's segments are often one step long, each ending at an event
-        self.put_back()
+        if not self.put_back() and model.n_slots > model.first_edge:
+            # A free edge contact read its gap on the edge the instant held it to; free, it
+            # reads the closest edge by its rules, which can start at or below its floor
+            # (a pile: -1e-16 m, then 1.6e-7 m through unseen): armed below it again.
+            phases.arm(model.gaps(self.y[: model.nq], self.p), self.gap_tolerance)
         # first: it clears the directions of earlier slides, which the stepper's first stage must not see
         events = EventFunctions(model, self.p, phases, self.force_tolerance, self.gap_tolerance, self.speed_tolerance,
                                 None if s.method in IMPLICIT else self.contact_masses)

@@ -57,6 +57,7 @@ class Model:
     #: Contacts between bodies, past the ground ones (flexbody.body_contact), and each one's
     #: index in ``scene.contacts``: none unless bodies may touch each other.
     n_slots = 0
+    first_edge = 0  # the first edge contact's slot (n_slots: none)
     slot_pair = np.zeros(0, np.intp)
     #: Contact laws (Coulomb mu, Newton e) per ground, then per pair of bodies, shape (k, 2):
     #: none where the model does not keep them.
