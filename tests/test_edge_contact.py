@@ -114,8 +114,10 @@ def test_the_gaps_sign_says_whether_the_first_edge_is_inside_the_second_body(rng
         assert mine.sum() == 1
         assert found.gap[mine][0] == pytest.approx(g, abs=1e-12)
         np.testing.assert_allclose(found.parameters[mine][0], [s, t], atol=1e-9)
-        inside = (np.einsum("fd,fd->f", face_normals, p - face_points) < 0.0).all()
-        assert inside == (g < 0.0)
+        # the point the function says is closest, inside the cube exactly where its gap is negative
+        closest = a + found.parameters[mine][0, 0] * (b - a)
+        inside = (np.einsum("fd,fd->f", face_normals, closest - face_points) < 0.0).all()
+        assert inside == (found.gap[mine][0] < 0.0)
         checked += 1
     assert checked > 100
 
@@ -221,3 +223,38 @@ def test_an_edge_lying_nearly_on_a_face_crosses_the_rim_as_an_edge_contact():
         if found:
             assert got.gap[0] == pytest.approx(1e-3, rel=1e-9)
             np.testing.assert_allclose(got.normal[0], n, atol=1e-12)
+
+
+def test_the_kept_candidate_list_holds_every_pair_within_reach_as_the_bodies_move(rng):
+    """EdgeSlots' Verlet list (what the runtime searches): for two 60-point spheres moving
+    towards each other, turning and stretching, at every position it holds each row's
+    pairs with the other body's edges whose segments come within the reach (brute force,
+    21 x 21 points along each pair), though it was made once and renewed only when needed."""
+    from flexbody.edge_contact import EdgeSlots
+
+    first = sphere_points(60, 0.3, [0.0, 0.0, 0.0])
+    second = sphere_points(60, 0.3, [0.0, 0.0, 0.0]) @ rotation_matrix([0.3, -0.2, 0.5]).T
+    x0 = np.vstack([first, second + [0.62, 0.0, 0.0]])
+    elements = np.vstack([hull(first), hull(second) + 60])
+    slots = EdgeSlots(elements, np.repeat([0, 1], len(hull(first))), [(0, 1)], x0)
+    along = np.linspace(0.0, 1.0, 21)
+    reach = 0.02
+    checked = 0
+    for step in range(12):
+        x = x0.copy()
+        x[60:] += [-0.004 * step, 0.001 * step, 0.0]  # closing in
+        x[60:] = (x[60:] - x[60:].mean(axis=0)) * (1.0 + 0.002 * step) + x[60:].mean(axis=0)  # stretching
+        which, other = slots._candidates(x, np.arange(slots.n_primary), reach)
+        kept = set(zip(which.tolist(), other.tolist()))
+        ends = x[slots.edges]
+        for row in range(slots.n_primary):
+            a, b = ends[slots.own[row]]
+            on_row = a + along[:, None] * (b - a)
+            theirs = np.flatnonzero(slots.edge_body == 1)
+            on_theirs = ends[theirs, :1] + along[None, :, None] * (ends[theirs, 1:] - ends[theirs, :1])
+            distance = np.linalg.norm(on_row[None, :, None] - on_theirs[:, None], axis=3).min(axis=(1, 2))
+            for edge in theirs[distance <= reach]:
+                assert (row, int(edge)) in kept
+                checked += 1
+    assert checked > 20  # the spheres came within reach
+    assert 1 <= slots.rebuilds < 12  # kept between steps, renewed as the bodies moved

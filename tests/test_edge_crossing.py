@@ -137,6 +137,35 @@ def test_edge_contacts_asked_for_where_they_cannot_be_are_refused_with_the_rule(
         flexbody.load_scene(table)
 
 
+def test_edge_contacts_beside_a_pair_with_friction_are_refused():
+    """An edge row coupled to a rough row would need tangent rows of its own."""
+    table = _crossed_boxes(DROP, edges=True)
+    table["bodies"].append({**table["bodies"][1], "name": "c", "position": [0.5, 0.0, 0.5]})
+    table["contacts"].append({"bodies": ["a", "c"], "friction": 0.4})
+    with pytest.raises(flexbody.SceneError, match=r"contacts\[0\]\.edges.*friction = 0 on every pair.*contacts\[1\]"):
+        flexbody.load_scene(table)
+
+
+def test_a_recorded_sample_restores_an_edge_rows_side_with_its_edge():
+    """An edge row's held edge and side are one code (what the driver records per sample):
+    held on a sample's code, the row's normal is that side's, whatever it holds now."""
+    from flexbody.model import load_model
+
+    scene = flexbody.load_scene(_crossed_boxes(DROP, edges=True))
+    model = load_model(scene)
+    x = scene.initial_positions()
+    row = model.first_edge
+    edge = model._edge_slots.closest(x, np.array([0]), np.full(model.n_slots - row, -1), 1.0, loose=True)[1][0]
+    up, down = model._edge_slots.encode([edge, edge], [1.0, -1.0])
+    model.element_of[row] = up
+    normal = model._edge_terms(np.array([row]), x, np.zeros_like(x)).normal[0]
+    recorded = model.element_of.copy()
+    recorded[row] = down
+    with model.held_on(recorded):
+        np.testing.assert_allclose(model._edge_terms(np.array([row]), x, np.zeros_like(x)).normal[0], -normal)
+    assert model.element_of[row] == up
+
+
 def test_edge_contacts_in_2d_are_refused():
     table = {"name": "rings", "bodies": [
         {"name": "a", "shape": "ring", "count": 8, "radius": 0.1, "mass": 0.05, "stiffness": 2000.0,

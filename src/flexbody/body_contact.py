@@ -194,7 +194,6 @@ class BodyContactModel(Model):
             self.slot_particle = np.concatenate([self.slot_particle, es.edges[es.own, 0]])
             self.slot_body = np.concatenate([self.slot_body, es.body])
             self.slot_pair = np.concatenate([self.slot_pair, es.pair])
-        self.edge_side = np.zeros(len(self.slot_particle) - self.first_edge)  # each edge contact's side, while constrained
         self.n_slots = len(self.slot_particle)
         self.n_contacts = self.n_ground_contacts + self.n_slots
         self.contacts = np.vstack([inner.contacts, np.column_stack([self.slot_particle,
@@ -221,7 +220,9 @@ class BodyContactModel(Model):
         # The narrow phase runs at every gap evaluation: in C with a C model, its NumPy twin otherwise.
         self._narrow = (CompiledClosestFeatures(self.elements, self.n_particles, self.element_body)
                         if self.backend == "c" else None)
-        self.element_of = np.full(self.n_slots, -1, np.intp)  # each slot's element while constrained
+        # each slot's element while constrained; an edge row's edge and side (EdgeSlots.encode):
+        # so held_on and the driver's samples restore an edge row's side with its edge
+        self.element_of = np.full(self.n_slots, -1, np.intp)
         # A held slot's element-boundary event fires where its margin falls below this floor
         # (m, <= 0): below 0 where a hand-over left it already past the boundary (a particle
         # a hair inside a concave corner), so that passing back over it is still found.
@@ -289,7 +290,9 @@ class BodyContactModel(Model):
         """Gap of contact ``c`` alone, equal to ``gaps(q, p)[c]``: a slot's is its particle's
         closest feature over the broad phase's kept pairs with the slot's body (a superset
         of the candidates holding its closest element within ``margin``; farther reads
-        ``margin``), what locating an impact between bodies evaluates again and again."""
+        ``margin``), what locating an impact between bodies evaluates again and again; an
+        edge row's, its edge's against the other body's candidate edges (NumPy, the
+        triangles' normals of every edge: not O(1))."""
         slot = c - self.n_ground_contacts
         if slot >= self.first_edge:
             return float(self._edge_gaps(self._coordinates.particles(q, None, p)[0], np.array([slot - self.first_edge]))[0][0])
@@ -498,8 +501,7 @@ class BodyContactModel(Model):
         same state (a third of a stack's evaluations)."""
         y = np.asarray(y, float)
         held, push = np.asarray(held, np.intc), np.asarray(push, float)
-        key = (y, np.asarray(p), held, push, self.element_of, self.edge_side) \
-            + ((self._slip, self._slip_held) if self._frictional else ())
+        key = (y, np.asarray(p), held, push, self.element_of) + ((self._slip, self._slip_held) if self._frictional else ())
         if self._last is not None and all(map(np.array_equal, self._last[0], key)):
             return self._last[1]
         solved = self._solve(y, p, held, push)
@@ -782,11 +784,11 @@ class BodyContactModel(Model):
         """3D: the deepest crossing of two bodies that may touch whose surfaces cross along
         edges (an edge of one passes through a triangle of the other by more than ``depth``
         m, :func:`flexbody.surface.edges_through`): its depth (m), the edge's body, the
-        triangle's and a description; None where none does.  Contacts are a particle against
-        a surface, so two edges meeting (boxes crossed edge on edge, coarse polyhedra
-        colliding) is no contact: the edges pass through each other with no particle inside
-        the other body.  Only elements inside the overlap of two bodies' bounding boxes are
-        tested, in one search."""
+        triangle's and a description; None where none does.  Without edge contacts two edges
+        meeting (boxes crossed edge on edge, coarse polyhedra colliding) is no contact: the
+        edges pass through each other with no particle inside the other body.  Only elements inside the overlap of two bodies' bounding boxes are
+        tested, in one search.  Edge contacts (``edges = true``, :mod:`flexbody.edge_contact`)
+        keep a pair's edges from this; elsewhere it is the measure of what they would catch."""
         if self.dim != 3 or not self.n_slots:
             return None
         x = self._state(y, p)[0]
@@ -1026,7 +1028,8 @@ class BodyContactModel(Model):
     def _surface_gaps(self, x, slots: IntArray | None = None) -> tuple[FloatArray, np.ndarray]:
         """Each slot's signed distance to its body's surface (``margin`` where it is farther
         than that), and whether it is within ``margin``, shape (ns,) each; with ``slots``
-        (primary slots), their entries only (the others read ``margin``, not near)."""
+        (primary slots and edge rows), their entries only (the others read ``margin``, not
+        near)."""
         gaps, near, _ = self._surface_contacts(x, slots)
         return gaps, near
 
@@ -1273,7 +1276,7 @@ class BodyContactModel(Model):
     def _edge_terms(self, slots, x, v) -> EdgeTerms:
         """Constrained edge contacts ``slots`` (slot numbering) against their edges."""
         rows = np.asarray(slots, np.intp) - self.first_edge
-        return self._edge_slots.terms(x, v, rows, self.element_of[self.first_edge + rows], self.edge_side[rows])
+        return self._edge_slots.terms(x, v, rows, self.element_of[self.first_edge + rows])
 
     def _edge_gaps(self, x, rows) -> tuple[FloatArray, np.ndarray]:
         """Gaps of edge contacts ``rows`` (rows of the edge slots, (k,)) and whether each is
@@ -1285,8 +1288,7 @@ class BodyContactModel(Model):
         gaps = np.full(len(rows), self.margin)
         on = against[rows] >= 0
         if on.any():
-            gaps[on] = self._edge_slots.terms(x, np.zeros_like(x), rows[on], against[rows[on]],
-                                              self.edge_side[rows[on]]).gap
+            gaps[on] = self._edge_slots.terms(x, np.zeros_like(x), rows[on], against[rows[on]]).gap
         if (~on).any():
             gap, edge, _ = self._edge_slots.closest(x, rows[~on], against, EDGE_REACH * self.margin)
             gaps[~on] = np.where(edge >= 0, gap, self.margin)
@@ -1313,7 +1315,7 @@ class BodyContactModel(Model):
             lost = edge < 0
             if lost.any():  # an instant's seed within the gap tolerance whose pair is no edge contact any more
                 edge[lost], side[lost] = self._edge_slots.nearest(x, part[lost], against)
-            against[part], self.edge_side[part] = edge, side
+            against[part] = self._edge_slots.encode(edge, side)
 
     def _rows(self, ground_rows, slots, q, u, p, tangents: bool = False) -> _Rows:
         """Constraint rows (ground rows, then slots) on the coordinates they move: their

@@ -928,9 +928,10 @@ class _Run:
                 f"from between t = {lo:.9g} and {hi:.9g} s"
             out.append(f"bodies {first!r} and {second!r} crossed edge on edge {when} ({first!r}: {how}), up to "
                        f"{self.max_edge_crossing:.2g} m deep where checked ({EDGE_CHECKS} times per output interval): "
-                       "two edges meeting are a contact only in 3D scenes without friction (and at most two edges "
-                       "of a body under one edge of another at once), so here edges passed through each other unseen; "
-                       "finer surfaces make it rarer (a vertex meets a face first more often)")
+                       "two edges meeting are a contact only between bodies whose [[contacts]] entry has "
+                       "edges = true (3D, without friction; at most two edges of the second body under one edge of "
+                       "the first at once), so here edges passed through each other unseen; finer surfaces make it "
+                       "rarer (a vertex meets a face first more often)")
         if s.rtol > LOOSE_RTOL:
             out.append(f"rtol = {s.rtol:g} is loose: impacts and lift-offs can differ from a tight run's; check the "
                        "event count against a run with a tighter --rtol")

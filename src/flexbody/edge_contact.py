@@ -233,11 +233,20 @@ class EdgeSlots:
         self._kept: tuple | None = None  # (reach, the edges' ends when made, start, other): see _candidates
         self.rebuilds = 0
         self._body_elements = {b: np.flatnonzero(element_body == b) for b in bodies}
-        self._half = 0.5 * float(np.linalg.norm(x0[self.edges[:, 1]] - x0[self.edges[:, 0]], axis=1).max()) \
-            if len(self.edges) else 0.0
 
     def __len__(self) -> int:
         return len(self.own)
+
+    def encode(self, edge: IntArray, side: FloatArray) -> IntArray:
+        """One code per held row: the edge held against (a row of ``edges``) and the side in
+        one integer, ``edge`` on side +1 and ``edge + E`` on side -1 (what the body-contact
+        model keeps per slot, and records per sample, as a particle slot's element)."""
+        return np.where(np.asarray(side) < 0.0, np.asarray(edge) + len(self.edges), np.asarray(edge)).astype(np.intp)
+
+    def decode(self, code: IntArray) -> tuple[IntArray, FloatArray]:
+        """The edges (-1 for a code of -1: none) and sides of codes from :meth:`encode`."""
+        code = np.asarray(code, np.intp)
+        return np.where(code < 0, -1, code % max(len(self.edges), 1)), np.where(code >= len(self.edges), -1.0, 1.0)
 
     def twins(self, rows: IntArray) -> IntArray:
         """Each row's other row of the same edge and body, shape (k,)."""
@@ -249,16 +258,16 @@ class EdgeSlots:
         normal = np.cross(b - a, c - a)
         return normal / np.linalg.norm(normal, axis=2, keepdims=True)
 
-    def points(self, rows: IntArray, against: IntArray) -> IntArray:
+    def points(self, rows: IntArray, codes: IntArray) -> IntArray:
         """The particles each row moves, ``[a, b, c, d]``: its edge, then the edge it is held
-        against (``against`` (k,), rows of ``edges``), shape (k, 4)."""
-        return np.column_stack([self.edges[self.own[rows]], self.edges[against]])
+        against (``codes`` (k,) from :meth:`encode`), shape (k, 4)."""
+        return np.column_stack([self.edges[self.own[rows]], self.edges[self.decode(codes)[0]]])
 
     def closest(self, x: FloatArray, rows: IntArray, against: IntArray, reach: float, loose: bool = False
                 ) -> tuple[FloatArray, IntArray, FloatArray]:
         """For each of ``rows`` (k,), the edge of its body its edge touches or crosses with
         the least gap (:func:`edge_contacts` within ``reach``), leaving out the one its twin
-        holds (``against``: every row's edge held against, -1: none, shape (ns,)); a free
+        holds (``against``: every row's code (:meth:`encode`), -1: none, shape (ns,)); a free
         twin of a free row leaves out the row's: the row takes the closest edge, the twin
         the next.  ``loose``: only an edge the twin holds is left out, and a crossing needs
         no inside test (an instant's fall-back for a row that fired but whose edge the
@@ -276,7 +285,7 @@ class EdgeSlots:
         gap, edge, side = np.full(len(rows), float(reach)), np.full(len(rows), -1, np.intp), np.zeros(len(rows))
         if not len(rows) or not len(self.edges):
             return gap, edge, side
-        left_out = np.asarray(against)[self.twins(rows)].copy()
+        left_out = self.decode(np.asarray(against)[self.twins(rows)])[0]
         second = (rows >= self.n_primary) & (left_out < 0) & (not loose)
         if second.any():
             left_out[second] = self.closest(x, rows[second] - self.n_primary, against, reach)[1]
@@ -311,8 +320,8 @@ class EdgeSlots:
         kernels = _kernels_module()
         edge, side = np.empty(len(rows), np.intp), np.empty(len(rows))
         for k, row in enumerate(np.asarray(rows, np.intp).tolist()):
-            others = np.flatnonzero((self.edge_body == self.body[row]) & (np.arange(len(self.edges)) !=
-                                                                             against[self.twins(np.array([row]))[0]]))
+            twin_edge = self.decode(np.asarray(against)[self.twins(np.array([row]))])[0][0]
+            others = np.flatnonzero((self.edge_body == self.body[row]) & (np.arange(len(self.edges)) != twin_edge))
             a, b = (np.repeat(x[self.edges[self.own[row], j]][:, None], len(others), axis=1) for j in (0, 1))
             c, d = x[self.edges[others, 0]].T, x[self.edges[others, 1]].T
             common = np.cross((b - a).T, (d - c).T)
@@ -333,16 +342,20 @@ class EdgeSlots:
         """The candidate (i, edge) pairs of rows ``primary`` (k,; rows below ``n_primary``):
         ``i`` indexes ``primary``, ``edge`` is an edge of its body whose midpoint is within
         ``reach`` plus both edges' half-lengths (a superset).  From a kept list (a Verlet
-        list, as :class:`flexbody.broadphase.CandidateList`'s): made with a skin of
-        ``reach`` around that and made again once an edge's end has moved half the skin."""
+        list, as :class:`flexbody.broadphase.CandidateList`'s): made for the largest reach
+        asked so far with a skin of that reach (twice the longest half-length then, plus
+        twice the skin: ends that move half the skin move midpoints and half-lengths by at
+        most that), and made again once an edge's end has moved half the skin."""
         from scipy.spatial import cKDTree
 
         kept = self._kept
         ends = x[self.edges].reshape(-1, 3)
-        if kept is None or kept[0] != reach or np.max(np.linalg.norm(ends - kept[1], axis=1), initial=0.0) > 0.5 * reach:
+        if kept is None or reach > kept[0] or np.max(np.linalg.norm(ends - kept[1], axis=1), initial=0.0) > 0.5 * kept[0]:
+            reach = max(reach, kept[0]) if kept is not None else reach
             middle = 0.5 * (x[self.edges[:, 0]] + x[self.edges[:, 1]])
             own = middle[self.own[: self.n_primary]]
-            near = cKDTree(middle).query_ball_point(own, 2.0 * reach + 2.0 * self._half)
+            half = 0.5 * float(np.linalg.norm(x[self.edges[:, 1]] - x[self.edges[:, 0]], axis=1).max())
+            near = cKDTree(middle).query_ball_point(own, 3.0 * reach + 2.0 * half)
             row = np.repeat(np.arange(self.n_primary), [len(k) for k in near])
             other = np.concatenate([np.asarray(k, np.intp) for k in near] + [np.zeros(0, np.intp)])
             keep = self.edge_body[other] == self.body[row]
@@ -382,12 +395,13 @@ class EdgeSlots:
         out[crossed] = inside
         return out
 
-    def terms(self, x: FloatArray, v: FloatArray, rows: IntArray, against: IntArray, side: FloatArray) -> EdgeTerms:
-        """``rows`` (k,) against the edges ``against`` (k,) on the sides ``side`` (k,)."""
+    def terms(self, x: FloatArray, v: FloatArray, rows: IntArray, codes: IntArray) -> EdgeTerms:
+        """``rows`` (k,) against the edges and sides of their ``codes`` (k,, :meth:`encode`)."""
         from .assembly import _kernels_module
 
         kernels = _kernels_module()
-        points = self.points(rows, against)
+        points = self.points(rows, codes)
+        side = self.decode(codes)[1]
         ends = [x[points[:, j]].T for j in range(4)]
         rates = [v[points[:, j]].T for j in range(4)]
         sides = np.asarray(side, float)[None, :]

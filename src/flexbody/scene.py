@@ -1069,6 +1069,12 @@ def _listed_contacts(raw: Any, raw_bodies: Any, problems: Problems, dim: int,
             continue
         where[indices] = k
         out.append(BodyContact(bodies=indices, friction=friction, restitution=restitution, edges=edges))
+    rough = [k for k, c in enumerate(out) if c.friction > 0.0]
+    for k, c in enumerate(out):
+        if c.edges and rough:  # an edge row coupled to a rough row would need tangent rows of its own
+            problems.add(f"contacts[{where[c.bodies]}].edges", True, "needs friction = 0 on every pair too (edge "
+                         f"contacts are frictionless so far; pairs with friction: contacts{sorted(where[out[j].bodies] for j in rough)})")
+            ok = False
     return out if ok else None
 
 
