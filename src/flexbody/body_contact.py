@@ -949,13 +949,13 @@ class BodyContactModel(Model):
         slots = slots[self._bounded(held, slots)]
         empty = np.zeros(0, np.intp)
         ended = empty
-        if len(edges):  # past an end of either edge the contact is a vertex's: the edge contact is set free
+        if len(slots) or len(edges):
             x, v = self._state(np.asarray(y, float), p)
+        if len(edges):  # past an end of either edge the contact is a vertex's: the edge contact is set free
             ended = edges[self._edge_terms(edges, x, v).margin - self.margin_floor[edges] <= gap_tolerance]
             self.element_of[ended], self.margin_floor[ended] = -1, 0.0
         if not len(slots):
             return HandOvers(empty, empty, ng + ended, empty, empty, empty.reshape(0, 2))
-        x, v = self._state(np.asarray(y, float), p)
         terms, margins, weights = self._margins(slots, x, v, held)
         past = margins - self.margin_floor[slots]
         passed = np.flatnonzero(past <= gap_tolerance)

@@ -138,10 +138,8 @@ def edge_contacts(x: FloatArray, first: IntArray, first_faces: FloatArray, secon
     first, second = np.asarray(first, np.intp), np.asarray(second, np.intp)
     a, b = x[first[pairs[:, 0], 0]], x[first[pairs[:, 0], 1]]
     c, d = x[second[pairs[:, 1], 0]], x[second[pairs[:, 1], 1]]
-    common = np.cross(b - a, d - c)
-    size = np.linalg.norm(b - a, axis=1) * np.linalg.norm(d - c, axis=1)
+    common, crossing = _common_normals(a, b, c, d)
     length = np.linalg.norm(common, axis=1)
-    crossing = length > PARALLEL * size
     faces_a, faces_b = first_faces[pairs[:, 0]], second_faces[pairs[:, 1]]
     for faces in (faces_a, faces_b):
         crossing &= np.linalg.norm(faces.sum(axis=1), axis=1) <= 2.0 - FLAT
@@ -322,14 +320,12 @@ class EdgeSlots:
         for k, row in enumerate(np.asarray(rows, np.intp).tolist()):
             twin_edge = self.decode(np.asarray(against)[self.twins(np.array([row]))])[0][0]
             others = np.flatnonzero((self.edge_body == self.body[row]) & (np.arange(len(self.edges)) != twin_edge))
-            a, b = (np.repeat(x[self.edges[self.own[row], j]][:, None], len(others), axis=1) for j in (0, 1))
-            c, d = x[self.edges[others, 0]].T, x[self.edges[others, 1]].T
-            common = np.cross((b - a).T, (d - c).T)
-            usable = np.linalg.norm(common, axis=1) > PARALLEL * np.linalg.norm((b - a).T, axis=1) \
-                * np.linalg.norm((d - c).T, axis=1)
+            a, b = (np.repeat(x[self.edges[self.own[row], j]][None], len(others), axis=0) for j in (0, 1))
+            c, d = x[self.edges[others, 0]], x[self.edges[others, 1]]
+            usable = _common_normals(a, b, c, d)[1]
             gap, parameters = np.full(len(others), np.inf), np.zeros((2, len(others)))
             if usable.any():
-                g, st, _, _ = kernels.edge_3d(a[:, usable], b[:, usable], c[:, usable], d[:, usable],
+                g, st, _, _ = kernels.edge_3d(a[usable].T, b[usable].T, c[usable].T, d[usable].T,
                                               np.ones((1, int(usable.sum()))))
                 gap[usable], parameters[:, usable] = g[0], st
             inside = ((parameters >= 0.0) & (parameters <= 1.0)).all(axis=0)
@@ -342,22 +338,15 @@ class EdgeSlots:
         """The candidate (i, edge) pairs of rows ``primary`` (k,; rows below ``n_primary``):
         ``i`` indexes ``primary``, ``edge`` is an edge of its body whose midpoint is within
         ``reach`` plus both edges' half-lengths (a superset).  From a kept list (a Verlet
-        list, as :class:`flexbody.broadphase.CandidateList`'s): made for the largest reach
-        asked so far with a skin of that reach (twice the longest half-length then, plus
-        twice the skin: ends that move half the skin move midpoints and half-lengths by at
-        most that), and made again once an edge's end has moved half the skin."""
-        from scipy.spatial import cKDTree
-
+        list, as :class:`flexbody.broadphase.CandidateList`'s): :func:`edge_candidates` for
+        the largest reach asked so far plus a skin of twice that reach (ends that move half
+        the reach move midpoints and half-lengths by at most that), made again once an
+        edge's end has moved half the reach."""
         kept = self._kept
         ends = x[self.edges].reshape(-1, 3)
         if kept is None or reach > kept[0] or np.max(np.linalg.norm(ends - kept[1], axis=1), initial=0.0) > 0.5 * kept[0]:
             reach = max(reach, kept[0]) if kept is not None else reach
-            middle = 0.5 * (x[self.edges[:, 0]] + x[self.edges[:, 1]])
-            own = middle[self.own[: self.n_primary]]
-            half = 0.5 * float(np.linalg.norm(x[self.edges[:, 1]] - x[self.edges[:, 0]], axis=1).max())
-            near = cKDTree(middle).query_ball_point(own, 3.0 * reach + 2.0 * half)
-            row = np.repeat(np.arange(self.n_primary), [len(k) for k in near])
-            other = np.concatenate([np.asarray(k, np.intp) for k in near] + [np.zeros(0, np.intp)])
+            row, other = edge_candidates(x, self.edges[self.own[: self.n_primary]], self.edges, 3.0 * reach).T
             keep = self.edge_body[other] == self.body[row]
             row, other = row[keep], other[keep]
             start = np.searchsorted(row, np.arange(self.n_primary + 1))
@@ -388,10 +377,11 @@ class EdgeSlots:
                   x[second[:, 0]] + t[:, None] * (x[second[:, 1]] - x[second[:, 0]])]
         inside = np.ones(len(crossed), bool)
         for point, other_edge in zip(points, (found.pair[crossed, 1], found.pair[crossed, 0])):
-            for k, edge in enumerate(other_edge):  # each point against the whole surface of the other body
-                elements = self._body_elements[int(self.edge_body[edge])]
-                pairs = np.column_stack([np.zeros(len(elements), np.intp), elements])
-                inside[k] &= closest_features(point[k : k + 1], x, self._elements, pairs).gap[0] <= slack
+            # each point against the whole surface of the other edge's body, in one search
+            surfaces = [self._body_elements[int(b)] for b in self.edge_body[other_edge]]
+            pairs = np.column_stack([np.repeat(np.arange(len(crossed)), [len(e) for e in surfaces]),
+                                     np.concatenate(surfaces)])
+            inside &= closest_features(point, x, self._elements, pairs).gap <= slack
         out[crossed] = inside
         return out
 
@@ -412,6 +402,14 @@ class EdgeSlots:
         lengths = [np.linalg.norm(x[points[:, 1 + 2 * j]] - x[points[:, 2 * j]], axis=1) for j in range(2)]
         margin = np.minimum(np.minimum(s, 1.0 - s) * lengths[0], np.minimum(t, 1.0 - t) * lengths[1])
         return EdgeTerms(gap[0], coefficients, normal.T, rate[0], bias[0], margin)
+
+
+def _common_normals(a: FloatArray, b: FloatArray, c: FloatArray, d: FloatArray) -> tuple[FloatArray, np.ndarray]:
+    """``(b - a) x (d - c)`` of edges a -> b and c -> d (k, 3) each, and whether they are
+    not parallel (:data:`PARALLEL`), shape (k, 3) and (k,)."""
+    common = np.cross(b - a, d - c)
+    size = np.linalg.norm(b - a, axis=1) * np.linalg.norm(d - c, axis=1)
+    return common, np.linalg.norm(common, axis=1) > PARALLEL * size
 
 
 def _in_cone(n: FloatArray, faces: FloatArray) -> np.ndarray:

@@ -1051,10 +1051,6 @@ def _listed_contacts(raw: Any, raw_bodies: Any, problems: Problems, dim: int,
             r.fail("edges", edges, "applies to 3D bodies only (edges of triangle surfaces; a 2D boundary's "
                    "segments meet at particles)")
             edges = None
-        elif edges and (friction or rough_grounds):
-            r.fail("edges", edges, "needs friction = 0 here and on every ground (edge contacts are frictionless so "
-                   f"far; this pair's friction = {friction}, grounds with friction: {'yes' if rough_grounds else 'no'})")
-            edges = None
         r.finish()
         indices = _contact_bodies(r, pair, names, self_contact)
         if indices is not None and indices in where:
@@ -1069,12 +1065,15 @@ def _listed_contacts(raw: Any, raw_bodies: Any, problems: Problems, dim: int,
             continue
         where[indices] = k
         out.append(BodyContact(bodies=indices, friction=friction, restitution=restitution, edges=edges))
-    rough = [k for k, c in enumerate(out) if c.friction > 0.0]
-    for k, c in enumerate(out):
-        if c.edges and rough:  # an edge row coupled to a rough row would need tangent rows of its own
-            problems.add(f"contacts[{where[c.bodies]}].edges", True, "needs friction = 0 on every pair too (edge "
-                         f"contacts are frictionless so far; pairs with friction: contacts{sorted(where[out[j].bodies] for j in rough)})")
-            ok = False
+    # an edge row coupled to a rough row (this pair's, another's, a ground's) would need tangent rows of its own
+    rough = ", ".join(f"contacts[{where[c.bodies]}] (friction = {c.friction:g})" for c in out if c.friction > 0.0)
+    if rough or rough_grounds:
+        for c in out:
+            if c.edges:
+                problems.add(f"contacts[{where[c.bodies]}].edges", True, "needs friction = 0 on every pair and ground "
+                             "(edge contacts are frictionless so far; grounds with friction: "
+                             f"{'yes' if rough_grounds else 'no'}; pairs with friction: {rough or 'none'})")
+                ok = False
     return out if ok else None
 
 
