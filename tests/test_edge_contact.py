@@ -172,11 +172,12 @@ def test_candidates_hold_every_pair_within_reach(rng):
         assert len(candidates) < 0.1 * closest.size
 
 
-def test_an_edge_across_two_rims_is_held_by_its_two_rows():
+def test_an_edge_across_two_rims_is_held_by_two_of_its_rows():
     """A bar's bottom edges (along x) lie across a cube's two top rims (along y, at x = 0
-    and 1), 1 cm above: each bottom edge has two rows, the first takes one rim and its twin
-    the other, both 1 cm apart; a row whose rules find no edge (its twin holding the only
-    one in reach) is held against the nearest line, on the side that keeps it apart."""
+    and 1), 1 cm above: each bottom edge has three rows, the first takes one rim, the
+    second the other, both 1 cm apart, the third none; a row whose rules find no edge (its
+    siblings holding the only ones in reach) is held against the nearest line, on the side
+    that keeps it apart."""
     from flexbody.edge_contact import EdgeSlots
 
     h = 0.01
@@ -185,23 +186,57 @@ def test_an_edge_across_two_rims_is_held_by_its_two_rows():
     elements = np.vstack([hull(bar), hull(CUBE) + 8])
     element_body = np.repeat([0, 1], [len(hull(bar)), len(hull(CUBE))])
     slots = EdgeSlots(elements, element_body, [(0, 1)], x)
-    assert slots.n_primary == 12 and len(slots) == 24  # the bar's 12 edges, twice
+    assert slots.n_primary == 12 and len(slots) == 36  # the bar's 12 edges, three times
     bottom = [r for r in range(12) if np.allclose(x[slots.edges[slots.own[r]], 2], 1.0 + h)
               and np.ptp(x[slots.edges[slots.own[r]], 0]) == 3.0]
     assert len(bottom) == 2
     free = np.full(len(slots), -1)
     for row in bottom:
-        gap, edge, side = slots.closest(x, np.array([row, row + slots.n_primary]), free, reach=0.05)
-        np.testing.assert_allclose(gap, h, rtol=1e-12)
-        rims = x[slots.edges[edge]]
+        rows = slots.siblings(np.array([row]))[0]
+        gap, edge, side = slots.closest(x, rows, free, reach=0.05)
+        np.testing.assert_allclose(gap, [h, h, 0.05], rtol=1e-12)  # the third: none within reach
+        assert edge[2] == -1
+        rims = x[slots.edges[edge[:2]]]
         assert sorted(rims[:, 0, 0].tolist()) == [0.0, 1.0] and np.allclose(rims[:, :, 2], 1.0)
         held = free.copy()
-        held[row] = edge[0]  # the row holds the first rim: its twin finds the other
-        assert slots.closest(x, np.array([row + slots.n_primary]), held, reach=0.05)[1][0] == edge[1]
-        held[row + slots.n_primary] = edge[1]
-        # the twin's rim taken: the row with no strict answer is held on the nearest line, apart
+        held[row] = edge[0]  # the row holds the first rim: the second finds the other, the third none
+        np.testing.assert_array_equal(slots.closest(x, rows[1:], held, reach=0.05)[1], [edge[1], -1])
+        held[rows[1]] = edge[1]
+        assert slots.closest(x, rows[2:], held, reach=0.05)[1][0] == -1
+        # the second's rim taken: the row with no strict answer is held on the nearest line, apart
         lone, lone_side = slots.nearest(x, np.array([row]), held)
         assert lone[0] == edge[0] and lone_side[0] == side[0]  # the row's own rim, nearest, apart by h
+
+
+def test_an_edge_across_a_strip_of_two_triangles_is_held_by_its_three_rows():
+    """A bar's bottom edge lies across a square roof creased along its diagonal (two of its
+    corners ``drop`` lower), h above the ridge: it crosses the ridge and two rims, which its
+    three rows take, the ridge first (gap h exactly, the normal +z) and the two rims (gap
+    about h + 0.8 drop, equal by symmetry); held on the ridge, the two others take the rims."""
+    from flexbody.edge_contact import EdgeSlots
+
+    h, drop = 1e-3, 0.01
+    roof = np.array([[0.0, 0.0, 0.0], [1.0, 1.0, 0.0], [1.0, 0.0, -drop], [0.0, 1.0, -drop], [0.5, 0.5, -1.0]])
+    along, across, up = np.array([1.0, -1.0, 0.0]) / np.sqrt(2.0), np.array([1.0, 1.0, 0.0]) / np.sqrt(2.0), np.eye(3)[2]
+    middle = np.array([0.6, 0.6, h])  # its bottom edge on x + y = 1.2: the rims at x = 1 and y = 1 at 0.2
+    bar = np.array([middle + a * 1.5 * along + b * 0.1 * across + z * 0.2 * up
+                    for a in (-1.0, 1.0) for b in (0.0, 1.0) for z in (0.0, 1.0)])
+    x = np.vstack([bar, roof])
+    elements = np.vstack([hull(bar), hull(roof) + 8])
+    slots = EdgeSlots(elements, np.repeat([0, 1], [len(hull(bar)), len(hull(roof))]), [(0, 1)], x)
+    row = next(r for r in range(slots.n_primary) if np.allclose(np.sum(x[slots.edges[slots.own[r]], :2], axis=1), 1.2)
+               and np.allclose(x[slots.edges[slots.own[r]], 2], h))
+    rows = slots.siblings(np.array([row]))[0]
+    free = np.full(len(slots), -1)
+    gap, edge, side = slots.closest(x, rows, free, reach=0.05)
+    ridge = slots.edges[edge[0]]
+    assert sorted(ridge.tolist()) == [8, 9]  # (0, 0, 0) to (1, 1, 0)
+    assert gap[0] == pytest.approx(h, rel=1e-12)
+    assert gap[1] == pytest.approx(gap[2], rel=1e-12) and gap[1] == pytest.approx(h + 0.8 * drop, rel=1e-3)
+    assert len(set(edge.tolist())) == 3
+    held = free.copy()
+    held[row] = slots.encode(edge[:1], side[:1])[0]
+    assert sorted(slots.closest(x, rows[1:], held, reach=0.05)[1].tolist()) == sorted(edge[1:].tolist())
 
 
 def test_an_edge_lying_nearly_on_a_face_crosses_the_rim_as_an_edge_contact():
@@ -258,3 +293,26 @@ def test_the_kept_candidate_list_holds_every_pair_within_reach_as_the_bodies_mov
                 checked += 1
     assert checked > 20  # the spheres came within reach
     assert 1 <= slots.rebuilds < 12  # kept between steps, renewed as the bodies moved
+
+
+def test_a_face_creased_by_a_hair_along_its_diagonal_is_an_edge_from_its_first_crease(rng):
+    """A square face creased along its diagonal (its two off-diagonal corners lowered by
+    ``drop``, a ridge of angle ~2.8 drop) under an edge crossing the diagonal at its middle,
+    ``height`` above it: once creased by 1e-6 rad the pair is an edge contact with gap =
+    height (crossed by 1e-7 m: a pile's sphere creases so as it deforms, and the old flat
+    test, 2 - |n1 + n2| <= 1e-9, counted the pair only from 6.3e-5 rad, already crossed);
+    an exactly flat face is no edge contact, in any orientation (its normals differ by
+    rounding)."""
+    turn = rotation_matrix(rng.normal(size=3))
+    for drop, height, found in ((1e-6 / (2.0 * np.sqrt(2.0)), -1e-7, True), (1e-6 / (2.0 * np.sqrt(2.0)), 1e-7, True),
+                                (0.0, -1e-7, False), (0.0, 1e-7, False)):
+        face = np.array([[0.0, 0.0, 0.0], [1.0, 1.0, 0.0], [1.0, 0.0, -drop], [0.0, 1.0, -drop], [0.5, 0.5, -1.0]])
+        edge = np.array([[0.2, 0.8, height], [0.8, 0.2, height], [0.35, 0.35, height + 1.0], [0.65, 0.65, height + 1.0]])
+        x, edges_a, normals_a, edges_b, normals_b = two_bodies(edge @ turn.T, face @ turn.T)
+        got = edge_contacts(x, edges_b, normals_b, edges_a, normals_a, edge_candidates(x, edges_b, edges_a, 0.01),
+                            reach=0.01)
+        assert (len(got.gap) == 1) == found, (drop, height, got)
+        if found:
+            assert got.gap[0] == pytest.approx(height, abs=1e-12)
+            np.testing.assert_allclose(got.parameters[0], [0.5, 0.5], atol=1e-6)
+            np.testing.assert_allclose(got.normal[0], turn @ [0.0, 0.0, 1.0], atol=1e-6)

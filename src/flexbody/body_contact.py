@@ -1282,7 +1282,7 @@ class BodyContactModel(Model):
         """Gaps of edge contacts ``rows`` (rows of the edge slots, (k,)) and whether each is
         within ``margin``: one held against an edge, that pair's (its side kept); a free one,
         its edge's least gap to the other body's edges where both closest points lie on
-        both edges (its twin's edge left out), else ``margin``."""
+        both edges (its siblings' edges left out, see :meth:`EdgeSlots.closest`), else ``margin``."""
         rows = np.asarray(rows, np.intp)
         against = self.element_of[self.first_edge :]
         gaps = np.full(len(rows), self.margin)
@@ -1304,8 +1304,9 @@ class BodyContactModel(Model):
             return
         rows = missing - self.first_edge
         against = self.element_of[self.first_edge :]
-        # a row before its twin: of two free twins, the first takes the closest edge
-        for part in (rows[rows < self._edge_slots.n_primary], rows[rows >= self._edge_slots.n_primary]):
+        # by rank: of an edge's free rows, the first takes the closest edge, the next the next
+        rank = rows // self._edge_slots.n_primary
+        for part in (rows[rank == r] for r in range(self._edge_slots.PER_EDGE)):
             if not len(part):
                 continue
             _, edge, side = self._edge_slots.closest(x, part, against, EDGE_REACH * self.margin)

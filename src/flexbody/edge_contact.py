@@ -46,9 +46,15 @@ PARALLEL = 1e-6
 #: edge row read 3e-6 m crossed and the ledger missed 1e-5 of the energy; with the slack
 #: 3.5e-12 m and 8.5e-9 (1 and 5 degrees alike).
 CONE_SLACK = float(np.cos(np.radians(5.0)))
-#: An edge whose two triangles' unit normals sum to more than ``2 - FLAT`` lies in a flat
-#: face (a box face's diagonal): no edge of the body's shape, and no edge contact.
-FLAT = 1e-9
+#: An edge whose two triangles' unit normals differ by less than this (about the angle of
+#: its crease, rad) lies in a flat face (a box face's diagonal): no edge of the body's shape,
+#: and no edge contact.  Linear in the angle, and small: an edge pressed across a face whose
+#: diagonal creases as the body deforms meets the diagonal's ridge at a gap of about the
+#: angle times the distance to the face's rim, so the pair must count from there on.  The
+#: old test, 2 - |n1 + n2| <= 1e-9 (quadratic: an angle of 6.3e-5 rad), let such a pair in
+#: a pile of 100-particle spheres appear already 2.7e-7 m crossed; an exactly flat face's
+#: normals differ by rounding (~1e-16 times its size over its edges' length).
+FLAT = 1e-10
 
 
 @dataclass(frozen=True)
@@ -142,7 +148,7 @@ def edge_contacts(x: FloatArray, first: IntArray, first_faces: FloatArray, secon
     length = np.linalg.norm(common, axis=1)
     faces_a, faces_b = first_faces[pairs[:, 0]], second_faces[pairs[:, 1]]
     for faces in (faces_a, faces_b):
-        crossing &= np.linalg.norm(faces.sum(axis=1), axis=1) <= 2.0 - FLAT
+        crossing &= np.linalg.norm(faces[:, 0] - faces[:, 1], axis=1) >= FLAT
     n = common / np.where(crossing, length, 1.0)[:, None]
     forward = _in_cone(n, faces_b) & _in_cone(-n, faces_a)  # n out of the second body, into the first
     backward = _in_cone(-n, faces_b) & _in_cone(n, faces_a)
@@ -176,8 +182,11 @@ class EdgeTerms(NamedTuple):
 class EdgeSlots:
     """The edge contacts of a 3D scene: ``PER_EDGE`` rows for each convex surface edge of
     the first body of a pair that may touch against the second body's convex edges (one
-    way round: an edge pair is one contact).  Two, because one edge can lie across two
-    edges of the other body at once (a bar's edge across a block's two rims).
+    way round: an edge pair is one contact).  Three, because one edge can lie across
+    several edges of the other body at once: a bar's edge across a block's two rims, an
+    edge across a strip of two triangles (their two outer edges and, a hair higher, the
+    diagonal between them: in a pile of 100-particle spheres, with two rows, that diagonal
+    went 2e-9 m through the edge held on the other two).
 
     Parameters
     ----------
@@ -197,10 +206,11 @@ class EdgeSlots:
     edge_body : ndarray of int, shape (E,)
     own, body, pair : ndarray of int, shape (ns,)
         Each row's edge (a row of ``edges``), the body it may touch and its pair (index in
-        ``pairs``); row ``j + n_primary`` is row j's twin.
+        ``pairs``); rows ``j``, ``j + n_primary``, ``j + 2 n_primary`` are one edge's, its
+        *siblings*, ranked in that order.
     """
 
-    PER_EDGE = 2
+    PER_EDGE = 3
 
     def __init__(self, elements: IntArray, element_body: IntArray, pairs: list[tuple[int, int]],
                  x0: FloatArray) -> None:
@@ -246,9 +256,16 @@ class EdgeSlots:
         code = np.asarray(code, np.intp)
         return np.where(code < 0, -1, code % max(len(self.edges), 1)), np.where(code >= len(self.edges), -1.0, 1.0)
 
-    def twins(self, rows: IntArray) -> IntArray:
-        """Each row's other row of the same edge and body, shape (k,)."""
-        return (np.asarray(rows) + self.n_primary) % len(self.own)
+    def siblings(self, rows: IntArray) -> IntArray:
+        """Each row's edge's rows (itself among them) in rank order, shape (k, PER_EDGE)."""
+        return np.asarray(rows, np.intp)[:, None] % self.n_primary + self.n_primary * np.arange(self.PER_EDGE)
+
+    def held_by_siblings(self, rows: IntArray, against: IntArray) -> IntArray:
+        """The edges each row's siblings (not itself) hold (``against``: every row's code,
+        :meth:`encode`), -1 where free, shape (k, PER_EDGE)."""
+        rows = np.asarray(rows, np.intp)
+        siblings = self.siblings(rows)
+        return np.where(siblings == rows[:, None], -1, self.decode(np.asarray(against)[siblings])[0])
 
     def face_normals(self, x: FloatArray) -> FloatArray:
         """The outward unit normals of each edge's two triangles at ``x``, (E, 2, 3)."""
@@ -264,12 +281,12 @@ class EdgeSlots:
     def closest(self, x: FloatArray, rows: IntArray, against: IntArray, reach: float, loose: bool = False
                 ) -> tuple[FloatArray, IntArray, FloatArray]:
         """For each of ``rows`` (k,), the edge of its body its edge touches or crosses with
-        the least gap (:func:`edge_contacts` within ``reach``), leaving out the one its twin
-        holds (``against``: every row's code (:meth:`encode`), -1: none, shape (ns,)); a free
-        twin of a free row leaves out the row's: the row takes the closest edge, the twin
-        the next.  ``loose``: only an edge the twin holds is left out, and a crossing needs
-        no inside test (an instant's fall-back for a row that fired but whose edge the
-        strict search no longer finds).
+        the least gap (:func:`edge_contacts` within ``reach``), leaving out those its
+        siblings hold (``against``: every row's code (:meth:`encode`), -1: none, shape
+        (ns,)); of an edge's free rows, the first in rank takes the closest edge, the next
+        the next closest, and so on.  ``loose``: every free row takes the closest edge no
+        sibling holds, and a crossing needs no inside test (an instant's fall-back for a row
+        that fired but whose edge the strict search no longer finds).
 
         Returns
         -------
@@ -283,14 +300,15 @@ class EdgeSlots:
         gap, edge, side = np.full(len(rows), float(reach)), np.full(len(rows), -1, np.intp), np.zeros(len(rows))
         if not len(rows) or not len(self.edges):
             return gap, edge, side
-        left_out = self.decode(np.asarray(against)[self.twins(rows)])[0]
-        second = (rows >= self.n_primary) & (left_out < 0) & (not loose)
-        if second.any():
-            left_out[second] = self.closest(x, rows[second] - self.n_primary, against, reach)[1]
+        left_out = self.held_by_siblings(rows, against)
+        # each row's place among its edge's free rows (those before it take the closest edges)
+        earlier = (left_out < 0) & (np.arange(self.PER_EDGE) < (rows // self.n_primary)[:, None])
+        place = np.zeros(len(rows), np.intp) if loose else earlier.sum(axis=1)
         which, other = self._candidates(x, rows % self.n_primary, reach)
         # the kept list's pairs whose edges' boxes, grown by reach, overlap now (most do not)
         own, theirs = x[self.edges[self.own[rows[which]]]], x[self.edges[other]]
-        keep = (other != left_out[which]) & (own.min(axis=1) <= theirs.max(axis=1) + reach).all(axis=1) \
+        keep = ~(other[:, None] == left_out[which]).any(axis=1) \
+            & (own.min(axis=1) <= theirs.max(axis=1) + reach).all(axis=1) \
             & (theirs.min(axis=1) <= own.max(axis=1) + reach).all(axis=1)
         which, other = which[keep], other[keep]
         normals = self.face_normals(x)
@@ -301,14 +319,14 @@ class EdgeSlots:
         found = EdgeContact(*(getattr(found, f)[real] for f in ("pair", "side", "gap", "parameters", "normal", "index")))
         which = which[real]
         order = np.lexsort((found.gap, which))  # by row, least gap first
-        first = order[np.r_[True, which[order][1:] != which[order][:-1]]] if len(order) else order
-        gap[which[first]] = found.gap[first]
-        edge[which[first]] = found.pair[first, 1]
-        side[which[first]] = found.side[first]
+        start = np.searchsorted(which[order], np.arange(len(rows)))
+        has = np.flatnonzero(np.bincount(which, minlength=len(rows)) > place)
+        taken = order[start[has] + place[has]]
+        gap[has], edge[has], side[has] = found.gap[taken], found.pair[taken, 1], found.side[taken]
         return gap, edge, side
 
     def nearest(self, x: FloatArray, rows: IntArray, against: IntArray) -> tuple[IntArray, FloatArray]:
-        """For each of ``rows`` (k,), the edge of its body (not the one its twin holds) whose
+        """For each of ``rows`` (k,), the edge of its body (not one its siblings hold) whose
         line is nearest its edge's line with the closest points on both edges (or the
         nearest line at all), on the side that makes the gap >= 0: a row the rules of
         :meth:`closest` leave without an edge, held harmlessly apart.  Returns the edges
@@ -317,9 +335,9 @@ class EdgeSlots:
 
         kernels = _kernels_module()
         edge, side = np.empty(len(rows), np.intp), np.empty(len(rows))
+        held = self.held_by_siblings(rows, against)
         for k, row in enumerate(np.asarray(rows, np.intp).tolist()):
-            twin_edge = self.decode(np.asarray(against)[self.twins(np.array([row]))])[0][0]
-            others = np.flatnonzero((self.edge_body == self.body[row]) & (np.arange(len(self.edges)) != twin_edge))
+            others = np.flatnonzero((self.edge_body == self.body[row]) & ~np.isin(np.arange(len(self.edges)), held[k]))
             a, b = (np.repeat(x[self.edges[self.own[row], j]][None], len(others), axis=0) for j in (0, 1))
             c, d = x[self.edges[others, 0]], x[self.edges[others, 1]]
             usable = _common_normals(a, b, c, d)[1]
@@ -453,5 +471,5 @@ def convex_edges(x: FloatArray, triangles: IntArray, edges: IntArray, faces: Int
     other /= np.linalg.norm(other, axis=1, keepdims=True)
     third = np.array([row[~np.isin(row, edge)][0] for row, edge in zip(second, edges)], np.intp)
     below = np.einsum("kd,kd->k", normals, x[third] - x[first[:, 0]]) < 0.0
-    return below & (np.linalg.norm(normals + other, axis=1) <= 2.0 - FLAT)
+    return below & (np.linalg.norm(normals - other, axis=1) >= FLAT)
 
