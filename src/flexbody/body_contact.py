@@ -332,7 +332,12 @@ class BodyContactModel(Model):
         if len(slots):
             x = self._coordinates.particles(q, None, p)[0]
             self._constrain_elements(slots, x)
-            out[rows >= ng] = self._row_terms(slots, x, np.zeros_like(x)).gap
+            edge, gaps = slots >= self.first_edge, np.empty(len(slots))
+            if (~edge).any():
+                gaps[~edge] = self._row_terms(slots[~edge], x, np.zeros_like(x)).gap
+            if edge.any():  # the gap kernel alone (this is asked at every step: drift)
+                gaps[edge] = self._edge_slots.gaps(x, slots[edge] - self.first_edge, self.element_of[slots[edge]])
+            out[rows >= ng] = gaps
         return out
 
     def energies(self, q, u, p) -> FloatArray:
@@ -1288,7 +1293,7 @@ class BodyContactModel(Model):
         gaps = np.full(len(rows), self.margin)
         on = against[rows] >= 0
         if on.any():
-            gaps[on] = self._edge_slots.terms(x, np.zeros_like(x), rows[on], against[rows[on]]).gap
+            gaps[on] = self._edge_slots.gaps(x, rows[on], against[rows[on]])
         if (~on).any():
             gap, edge, _ = self._edge_slots.closest(x, rows[~on], against, EDGE_REACH * self.margin)
             gaps[~on] = np.where(edge >= 0, gap, self.margin)

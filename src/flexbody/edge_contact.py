@@ -304,24 +304,33 @@ class EdgeSlots:
         # each row's place among its edge's free rows (those before it take the closest edges)
         earlier = (left_out < 0) & (np.arange(self.PER_EDGE) < (rows // self.n_primary)[:, None])
         place = np.zeros(len(rows), np.intp) if loose else earlier.sum(axis=1)
-        which, other = self._candidates(x, rows % self.n_primary, reach)
+        # each edge's contacts found once for all its rows asked (siblings share them)
+        primary, row_primary = np.unique(rows % self.n_primary, return_inverse=True)
+        which, other = self._candidates(x, primary, reach)
+        mine = self.own[primary[which]]
         # the kept list's pairs whose edges' boxes, grown by reach, overlap now (most do not)
-        own, theirs = x[self.edges[self.own[rows[which]]]], x[self.edges[other]]
-        keep = ~(other[:, None] == left_out[which]).any(axis=1) \
-            & (own.min(axis=1) <= theirs.max(axis=1) + reach).all(axis=1) \
-            & (theirs.min(axis=1) <= own.max(axis=1) + reach).all(axis=1)
-        which, other = which[keep], other[keep]
+        ends = x[self.edges]
+        low, high = ends.min(axis=1) - 0.5 * reach, ends.max(axis=1) + 0.5 * reach
+        keep = ((low[mine] <= high[other]) & (low[other] <= high[mine])).all(axis=1)
+        which, mine, other = which[keep], mine[keep], other[keep]
         normals = self.face_normals(x)
-        found = edge_contacts(x, self.edges, normals, self.edges, normals,
-                              np.column_stack([self.own[rows[which]], other]), reach)
+        found = edge_contacts(x, self.edges, normals, self.edges, normals, np.column_stack([mine, other]), reach)
         which = which[found.index]
         real = np.ones(len(found.gap), bool) if loose else self._crossing_inside(x, found, 1e-6 * reach)
         found = EdgeContact(*(getattr(found, f)[real] for f in ("pair", "side", "gap", "parameters", "normal", "index")))
         which = which[real]
-        order = np.lexsort((found.gap, which))  # by row, least gap first
-        start = np.searchsorted(which[order], np.arange(len(rows)))
-        has = np.flatnonzero(np.bincount(which, minlength=len(rows)) > place)
-        taken = order[start[has] + place[has]]
+        # each row's entries: its edge's contacts, in the order found, less those its siblings hold
+        grouped = np.argsort(which, kind="stable")
+        per_primary = np.bincount(which, minlength=len(primary))
+        first, count = np.cumsum(per_primary) - per_primary, per_primary[row_primary]
+        row = np.repeat(np.arange(len(rows)), count)
+        entry = grouped[np.repeat(first[row_primary], count) + np.arange(len(row)) - np.repeat(np.cumsum(count) - count, count)]
+        kept = ~(found.pair[entry, 1][:, None] == left_out[row]).any(axis=1)
+        row, entry = row[kept], entry[kept]
+        order = np.lexsort((found.gap[entry], row))  # by row, least gap first
+        start = np.searchsorted(row[order], np.arange(len(rows)))
+        has = np.flatnonzero(np.bincount(row, minlength=len(rows)) > place)
+        taken = entry[order[start[has] + place[has]]]
         gap[has], edge[has], side[has] = found.gap[taken], found.pair[taken, 1], found.side[taken]
         return gap, edge, side
 
@@ -382,10 +391,12 @@ class EdgeSlots:
         crossing just begun), bool (k,).  A negative distance of two lines is a crossing
         only there: with their common normal in both edges' cones, two edges of bodies far
         apart along it (a block's rim under a small tetrahedron's far side) also read one,
-        as deep as the bodies are across."""
+        as deep as the bodies are across.  A crossing shallower than half the slack needs
+        no test: each closest point is within |gap| of the other, which is on its body's
+        surface (a held contact's rounding, most of a pile's)."""
         from .surface_contact import closest_features
 
-        out = found.gap >= 0.0
+        out = found.gap >= -0.5 * slack
         crossed = np.flatnonzero(~out)
         if not len(crossed):
             return out
@@ -403,16 +414,27 @@ class EdgeSlots:
         out[crossed] = inside
         return out
 
+    def gaps(self, x: FloatArray, rows: IntArray, codes: IntArray) -> FloatArray:
+        """The gaps of ``rows`` (k,) against the edges and sides of their ``codes`` (k,), m:
+        :meth:`terms`' ``gap`` without the velocity kernel."""
+        from .assembly import _kernels_module
+
+        return _kernels_module().edge_3d(*self._ends(x, rows, codes))[0][0]
+
+    def _ends(self, x: FloatArray, rows: IntArray, codes: IntArray) -> list[FloatArray]:
+        """The ``edge_3d`` kernel's inputs for ``rows`` against ``codes``: the four ends
+        (3, k) each and the sides (1, k)."""
+        points = self.points(rows, codes)
+        return [x[points[:, j]].T for j in range(4)] + [np.asarray(self.decode(codes)[1], float)[None, :]]
+
     def terms(self, x: FloatArray, v: FloatArray, rows: IntArray, codes: IntArray) -> EdgeTerms:
         """``rows`` (k,) against the edges and sides of their ``codes`` (k,, :meth:`encode`)."""
         from .assembly import _kernels_module
 
         kernels = _kernels_module()
         points = self.points(rows, codes)
-        side = self.decode(codes)[1]
-        ends = [x[points[:, j]].T for j in range(4)]
+        *ends, sides = self._ends(x, rows, codes)
         rates = [v[points[:, j]].T for j in range(4)]
-        sides = np.asarray(side, float)[None, :]
         gap, parameters, normal, _ = kernels.edge_3d(*ends, sides)
         rate, _, bias = kernels.edge_3d_velocity(*ends, sides, *rates)
         s, t = parameters
