@@ -61,7 +61,8 @@ def test_boxes_meeting_edge_on_edge_hit_when_the_fall_says_and_rest_there():
     """The upper box falls DROP onto the lower one's edge, crossed, no vertex on a face: an
     edge contact, hit at sqrt(2 DROP / g) and then held (balanced on the crossing point);
     nothing crosses, and the lower box's ground contacts carry both weights, the edge
-    contact the upper box's."""
+    contact the upper box's, half on each end of the lower box's top edge (it is crossed at
+    its middle)."""
     r = flexbody.simulate(flexbody.load_scene(_crossed_boxes(DROP, edges=True)))
     assert r.success and r.stats["impacts"] == 1 and r.stats["liftoffs"] == 0
     assert abs(r.events_time[0] - np.sqrt(2 * DROP / G)) < 1e-9
@@ -73,6 +74,9 @@ def test_boxes_meeting_edge_on_edge_hit_when_the_fall_says_and_rest_there():
     # the ground carries both weights, the edge contact the upper box's
     assert r.contact_force[-1].sum() == pytest.approx(lower + 2 * upper, rel=1e-9)
     assert r.contact_force[-1, 8:].sum() == 0.0  # the edge contact's force is reported on the lower box's edge
+    # split between its ends as (1 - s, s): the crossing is at the middle of the top edge, half each
+    top = np.argsort(r.positions[-1, :8, 2])[-2:]
+    np.testing.assert_allclose(r.contact_force[-1, top], [upper / 2, upper / 2], rtol=1e-9)
 
 
 def test_flexible_boxes_crossed_edge_to_edge_stay_apart_with_edge_contacts_and_cross_without():

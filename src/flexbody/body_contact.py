@@ -184,8 +184,8 @@ class BodyContactModel(Model):
         self.allowed = allowed
         x0 = scene.initial_positions()
         #: Then the edge contacts of the pairs with ``edges = true`` (3D, frictionless): each
-        #: convex surface edge of a pair's first body against the second body's edges, twice
-        #: (``EdgeSlots``), from slot ``first_edge`` on; their particle is the edge's first end.
+        #: convex surface edge of a pair's first body against the second body's edges, three
+        #: times (``EdgeSlots``), from slot ``first_edge`` on; their particle is the edge's first end.
         self.first_edge = len(self.slot_particle)
         pairs = [tuple(c.bodies) for c in scene.contacts if c.edges]  # 3D, frictionless (the scene checks)
         self._edge_slots = EdgeSlots(self.elements, self.element_body, pairs, x0) if pairs else None
@@ -750,13 +750,27 @@ class BodyContactModel(Model):
         return self.inner.jacobian_function(p, np.asarray(held)[: self.n_ground_contacts])
 
     # ------------------------------------------------------------------ for the phase machine
-    def particle_forces(self, lam: FloatArray) -> FloatArray:
+    def particle_forces(self, lam: FloatArray, positions: FloatArray | None = None,
+                        elements: IntArray | None = None) -> FloatArray:
         """Normal contact force on each particle (N), shape (nt, n), from the contact forces
         ``lam (nt, nc)``: its grounds' and those of the slots it is the particle of (the
-        reactions on the other body's element vertices are not counted there)."""
+        reactions on the other body's element vertices are not counted there).  An edge
+        contact's force is its edge's: split between the edge's two ends as (1 - s) and s
+        (its closest point's parameter) where the samples' ``positions`` (nt, n, 3) and the
+        slots' held ``elements`` (nt, ns) are given, else all on its first end."""
         lam = np.atleast_2d(lam)
         out = super().particle_forces(lam)
-        np.add.at(out.T, self.slot_particle, lam[:, self.n_ground_contacts :].T)
+        ng, first = self.n_ground_contacts, self.first_edge
+        np.add.at(out.T, self.slot_particle, lam[:, ng:].T)
+        if positions is None or elements is None or self._edge_slots is None:
+            return out
+        sample, row = np.nonzero((lam[:, ng + first :] != 0.0) & (np.asarray(elements)[:, first:] >= 0))
+        if len(sample):
+            es, force = self._edge_slots, lam[sample, ng + first + row]
+            s = es.parameters(np.asarray(positions), sample, row, np.asarray(elements)[sample, first + row])
+            ends = es.edges[es.own[row]]
+            np.add.at(out, (sample, ends[:, 0]), -s * force)  # its first end had it all
+            np.add.at(out, (sample, ends[:, 1]), s * force)
         return out
 
     def fold(self, y, p, contacts: IntArray) -> tuple[int, str] | None:

@@ -950,7 +950,7 @@ class _Run:
             X, V, E, lam = model.trajectory(Y, p, held, push, elements=self.sample_elements[:k])
         else:
             X, V, E, lam = model.trajectory(Y, p, held, push)
-        force = model.particle_forces(lam + push)
+        force = model.particle_forces(lam + push, X, None if self.sample_elements is None else self.sample_elements[:k])
         if len(Y):
             self.track_gaps(Y[-1])
         # Energy taken by instant impacts strictly before each sample time (losses come in time order).

@@ -421,6 +421,16 @@ class EdgeSlots:
 
         return _kernels_module().edge_3d(*self._ends(x, rows, codes))[0][0]
 
+    def parameters(self, positions: FloatArray, samples: IntArray, rows: IntArray, codes: IntArray) -> FloatArray:
+        """The closest point's parameter s on each row's own edge, ``rows`` (k,) against the
+        edges and sides of their ``codes`` (k,) at ``samples`` (k,) of ``positions`` (nt, n,
+        3), shape (k,)."""
+        from .assembly import _kernels_module
+
+        points = self.points(rows, codes)
+        ends = [positions[samples, points[:, j]].T for j in range(4)]
+        return _kernels_module().edge_3d(*ends, np.asarray(self.decode(codes)[1], float)[None, :])[1][0]
+
     def _ends(self, x: FloatArray, rows: IntArray, codes: IntArray) -> list[FloatArray]:
         """The ``edge_3d`` kernel's inputs for ``rows`` against ``codes``: the four ends
         (3, k) each and the sides (1, k)."""

@@ -75,10 +75,12 @@ class Model:
         """The first contacts, with the grounds: all of them unless bodies touch each other."""
         return self.n_contacts
 
-    def particle_forces(self, lam: FloatArray) -> FloatArray:
+    def particle_forces(self, lam: FloatArray, positions: FloatArray | None = None,
+                        elements: IntArray | None = None) -> FloatArray:
         """Contact force on each particle, shape (nt, n), from per-contact values ``lam (nt,
         nc)``: the sum over its grounds (the ground contacts are every (particle, ground) pair,
-        particle-major)."""
+        particle-major).  ``positions`` (nt, n, dim) and the slots' ``elements`` (nt, ns) at
+        the same samples are for contacts between bodies (see :mod:`flexbody.body_contact`)."""
         lam = np.atleast_2d(lam)
         ng, n = self.n_ground_contacts, self.n_particles
         return lam[:, :ng].reshape(len(lam), n, ng // n).sum(axis=2)
