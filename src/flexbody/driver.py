@@ -29,6 +29,7 @@ from .choices import CHATTER_WINDOW
 from .contact import FREE, HELD, PUSHED, Event, Phases, UnsettledInstant, resolve
 from .contact_problems import UNALIGNED
 from .coupled import CoupledImpactError, project_held
+from .edge_contact import EdgeSlots
 from .events import EventFunctions, locate
 from .model import MADE_FOR, Model, couples_contacts, load_model, made_for, resolved_formulation
 from .result import STATUSES, SimulationResult
@@ -929,9 +930,9 @@ class _Run:
             out.append(f"bodies {first!r} and {second!r} crossed edge on edge {when} ({first!r}: {how}), up to "
                        f"{self.max_edge_crossing:.2g} m deep where checked ({EDGE_CHECKS} times per output interval): "
                        "two edges meeting are a contact only between bodies whose [[contacts]] entry has "
-                       "edges = true (3D, without friction; at most two edges of the second body under one edge of "
-                       "the first at once), so here edges passed through each other unseen; finer surfaces make it "
-                       "rarer (a vertex meets a face first more often)")
+                       f"edges = true (3D, without friction; at most {EdgeSlots.PER_EDGE} edges of the second body "
+                       "under one edge of the first at once), so here edges passed through each other unseen; finer "
+                       "surfaces make it rarer (a vertex meets a face first more often)")
         if s.rtol > LOOSE_RTOL:
             out.append(f"rtol = {s.rtol:g} is loose: impacts and lift-offs can differ from a tight run's; check the "
                        "event count against a run with a tighter --rtol")

@@ -419,7 +419,7 @@ class EdgeSlots:
         :meth:`terms`' ``gap`` without the velocity kernel."""
         from .assembly import _kernels_module
 
-        return _kernels_module().edge_3d(*self._ends(x, rows, codes))[0][0]
+        return _kernels_module().edge_3d(*self._ends(x, self.points(rows, codes), codes))[0][0]
 
     def parameters(self, positions: FloatArray, samples: IntArray, rows: IntArray, codes: IntArray) -> FloatArray:
         """The closest point's parameter s on each row's own edge, ``rows`` (k,) against the
@@ -427,15 +427,15 @@ class EdgeSlots:
         3), shape (k,)."""
         from .assembly import _kernels_module
 
-        points = self.points(rows, codes)
-        ends = [positions[samples, points[:, j]].T for j in range(4)]
-        return _kernels_module().edge_3d(*ends, np.asarray(self.decode(codes)[1], float)[None, :])[1][0]
+        return _kernels_module().edge_3d(*self._ends(positions, self.points(rows, codes), codes, samples))[1][0]
 
-    def _ends(self, x: FloatArray, rows: IntArray, codes: IntArray) -> list[FloatArray]:
-        """The ``edge_3d`` kernel's inputs for ``rows`` against ``codes``: the four ends
-        (3, k) each and the sides (1, k)."""
-        points = self.points(rows, codes)
-        return [x[points[:, j]].T for j in range(4)] + [np.asarray(self.decode(codes)[1], float)[None, :]]
+    def _ends(self, x: FloatArray, points: IntArray, codes: IntArray, samples: IntArray | None = None
+              ) -> list[FloatArray]:
+        """The ``edge_3d`` kernel's inputs for rows moving ``points`` (k, 4, :meth:`points`)
+        against ``codes`` (k,): the four ends (3, k) each, from ``x`` (n, 3) or from
+        ``samples`` (k,) of ``x`` (nt, n, 3), and the sides (1, k)."""
+        at = [points[:, j] if samples is None else (samples, points[:, j]) for j in range(4)]
+        return [x[j].T for j in at] + [np.asarray(self.decode(codes)[1], float)[None, :]]
 
     def terms(self, x: FloatArray, v: FloatArray, rows: IntArray, codes: IntArray) -> EdgeTerms:
         """``rows`` (k,) against the edges and sides of their ``codes`` (k,, :meth:`encode`)."""
@@ -443,7 +443,7 @@ class EdgeSlots:
 
         kernels = _kernels_module()
         points = self.points(rows, codes)
-        *ends, sides = self._ends(x, rows, codes)
+        *ends, sides = self._ends(x, points, codes)
         rates = [v[points[:, j]].T for j in range(4)]
         gap, parameters, normal, _ = kernels.edge_3d(*ends, sides)
         rate, _, bias = kernels.edge_3d_velocity(*ends, sides, *rates)
