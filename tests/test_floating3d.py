@@ -150,6 +150,7 @@ def test_floating_and_particles_give_the_same_accelerations_and_contact_forces(m
         assert np.abs(lam_p).max() > 0  # the held contacts did push
 
 
+@pytest.mark.slow  # a whole-scene derivation and its compile (12 s with a cold cache; the fixture's model)
 @needs_cc
 def test_a_3d_drop_gives_the_same_events_and_motion_in_both_formulations():
     scene = space_scene("tetrahedron")
@@ -192,6 +193,7 @@ def test_a_body_starting_at_the_gimbal_lock_is_refused(models):
         initial_coordinates(scene, models["tetrahedron", "floating"])
 
 
+@pytest.mark.slow  # the box's whole-scene derivation and compile (38 s with a cold cache; the fixture's model)
 @needs_cc
 def test_a_body_tumbling_through_the_gimbal_lock_stops_with_blow_up():
     """The 2x2x2 box starts with T's angles (45, 0, 0) deg (T's y-axis is the face diagonal

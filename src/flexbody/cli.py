@@ -250,7 +250,7 @@ def _show(args: argparse.Namespace) -> int:
     formulation = args.formulation or ("floating" if scene.rigid_bodies else scene.simulation.formulation)
     if scene.n_particles > SHOW_MAX_PARTICLES and not args.force and find_model_dir(scene, formulation) is None:
         print(f"error: {scene.source} has {scene.n_particles} particles: deriving its equations whole ({formulation}) "
-              f"would take about {derivation_seconds(scene.n_particles, formulation):.0f} s. Running it needs no "
+              f"would take about {derivation_seconds(scene.n_particles, formulation, scene.dim):.0f} s. Running it needs no "
               "derivation (the particles formulation is assembled from element kernels); to print the equations "
               "anyway, add --force.", file=sys.stderr)
         return EXIT_USAGE

@@ -449,7 +449,7 @@ def derive_on_demand(scene: Scene, formulation: str) -> Path:
     out = cache_root() / "models" / digest
     n = scene.n_particles
     # a rigid body costs its frame T alone (about what three particles of a flexible one do)
-    estimate = derivation_seconds(sum(b.n_particles if not b.rigid else 3 for b in scene.bodies), formulation)
+    estimate = derivation_seconds(sum(b.n_particles if not b.rigid else 3 for b in scene.bodies), formulation, scene.dim)
     print(f"deriving the equations of {scene.name} ({n} particles, formulation {formulation}) with SymPy; "
           f"this usually takes ~{estimate:.0f} s (once: the model is cached in {out})", file=sys.stderr, flush=True)
     env = dict(os.environ, PYTHONHASHSEED="0")
@@ -470,13 +470,19 @@ FLOATING_MAX_PARTICLES = 40
 SHOW_MAX_PARTICLES = 30
 
 
-def derivation_seconds(n_particles: int, formulation: str) -> float:
+def derivation_seconds(n_particles: int, formulation: str, dim: int = 2) -> float:
     """A rough estimate (s) of deriving and rendering a whole scene on this class of machine.
 
-    Fitted to measurements on a 2-core VM: particles 9 s at 23 particles and 96 s at 100;
-    floating 37 s and 375 s (both grow as about n^1.6)."""
+    Fitted to measurements on a 2-core VM: 2D particles 9 s at 23 particles and 96 s at 100;
+    floating 37 s and 375 s (both grow as about n^1.6).  3D costs more per particle
+    (``DIM3_FACTOR``: floating 9.3 s at 5 particles and 23.5 s at 8, 2.9 and 3.5 times the 2D
+    fit; particles 16.7 s at 8, ten times it)."""
     base = 9.0 if formulation == "particles" else 37.0
-    return base * (max(n_particles, 1) / 23.0) ** 1.6
+    return base * (max(n_particles, 1) / 23.0) ** 1.6 * (DIM3_FACTOR[formulation] if dim == 3 else 1.0)
+
+
+#: How much longer a 3D derivation takes than the 2D fit says (see derivation_seconds).
+DIM3_FACTOR = {"particles": 10.0, "floating": 3.2}
 
 
 def _scene_and_formulation(scene, backend: str, formulation: str | None) -> tuple[Scene, str]:
