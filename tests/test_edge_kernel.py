@@ -132,3 +132,20 @@ def test_c_kernels_equal_numpy_kernels(rng):
         expected = getattr(K, name)(*(z.T for z in args))
         for got, want in zip(outs, expected):
             np.testing.assert_allclose(got, np.reshape(want, (got.shape[1], m)).T, rtol=1e-12, atol=1e-13)
+
+
+@pytest.mark.skipif(not HAS_CC, reason="no C compiler")
+def test_the_edge_kernels_of_either_backend_give_the_same_arrays(rng):
+    """EdgeKernels("c") hands the compiled kernels' outputs back in the NumPy twins' shapes
+    (size, k), the Jacobian (1, 12, k), equal to rounding on random edge pairs."""
+    from flexbody.edge_contact import EdgeKernels
+
+    m = 9
+    ends = [rng.normal(size=(3, m)) for _ in range(4)]
+    side = np.where(rng.random((1, m)) < 0.5, -1.0, 1.0)
+    rates = [rng.normal(size=(3, m)) for _ in range(4)]
+    c, numpy = EdgeKernels("c"), EdgeKernels("numpy")
+    for got, want in zip(c.edge_3d(*ends, side) + c.edge_3d_velocity(*ends, side, *rates),
+                         numpy.edge_3d(*ends, side) + numpy.edge_3d_velocity(*ends, side, *rates)):
+        assert got.shape == np.shape(want)
+        np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-13)

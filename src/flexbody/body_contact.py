@@ -188,7 +188,7 @@ class BodyContactModel(Model):
         #: times (``EdgeSlots``), from slot ``first_edge`` on; their particle is the edge's first end.
         self.first_edge = len(self.slot_particle)
         pairs = [tuple(c.bodies) for c in scene.contacts if c.edges]  # 3D, frictionless (the scene checks)
-        self._edge_slots = EdgeSlots(self.elements, self.element_body, pairs, x0) if pairs else None
+        self._edge_slots = EdgeSlots(self.elements, self.element_body, pairs, x0, self.backend) if pairs else None
         if self._edge_slots is not None:
             es = self._edge_slots
             self.slot_particle = np.concatenate([self.slot_particle, es.edges[es.own, 0]])
@@ -239,6 +239,7 @@ class BodyContactModel(Model):
         self._frictional = bool((self.mu > 0.0).any())  # else the slip directions change no answer
         self._last: tuple[tuple[np.ndarray, ...], _Solved] | None = None  # the last state's answer (see _dynamics)
         self._swept: dict[bytes, tuple] = {}  # positions -> the whole surface sweep (see _surface_contacts)
+        self._edges_swept: dict[bytes, tuple] = {}  # positions and edges held -> every edge row's gap (the same)
         self._layouts: dict[tuple, _Layout] = {}  # held rows -> where their terms go (see _rows)
         self._allowed_pairs: tuple[IntArray, IntArray] | None = None  # (kept pairs, the allowed ones; see _allowed_kept)
         self._element = ElementKernels(self.dim, self.backend)
@@ -1069,7 +1070,12 @@ class BodyContactModel(Model):
             rows = np.arange(self.n_slots - self.first_edge)
         if len(rows):  # the edge contacts': an edge held against another reads that pair's gap
             gaps, near = gaps.copy(), near.copy()
-            gaps[self.first_edge + rows], near[self.first_edge + rows] = self._edge_gaps(x, rows)
+            if slots is None:  # all of them: x and the edges held decide them (asked again as the sweep is)
+                key = np.ascontiguousarray(x).tobytes() + self.element_of[self.first_edge :].tobytes()
+                edge_gaps = _kept(self._edges_swept, key, lambda: _read_only(self._edge_gaps(x, rows)), SWEEPS_KEPT)
+            else:
+                edge_gaps = self._edge_gaps(x, rows)
+            gaps[self.first_edge + rows], near[self.first_edge + rows] = edge_gaps
         return gaps, near, found
 
     def _sweep(self, x, slots: IntArray | None = None) \
