@@ -279,7 +279,7 @@ def test_the_kept_candidate_list_holds_every_pair_within_reach_as_the_bodies_mov
         x = x0.copy()
         x[60:] += [-0.004 * step, 0.001 * step, 0.0]  # closing in
         x[60:] = (x[60:] - x[60:].mean(axis=0)) * (1.0 + 0.002 * step) + x[60:].mean(axis=0)  # stretching
-        which, other = slots._candidates(x, np.arange(slots.n_primary), reach)
+        which, other = slots._candidates(x, x[slots.edges], np.arange(slots.n_primary), reach)
         kept = set(zip(which.tolist(), other.tolist()))
         ends = x[slots.edges]
         for row in range(slots.n_primary):

@@ -114,6 +114,10 @@ class AssembledModel(Model):
         grounds = p[n + 3 * nl + d :].reshape(self.n_grounds, 2, d)
         return p[:n], link_par, gravity, grounds
 
+    def ground_normals(self, p) -> FloatArray:
+        """Each ground's unit normal, shape (n_grounds, dim) (from ``p``)."""
+        return self._views(np.asarray(p, float))[3][:, 1]
+
     # ------------------------------------------------------------------ sparse Jacobian
     def jacobian_function(self, p, held):
         """``J(t, y)`` of the constrained right-hand side as a sparse matrix (ny, ny).

@@ -1551,9 +1551,8 @@ class _ParticleCoordinates:
         return x, None if u is None else np.asarray(u, float)[: self.inner.nu].reshape(-1, d)
 
     def ground_normals(self, p) -> FloatArray:
-        """Each ground's unit normal, shape (n_grounds, dim): the end of ``p`` (point, normal)."""
-        d, k = self.inner.dim, self.inner.n_grounds
-        return np.asarray(p, float)[len(p) - 2 * d * k :].reshape(k, 2, d)[:, 1]
+        """Each ground's unit normal, shape (n_grounds, dim)."""
+        return self.inner.ground_normals(p)
 
     def coupled_grounds(self, held: np.ndarray, moved: np.ndarray) -> np.ndarray:
         """Which held ground contacts (bool (ng,)) couple with rows moving particles ``moved``

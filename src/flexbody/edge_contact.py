@@ -368,10 +368,10 @@ class EdgeSlots:
         place = np.zeros(len(rows), np.intp) if loose else earlier.sum(axis=1)
         # each edge's contacts found once for all its rows asked (siblings share them)
         primary, row_primary = np.unique(rows % self.n_primary, return_inverse=True)
-        which, other = self._candidates(x, primary, reach)
+        ends = x[self.edges]
+        which, other = self._candidates(x, ends, primary, reach)
         mine = self.own[primary[which]]
         # the kept list's pairs whose edges' boxes, grown by reach, overlap now (most do not)
-        ends = x[self.edges]
         low, high = ends.min(axis=1) - 0.5 * reach, ends.max(axis=1) + 0.5 * reach
         keep = ((low[mine] <= high[other]) & (low[other] <= high[mine])).all(axis=1)
         which, mine, other = which[keep], mine[keep], other[keep]
@@ -424,8 +424,10 @@ class EdgeSlots:
             edge[k], side[k] = others[best], 1.0 if gap[best] >= 0.0 else -1.0
         return edge, side
 
-    def _candidates(self, x: FloatArray, primary: IntArray, reach: float) -> tuple[IntArray, IntArray]:
-        """The candidate (i, edge) pairs of rows ``primary`` (k,; rows below ``n_primary``):
+    def _candidates(self, x: FloatArray, ends: FloatArray, primary: IntArray, reach: float
+                    ) -> tuple[IntArray, IntArray]:
+        """The candidate (i, edge) pairs of rows ``primary`` (k,; rows below ``n_primary``),
+        at positions ``x`` whose edges' ends are ``ends`` (E, 2, 3):
         ``i`` indexes ``primary``, ``edge`` is an edge of its body whose midpoint is within
         ``reach`` plus both edges' half-lengths (a superset).  From a kept list (a Verlet
         list, as :class:`flexbody.broadphase.CandidateList`'s): :func:`edge_candidates` for
@@ -433,7 +435,7 @@ class EdgeSlots:
         the reach move midpoints and half-lengths by at most that), made again once an
         edge's end has moved half the reach."""
         kept = self._kept
-        ends = x[self.edges].reshape(-1, 3)
+        ends = ends.reshape(-1, 3)
         if kept is None or reach > kept[0] or np.max(np.linalg.norm(ends - kept[1], axis=1), initial=0.0) > 0.5 * kept[0]:
             reach = max(reach, kept[0]) if kept is not None else reach
             row, other = edge_candidates(x, self.edges[self.own[: self.n_primary]], self.edges, 3.0 * reach).T

@@ -194,9 +194,8 @@ class MixedModel(Model):
         return x, v
 
     def ground_normals(self, p) -> FloatArray:
-        """Each ground's unit normal, shape (n_grounds, dim): the end of the flexible part's ``p``."""
-        p_f, d, k = self._p(p)[0], self.dim, self.n_grounds
-        return p_f[len(p_f) - 2 * d * k :].reshape(k, 2, d)[:, 1]
+        """Each ground's unit normal, shape (n_grounds, dim): the flexible part's."""
+        return self.flexible.ground_normals(self._p(p)[0])
 
     def rigid_state(self, q, u, p) -> tuple[FloatArray, FloatArray, FloatArray]:
         """The rigid part's ``q_r (nq_r,)``, ``u_r (nu_r,)`` and ``p_r`` (its model's order)."""
