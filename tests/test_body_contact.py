@@ -9,6 +9,8 @@ on what carries it; and the assembled model's own per-particle ground contacts.
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 
@@ -686,22 +688,86 @@ def _loop_and_dart(kick: float, braced: bool) -> dict:
 
 def test_a_contact_against_a_surface_folded_over_itself_is_refused():
     """Particles 0 and 3 of a soft loop pass each other: its boundary crosses itself, and a
-    gap's sign against it means nothing.  When the dart then touches it the run stops as
-    unsupported, naming the body and the crossing segments, after the samples show the fold;
-    a braced loop with the same kick does not fold and the dart's hit is simulated."""
+    gap's sign against it means nothing.  When the dart comes within reach of it (a
+    particle within the model's margin of the other's surface, where its gap is read: on
+    the folded loop, deep inside) the run stops as unsupported, naming the body and the
+    crossing segments, after the samples show the fold and before the dart touches it (the
+    last stop's code waited for a contact against it: 3 events, 0.146 s); a braced loop
+    with the same kick does not fold and the dart's hit is simulated."""
     from flexbody.surface import crossings
 
     ring = np.array([[k, (k + 1) % 6] for k in range(6)])
-    folded = flexbody.simulate(flexbody.load_scene(_loop_and_dart(kick=1.0, braced=False)))
+    scene = flexbody.load_scene(_loop_and_dart(kick=1.0, braced=False))
+    folded = flexbody.simulate(scene)
     assert folded.status == "unsupported"
     assert "'loop' has folded over (its segments" in folded.message
     crossed = [len(crossings(x[:6], ring)) > 0 for x in folded.positions]
     assert crossed[-1] and not crossed[0]
-    assert folded.stats["events"] >= 1
+    assert folded.stats["events"] == 0
+    # the bodies at the stop, a step after the last sample (no force but the loop's soft links)
+    t_stop = float(re.search(r"at t = ([0-9.e-]+) s", folded.message).group(1))
+    x = folded.positions[-1] + folded.velocities[-1] * (t_stop - folded.t[-1])
+    elements, _ = scene.surfaces()
+    loop, dart = elements[elements.max(axis=1) < 6], elements[elements.min(axis=1) >= 6]
+
+    def nearest(points, segments):  # the least distance of the points to the segments
+        a, b = x[segments[:, 0]], x[segments[:, 1]]
+        s = np.clip(np.einsum("psd,sd->ps", points[:, None] - a, b - a) / np.einsum("sd,sd->s", b - a, b - a), 0, 1)
+        return np.linalg.norm(points[:, None] - (a + s[..., None] * (b - a)), axis=2).min()
+
+    assert min(nearest(x[6:], loop), nearest(x[:6], dart)) <= load_model(scene).margin
     braced = flexbody.simulate(flexbody.load_scene(_loop_and_dart(kick=1.0, braced=True)))
     assert braced.status == "success", braced.message
     assert braced.stats["impacts"] >= 1
     assert not any(len(crossings(x[:6], ring)) for x in braced.positions)
+
+
+def _unbraced_ring_beside(other: dict, ring: dict, pair: dict, ground_e: float) -> dict:
+    """An unbraced ring (perimeter links only: a mechanism) and another body that may touch it."""
+    return {"name": "unbraced", "gravity": [0.0, -9.81],
+            "grounds": [{"point": [0.0, 0.0], "normal": [0.0, 1.0], "restitution": ground_e}],
+            "bodies": [other, {"name": "ring", "shape": "ring", "center": False, "damper": "axial", **ring}],
+            "contacts": [{"bodies": [other["name"], "ring"], **pair}], "simulation": {"t_end": 0.3}}
+
+
+#: Two scenes a fuzz of random piles found (seeds 64 and 18, shrunk): an unbraced ring
+#: collapses beside a rigid box (it ended `success` reading a box corner 0.086 m inside it,
+#: the corner's contact armed below that, none decided against the ring), and beside an
+#: ellipse (it stalled at t = 0.1323 s, `too_slow`).
+UNBRACED = {
+    "box": _unbraced_ring_beside(
+        {"name": "box", "shape": "polygon", "rigid": True, "mass_total": 0.1486, "position": [0.243873, 0.18587],
+         "vertices": [[-0.052137, -0.033335], [0.052137, -0.033335], [0.052137, 0.033335], [-0.052137, 0.033335]],
+         "angle": 0.3275, "velocity": [-0.9114, 0.1388], "angular_velocity": -0.1328},
+        {"count": 8, "radius": 0.111721, "mass_total": 0.684, "stiffness": 12253.1, "damping": 0.768,
+         "position": [-0.048178, 0.489351], "angle": 0.3426, "velocity": [0.2335, -0.4175], "angular_velocity": 2.3139},
+        {"friction": 0.3, "restitution": 0.3}, 0.3),
+    "ellipse": _unbraced_ring_beside(
+        {"name": "ellipse", "shape": "ellipse", "count": 8, "radii": [0.092578, 0.066635], "center": True,
+         "mass_total": 0.4489, "stiffness": 17845.7, "damping": 0.427, "damper": "axial",
+         "position": [-0.119082, 0.407309], "angle": 0.2799, "velocity": [-0.7603, -0.6582], "angular_velocity": 1.3696},
+        {"count": 12, "radius": 0.055791, "mass_total": 0.6075, "stiffness": 13597.8, "damping": 0.598,
+         "position": [-0.264319, 0.216021], "angle": 0.189, "velocity": [0.8148, 0.7772], "angular_velocity": 2.6899},
+        {"restitution": 0.8}, 0.8),
+}
+
+
+@pytest.mark.parametrize("beside", sorted(UNBRACED))
+def test_a_surface_that_folds_with_no_contact_against_it_decided_stops_the_run(beside):
+    """The unbraced ring's surface crosses itself while only its own particles touch
+    anything: the run stops as unsupported, naming it, as soon as a free contact reads its
+    gap against it (within reach; at an output sample or deep inside at a step's end), with
+    nothing inside anything (the last stop's code: `success` 0.086 m inside, and `too_slow`)."""
+    from flexbody.surface import crossings
+
+    scene = flexbody.load_scene(UNBRACED[beside])
+    result = flexbody.simulate(scene, max_wall_time=60.0)
+    assert result.status == "unsupported", result.message
+    assert "body 'ring' has folded over (its segments" in result.message
+    assert result.stats["max_penetration_m"] <= 1e-9
+    elements, body = scene.surfaces()
+    crossed = [len(crossings(x, elements[body == 1])) > 0 for x in result.positions]
+    assert not crossed[0]
 
 
 def test_the_fold_check_names_the_folded_3d_body_and_how():

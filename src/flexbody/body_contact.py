@@ -774,15 +774,18 @@ class BodyContactModel(Model):
             np.add.at(out, (sample, ends[:, 1]), s * force)
         return out
 
-    def fold(self, y, p, contacts: IntArray) -> tuple[int, str] | None:
-        """A body whose surface slot contacts ``contacts`` touch and how it has folded (its
-        index and a description), or None.  Folded: two of its 2D segments cross, an edge of
-        its 3D surface passes through one of its triangles, or its closed surface encloses no
+    def fold(self, y, p, contacts: IntArray | None = None) -> tuple[int, str] | None:
+        """A body whose surface slot contacts ``contacts`` touch (default: every surface a
+        free slot is within ``margin`` of) and how it has folded (its index and a
+        description), or None.  Folded: two of its 2D segments cross, an edge of its 3D
+        surface passes through one of its triangles, or its closed surface encloses no
         positive area or volume (turned inside out).  On a folded surface inside and outside
         are not defined, so a gap's sign against it is not either: another body's particle
         can read "inside" far from any contact."""
         x = self._state(y, p)[0]
-        for body in np.unique(self.slot_body[np.asarray(contacts, np.intp) - self.n_ground_contacts]):
+        slots = (np.asarray(contacts, np.intp) - self.n_ground_contacts if contacts is not None
+                 else np.flatnonzero(self._surface_gaps(x)[1]))
+        for body in np.unique(self.slot_body[slots]):
             mine = self.elements[self._body_elements[body]]
             if self.dim == 2:
                 crossed = crossings(x, mine)
