@@ -89,9 +89,17 @@ class EventFunctions:
         sliding = self.phases.phase == SLIDING
         self.from_rest = sliding & ((speed == 0.0) | self.started)
         self.started = np.zeros_like(self.started)  # the first step's only
+        hold = ft
+        if (self.from_rest & (speed > 0.0)).any():
+            # Its pull is what would hold it there, reversed: the law's own force follows a
+            # round-off slip (measured in a fuzz: 6.8e-49 m/s against the pull, so friction
+            # pushed the slide on, 12 N for 0.35 ms, and the ledger's friction work fell).
+            codes = np.where(self.from_rest, HELD, self.held).astype(self.held.dtype)
+            hold = np.where(self.from_rest[:, None], self.model.friction(y, self.p, codes, self.phases.push)[1], ft)
+        size = np.linalg.norm(hold, axis=1)
         with np.errstate(divide="ignore", invalid="ignore"):
             direction = np.where((~self.from_rest)[:, None], vt / speed[:, None],
-                                 np.where((pull > 0.0)[:, None], -ft / pull[:, None], 0.0))
+                                 np.where((size > 0.0)[:, None], -hold / size[:, None], 0.0))
         self.direction[sliding] = direction[sliding]
         if not self.hold_slips:
             return False
