@@ -261,3 +261,29 @@ def test_a_3d_friction_answer_off_coulombs_circle_is_kept_with_a_note_not_silent
     _note_unaligned(answer("solved", "circular Coulomb friction in 1 alignment round(s)"), np.array([3, 9]), notes)
     _note_unaligned(answer("inaccurate", "a complementary basis was found, but ..."), np.array([3, 9]), notes)
     assert notes == [f"contacts [3, 9]: {UNALIGNED}: after 50 alignment round(s) ... by 0.0016"]
+
+
+def test_two_rough_spheres_go_on_past_a_slide_from_rest_with_a_round_off_slip():
+    """Two spheres rolling and sliding on each other (μ 0.8) and on a rough ground, found
+    by a fuzz of random piles: at 0.1913 s a particle starts sliding from rest with a
+    round-off slip.  Its slide takes its pull's direction: before, it took the round-off
+    slip's, friction drove it on, and the run stalled there (`too_slow` after 60 s, 4 018
+    steps).  It now ends, with friction taking energy only."""
+    sphere = {"shape": "sphere", "count": 38, "center": True, "damper": "relative"}
+    scene = flexbody.load_scene({
+        "name": "two_rough_spheres", "gravity": [0.0, 0.0, -9.81],
+        "grounds": [{"point": [0.0, 0.0, 0.0], "normal": [0.0, 0.0, 1.0], "friction": 0.3}],
+        "bodies": [
+            {**sphere, "name": "a", "radius": 0.09906367787170112, "mass_total": 0.5357, "stiffness": 16193.6,
+             "damping": 0.887, "position": [0.010496, 0.232083, 0.464047], "rotation": [0.1422, 0.2087, -0.257],
+             "velocity": [0.737, 0.999, 0.8219], "angular_velocity": [-2.3007, -0.6741, 2.5514]},
+            {**sphere, "name": "b", "radius": 0.07871633401482427, "mass_total": 0.7043, "stiffness": 13294.9,
+             "damping": 0.322, "position": [-0.245948, 0.177742, 0.313952], "rotation": [-0.3851, 0.1239, -0.0822],
+             "velocity": [0.1951, -0.0536, -0.4192], "angular_velocity": [-0.6531, 0.2234, -2.0237]}],
+        "contacts": [{"bodies": ["a", "b"], "friction": 0.8}],
+        "simulation": {"t_end": 0.203}})
+    r = flexbody.simulate(scene, max_wall_time=60.0)
+    assert r.success, r.message
+    assert ((r.events_kind == "slip") & (r.events_time > 0.19)).any()
+    assert np.diff(r.friction_work).min() >= 0.0 and r.friction_work[-1] > 0.0
+    assert r.stats["max_penetration_m"] <= 1e-9 and r.stats["energy_drift_relative"] < 1e-5
