@@ -584,10 +584,8 @@ class _Run:
             self.Y[k] = dense(self.grid[k])
         self.keep_samples(start, stop)
         lowest = self.track_gaps(self.y)
-        if self.model.n_slots and stop > start:
-            self.check_surfaces(self.grid[stop - 1], self.Y[stop - 1])
-        if self.model.n_slots and lowest < -FOLD_PROBE * self.gap_tolerance:
-            self.check_surfaces(t_stop, self.y)
+        if self.model.n_slots and (stop > start or lowest < -FOLD_PROBE * self.gap_tolerance):
+            self.check_surfaces(t_stop)  # at the step's end: its surfaces' sweep is kept (the event functions')
         self.track_edges(dense, t_start, t_stop)
 
     def track_edges(self, dense, t_start: float, t: float) -> None:
@@ -866,12 +864,12 @@ class _Run:
         touched = [e.contact for e in new_events if e.contact >= self.model.n_ground_contacts]
         self.refuse_fold(t, self.model.fold(self.y, self.p, touched) if touched else None)
 
-    def check_surfaces(self, t: float, y: np.ndarray) -> None:
-        """:meth:`check_folds` for every surface a free contact is within reach of at state
-        ``y`` at ``t`` (each output sample, and a step's end where a contact between bodies
-        reads deep inside): a body can fold with no contact against it decided, and then a
+    def check_surfaces(self, t: float) -> None:
+        """:meth:`check_folds` for every surface a free contact is within reach of at the
+        end ``t`` of a step that passed an output sample, or where a contact between bodies
+        reads deep inside: a body can fold with no contact against it decided, and then a
         particle beside it reads inside."""
-        self.refuse_fold(t, self.model.fold(y, self.p))
+        self.refuse_fold(t, self.model.fold(self.y, self.p))
 
     def refuse_fold(self, t: float, fold: tuple[int, str] | None) -> None:
         """Stop with ``unsupported`` at ``t`` if ``fold`` (a body and how it folded) is one."""
