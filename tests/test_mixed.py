@@ -97,6 +97,7 @@ def test_a_rigid_bar_hitting_a_flexible_disc_in_space_keeps_momentum_and_angular
         assert r.stats["max_penetration_m"] < 1e-9 and r.stats["energy_drift_relative"] < 1e-8
 
 
+@pytest.mark.slow  # an oracle: the whole scene derived (6.6 s with a cold cache, and its compile)
 def test_a_small_mixed_scene_moves_as_derived_whole():
     """The oracle: a flexible ring landing on a rigid block that falls onto the ground, on the
     floating formulation (every body derived whole, Kane) and on the particles one (the ring
@@ -224,6 +225,7 @@ def test_a_3d_sphere_of_200_particles_landing_on_a_rigid_box_moves_as_on_a_groun
     assert a.stats["max_penetration_m"] < 1e-9
 
 
+@pytest.mark.slow  # the whole scene derived (3.2 s with a cold cache, and its compile)
 def test_the_whole_scene_derived_model_of_a_mixed_scene_is_the_floating_one():
     """``load_derived_model`` (the oracle, ``flexbody show``) derives rigid frames whole on the
     floating formulation: the default for a mixed scene, and 'particles' asked for is refused

@@ -103,6 +103,7 @@ TWO_RINGS = {
 }
 
 
+@pytest.mark.slow  # an oracle: the whole scene derived on frames T (10 s with a cold cache, and its compile)
 def test_flexible_bodies_on_frames_collide_as_in_the_particles_formulation():
     """The same two flexible rings colliding off-centre, on the particles formulation (their
     particles are the coordinates) and on the floating one (frames T, elastic coordinates in

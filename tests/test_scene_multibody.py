@@ -118,6 +118,30 @@ def test_a_3d_surface_pushed_through_itself_is_pierced_and_a_dented_one_is_not()
     assert signed_measure(octahedron, faces) > 0.0 > signed_measure(inverted, faces)
 
 
+
+def test_flat_faces_and_straight_sides_do_not_cross_themselves_whatever_the_rounding(rng):
+    """A 3 x 3 x 2 box's faces hold coplanar edges and triangles, a polygon's straight sides
+    collinear segments: rounding put an edge's ends on either side of its own face's plane
+    at random, and an undeformed box in free flight was reported folded (a fuzz: 22 % of
+    random orientations, 93 % of translated copies).  An end must be on a side by more
+    than STRICT of its edge's length: none is, in any of 200 random poses (a surface
+    pushed through itself still is: the tests above)."""
+    from scipy.spatial.transform import Rotation
+
+    scene = flexbody.load_scene({"name": "box", "gravity": [0.0, 0.0, -9.81], "bodies": [
+        {"name": "box", "shape": "box", "count": [3, 3, 2], "size": [0.2, 0.15, 0.1], "mass_total": 0.5,
+         "stiffness": 3000.0, "damping": 0.5, "position": [0.0, 0.0, 0.5]}], "simulation": {"t_end": 0.1}})
+    points, faces = scene.initial_positions(), scene.surfaces()[0]
+    square = np.array([[0.0, 0.0], [0.5, 0.0], [1.0, 0.0], [1.0, 0.5], [1.0, 1.0], [0.5, 1.0], [0.0, 1.0], [0.0, 0.5]])
+    sides = np.array([[k, (k + 1) % 8] for k in range(8)])
+    for rotation in Rotation.random(200, random_state=7):
+        shift = rng.uniform(-10.0, 10.0, 3)
+        assert piercings(rotation.apply(points) + shift, faces).shape == (0, 2)
+        angle = rotation.as_rotvec()[2]
+        turn = np.array([[np.cos(angle), -np.sin(angle)], [np.sin(angle), np.cos(angle)]])
+        assert crossings(square @ turn.T + shift[:2], sides).shape == (0, 2)
+
+
 def test_two_particles_enclose_nothing():
     assert presets.ellipse_surface(2, False).shape == (0, 2)
 
