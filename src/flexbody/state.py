@@ -48,7 +48,7 @@ def initial_coordinates(scene: Scene, model: Model) -> tuple[np.ndarray, np.ndar
         if body.get("rigid") and n > 1:
             _check_rigid_motion(xb, vb, scene.bodies[k].name)
         if len(gauge) == 3 and n > 1:
-            qb, ub = _floating_3d(xb, vb, gauge, scene.bodies[k].name)
+            qb, ub = _floating_3d(xb, vb, gauge, scene.bodies[k].name, bool(body.get("rigid")))
             if body.get("rigid"):
                 qb, ub = qb[:6], ub[:6]  # T alone: its particles are fixed in it
             q += qb
@@ -172,7 +172,7 @@ def xyz_rates(angles: np.ndarray, omega_t: np.ndarray) -> np.ndarray:
     return np.linalg.solve(B, omega_t)
 
 
-def _floating_3d(x: np.ndarray, v: np.ndarray, gauge, name: str) -> tuple[list, list]:
+def _floating_3d(x: np.ndarray, v: np.ndarray, gauge, name: str, rigid: bool = False) -> tuple[list, list]:
     anchor, reference, third = gauge
     R, omega = gauge_frame(x, v, gauge)
     angles = xyz_angles(R)
@@ -181,7 +181,9 @@ def _floating_3d(x: np.ndarray, v: np.ndarray, gauge, name: str) -> tuple[list, 
             f"body {name!r}: in the floating formulation its frame T (origin at particle {anchor}, x-axis through "
             f"particle {reference}, x-y plane through particle {third}) starts with its z-axis "
             f"{90.0 - abs(np.degrees(angles[1])):.3g} deg from N's x-axis; T's X-Y-Z angles must start at least "
-            f"{GIMBAL_MARGIN_DEG:g} deg from that gimbal lock: rotate the body, or use the particles formulation"
+            f"{GIMBAL_MARGIN_DEG:g} deg from that gimbal lock: "
+            + ("rotate the body (its `rotation`; a rigid body has no other formulation)" if rigid else
+               "rotate the body, or use the particles formulation")
         )
     rates = xyz_rates(angles, R.T @ omega)
     q, u = list(x[anchor]) + list(angles), list(v[anchor]) + list(rates)
