@@ -29,7 +29,8 @@ directions.
   one end can drive its other, resting or even separating end into the ground.  Contacts
   with a gap (``touching`` False) take none.  With several contacts this is one choice
   among impact laws (the thesis's "indeterminate multiple simultaneous impact"), and it is
-  not energy-consistent in general.  The kinetic energy changes by
+  not energy-consistent in general; nor has it always an answer (a body pinched between
+  others with unequal ``e``: :func:`flexbody.coupled._poisson`).  The kinetic energy changes by
   ``dKE = P . (v+ + v-) / 2 = P . v+ - P^T W P / 2``: with ``e = 0`` (``P . v+ = 0``) it
   never grows; when every contact taking impulse approaches and all share one ``e``,
   ``dKE = -(1 - e) / (2 (1 + e)) P^T W P <= 0``; but a touching contact that does not

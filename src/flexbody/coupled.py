@@ -5,7 +5,9 @@ stopping each hit contact on its own, or all of them jointly, is not the impact 
 instant the touching contacts (those hit and those held) take impulses ``P >= 0`` with
 Newton's law per contact, ``v+ + e v-  >= 0`` complementary to ``P``
 (:func:`flexbody.contact_problems.solve_impact`, Lemke's method: exact, finite and
-independent of the order of the contacts).  A contact left at ``v+ = 0`` with a plastic law
+independent of the order of the contacts); where that law has no answer (a body pinched
+between others with unequal restitution) the impact follows Poisson's two phases instead
+(:func:`_poisson`).  A contact left at ``v+ = 0`` with a plastic law
 is held; one that leaves (a rebound, or an end lifted by the others' impulses) is free.
 The held contacts' forces are decided the same way (:func:`coupled_release`): Signorini's
 law ``a = a_free + W lam >= 0`` complementary to ``lam >= 0`` as one LCP, so which contacts
@@ -16,6 +18,7 @@ bodies (:mod:`flexbody.body_contact`).
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -37,6 +40,8 @@ from .dynamics import contact_solve
 #: with a bound of 10 they rocked on the two rows, each impact of one lifting the other, 26
 #: times within 1 ms ("chattering"; tests/test_zeno_stop.py).
 STOP_ENERGY = 100.0
+#: How the message of an impact that Newton's law could not resolve starts (:func:`_poisson`).
+POISSON = "Newton's law has no answer here"
 
 
 class CoupledImpactError(RuntimeError):
@@ -177,16 +182,29 @@ def coupled_impact(model, y: np.ndarray, p: np.ndarray, touching: np.ndarray, re
     k = len(rows)
     friction = _frictional(model, rows)
     J, cols, W, response, _ = _coupling(model, q, u, p, rows, friction)
+    e = restitution[rows]
+
+    def newton(v_minus: np.ndarray, e: np.ndarray):
+        """Newton's law at the contact velocities ``v_minus``: the solution and its stacked impulses."""
+        if friction:  # Coulomb's law per contact too: normal and tangential impulses, one LCP
+            solution = solve_impact_friction(W, v_minus, e, model.mu[rows], dim=model.dim)
+            return solution, np.concatenate([solution.normal, _blocks(solution.tangent)])
+        solution = solve_impact(W, v_minus, e)
+        return solution, solution.normal
+
+    def found(solution, v_minus: np.ndarray, e: np.ndarray) -> bool:
+        # left approaching slower than a Zeno rebound, a contact is stopped below anyway
+        return solution.solved or _within_rounding(solution, v_minus[:k], slowest[rows], e)
+
     v_minus = _rounded(J @ u[cols], J, u[cols])
-    if friction:  # Coulomb's law per contact too: normal and tangential impulses, one LCP
-        solution = solve_impact_friction(W, v_minus, restitution[rows], model.mu[rows], dim=model.dim)
-        P = np.concatenate([solution.normal, _blocks(solution.tangent)])
-    else:
-        solution = solve_impact(W, v_minus, restitution[rows])
-        P = solution.normal
-    # left approaching slower than a Zeno rebound, a contact is stopped below anyway
-    if not (solution.solved or _within_rounding(solution, v_minus[:k], slowest[rows], restitution[rows])):
-        raise CoupledImpactError(f"the impact of contacts {rows.tolist()} has no solution found: {solution.message}")
+    solution, P = newton(v_minus, e)
+    if not found(solution, v_minus, e):
+        poisson = _poisson(newton, found, W, v_minus, e, k, solution.message) if e.any() else None
+        if poisson is None:
+            raise CoupledImpactError(f"the impact of contacts {rows.tolist()} has no solution found: {solution.message}")
+        solution, P = poisson
+        if notes is not None:
+            notes.append(f"the impact of contacts {rows.tolist()}: {solution.message}")
     _note_unaligned(solution, rows, notes)
     out = np.array(y, float)
     u_new = u + response(P)
@@ -223,6 +241,41 @@ def coupled_impact(model, y: np.ndarray, p: np.ndarray, touching: np.ndarray, re
     after = float(model.energies(q, u_new, p)[0])
     leaving[rows] = leaves
     return CoupledImpact(out, before - after, impulses, leaving)
+
+
+def _poisson(newton, found, W: np.ndarray, v_minus: np.ndarray, e: np.ndarray, k: int, why: str):
+    """Poisson's two phases where Newton's law has no answer (``why``: its solver's message):
+    the solution and its stacked impulses, or None where a phase found none.
+
+    Newton's law can ask for the impossible where restitution differs between contacts that
+    act on each other: a body pinched between two others, hit on one side (``e > 0``) while
+    touching on the other, would have to leave both.  Its LCP is then infeasible (Lemke ends
+    on a secondary ray): with ``z >= 0`` and ``J^T z = 0``, ``q . z = sum e_i min(v_i, 0)
+    z_i < 0``.  Instead: *compression*, the plastic impact (``e = 0``, always solvable, also
+    with friction: Anitescu & Potra), impulses ``P_c``; then *restitution*, the normal
+    impulses ``e P_c`` applied, and from the velocities they give another plastic impact,
+    so that nothing is left approaching (Glocker's Poisson law: each contact's restitution
+    impulse at least ``e`` times its compression's).  Both phases are plastic impacts at
+    velocities ``J u`` of the bodies, so both have answers.  For one contact, or where
+    the restitution impulses leave every contact, this is Newton's ``v+ = -e v-``.  The
+    friction of the restitution phase is bounded by that phase's own normal impulse, so the
+    total impulse lies in Coulomb's cone."""
+    plastic = np.zeros_like(e)
+    compressed, P_c = newton(v_minus, plastic)
+    if not found(compressed, v_minus, plastic):
+        return None
+    kick = np.zeros_like(P_c)
+    kick[:k] = e * compressed.normal
+    v_kicked = v_minus + W @ (P_c + kick)  # J M^-1 J^T P: the contacts' velocities after P
+    restored, P_r = newton(v_kicked, plastic)
+    if not found(restored, v_kicked, plastic):
+        return None
+    P = P_c + kick + P_r
+    pivots = compressed.pivots + restored.pivots
+    return dataclasses.replace(
+        restored, normal=P[:k], tangent=compressed.tangent + restored.tangent, pivots=pivots,
+        message=(f"{POISSON} ({why.rstrip('.')}): Poisson's two phases were used, compression and restitution, "
+                 f"each a plastic impact ({pivots} pivots).")), P
 
 
 def _held_back(model, y: np.ndarray, p: np.ndarray, rows: np.ndarray) -> np.ndarray:
