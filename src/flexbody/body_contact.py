@@ -1799,10 +1799,9 @@ class ElementKernels:
         ``triangle_3d_slip`` kernel; only friction asks for them)."""
         k = len(points[0])
         if self.c is not None:
-            inputs = [np.ascontiguousarray(z, dtype=float) for z in points + rates]
-            slip, bias, tangents = np.empty((k, 2)), np.empty((k, 2)), np.empty((k, 2, 3))
-            self._slip_c(k, *(z.ctypes.data for z in inputs), slip.ctypes.data, bias.ctypes.data,
-                         tangents.ctypes.data)
+            from .runtime import batched_call
+
+            _, bias, tangents = batched_call(self._slip_c, points + rates, [(2,), (2,), (2, 3)])
             return bias, tangents
         _, bias, tangents = self.numpy.triangle_3d_slip(*(z.T for z in points + rates))
         return bias.T, tangents.T.reshape(k, 2, 3)

@@ -156,10 +156,10 @@ class EdgeKernels:
 
     def _run(self, name: str, inputs) -> tuple[FloatArray, ...]:
         """The compiled kernel ``name`` on ``inputs`` (each (size, k)): its outputs (size, k)."""
-        rows = [np.ascontiguousarray(np.asarray(z, float).T) for z in inputs]  # (k, size): pair e reads row e
-        k = len(rows[0])
-        outputs = [np.empty((k, size)) for size in self.SIZES[name]]
-        self._c[name](k, *(z.ctypes.data for z in rows + outputs))
+        from .runtime import batched_call
+
+        outputs = batched_call(self._c[name], [np.asarray(z, float).T for z in inputs],  # pair e reads row e
+                               [(size,) for size in self.SIZES[name]])
         return tuple(z.T for z in outputs)
 
 

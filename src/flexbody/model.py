@@ -470,6 +470,10 @@ FLOATING_MAX_PARTICLES = 40
 SHOW_MAX_PARTICLES = 30
 
 
+#: How much longer a 3D derivation takes than the 2D fit says (see derivation_seconds).
+DIM3_FACTOR = {"particles": 10.0, "floating": 3.2}
+
+
 def derivation_seconds(n_particles: int, formulation: str, dim: int = 2) -> float:
     """A rough estimate (s) of deriving and rendering a whole scene on this class of machine.
 
@@ -479,10 +483,6 @@ def derivation_seconds(n_particles: int, formulation: str, dim: int = 2) -> floa
     fit; particles 16.7 s at 8, ten times it)."""
     base = 9.0 if formulation == "particles" else 37.0
     return base * (max(n_particles, 1) / 23.0) ** 1.6 * (DIM3_FACTOR[formulation] if dim == 3 else 1.0)
-
-
-#: How much longer a 3D derivation takes than the 2D fit says (see derivation_seconds).
-DIM3_FACTOR = {"particles": 10.0, "floating": 3.2}
 
 
 def _scene_and_formulation(scene, backend: str, formulation: str | None) -> tuple[Scene, str]:

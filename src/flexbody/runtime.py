@@ -88,6 +88,29 @@ class Work:
             self.address = None
 
 
+def batched_call(kernel, inputs: list[np.ndarray], output_shapes: list[tuple[int, ...]]) -> list[np.ndarray]:
+    """Call a compiled element kernel ``kernel(k, inputs..., outputs...)`` on ``k`` rows at once.
+
+    Parameters
+    ----------
+    kernel : ctypes function
+        Takes the row count, then one address per input and per output array.
+    inputs : list of array_like, each shape (k, ...)
+        Row ``e`` of each is the kernel's ``e``-th call's input (copied C-contiguous, float).
+    output_shapes : list of tuple of int
+        Each output's shape per row.
+
+    Returns
+    -------
+    list of ndarray, each shape (k, *shape)
+    """
+    rows = [np.ascontiguousarray(z, dtype=float) for z in inputs]
+    k = len(rows[0])
+    outputs = [np.empty((k, *shape)) for shape in output_shapes]
+    kernel(k, *(z.ctypes.data for z in rows + outputs))
+    return outputs
+
+
 def singular_matrix_error() -> FloatingPointError:
     """What a nonzero status of a C evaluation means."""
     return FloatingPointError("mass or contact matrix not positive definite at this state")

@@ -185,9 +185,9 @@ STRICT = 1e-9
 def crossings(points: np.ndarray, segments: np.ndarray) -> np.ndarray:
     """The pairs of 2D segments that share no particle and cross: each one's ends strictly on
     either side of the other's line (beyond :data:`STRICT` of its length: a surface that
-    folds over itself; ends merely touching, or collinear, do not count).  Only pairs whose midpoints are within the longest segment's length can
-    cross, and only those are tested (a k-d tree on the midpoints, ``scipy.spatial.cKDTree``),
-    so the cost grows as m log m.
+    folds over itself; ends merely touching, or collinear, do not count).  Only pairs whose
+    midpoints are within the longest segment's length can cross, and only those are tested
+    (a k-d tree on the midpoints, ``scipy.spatial.cKDTree``), so the cost grows as m log m.
 
     Parameters
     ----------
