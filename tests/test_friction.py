@@ -607,6 +607,32 @@ def test_stick_slip_chattering_and_micro_bounce_cascades_stop_with_a_status(kind
         run.check_guards(t, [Event(t, 0, kinds[k % len(kinds)], -1e-6)])
 
 
+def test_stick_slip_switches_at_impact_instants_are_the_impacts_to_guard():
+    """A sliding contact that an impact's friction impulse stops, and the forces set sliding
+    again at once, switches at every impact of its body (a fuzz's rigid ring, its body's
+    corners rattling: 26 switches in 1 ms, stopped as stick-slip chattering).  Those
+    switches end with the impacts, which their own bound watches: at instants with an
+    impact they are not counted; the same switches alone are."""
+    from flexbody.choices import CHATTER_WINDOW
+    from flexbody.contact import Event
+    from flexbody.driver import CHATTER_FRICTION, SimulationFailed, _Run, _settings
+
+    scene = flexbody.load_scene({
+        "name": "pair", "grounds": [{"point": [0.0, 0.0], "normal": [0.0, 1.0], "friction": 0.3, "restitution": 0.5}],
+        "bodies": [{"name": "p", "particles": [[0.0, 0.0], [0.1, 0.0]], "links": [[0, 1]], "stiffness": [100.0],
+                    "damping": [0.0], "mass": 0.1, "position": [0.0, 0.0]}],
+        "simulation": {"t_end": 1.0, "chatter_impacts": 1000}})  # the impacts' own bound is the scene's to raise
+    spacing = CHATTER_WINDOW / (2 * CHATTER_FRICTION)
+    run = _Run(scene, assembled_model(scene, "numpy"), _settings(scene, {"backend": "numpy"}), None, 10**6)
+    for k in range(2 * CHATTER_FRICTION):  # another particle's impacts (held: no cascade) with each switch
+        t = k * spacing
+        run.check_guards(t, [Event(t, 1, "impact", -1e-3, True), Event(t, 0, "slip", 0.0)])
+    run = _Run(scene, assembled_model(scene, "numpy"), _settings(scene, {"backend": "numpy"}), None, 10**6)
+    with pytest.raises(SimulationFailed, match="stick-slip chattering"):
+        for k in range(2 * CHATTER_FRICTION):
+            run.check_guards(k * spacing, [Event(k * spacing, 0, "slip", 0.0)])
+
+
 @pytest.mark.parametrize("path", PATHS[:1])  # the Python twin takes minutes on this body at this tolerance
 def test_a_frictional_bouncing_landing_in_the_z0_plane_of_3d_is_the_2d_one(path):
     points = [[x, 0.0] for x in np.linspace(-0.2, 0.2, 5)]

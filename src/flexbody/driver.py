@@ -854,8 +854,12 @@ class _Run:
             self.check_corners(t)
         if self.model.n_slots:
             self.check_folds(t, new_events)
+        # An impact's friction impulse can stop a sliding contact of its body that the forces
+        # set sliding again at once: such switches end with the impacts, whose own bound
+        # watches them (a rigid ring sliding while the corners of its body rattled: 26 in 1 ms)
+        impacted = any(e.kind == "impact" for e in new_events)
         for e in new_events:
-            if e.kind in ("stick", "slip"):
+            if e.kind in ("stick", "slip") and not impacted:
                 self.check_stick_slip(t, e)
             if e.kind != "impact":
                 continue
