@@ -57,6 +57,7 @@ def _crossed_boxes(lift: float, friction: float = 0.0, edges: bool = False) -> d
             "simulation": {"t_end": 0.1, "output_dt": 0.002}}
 
 
+@pytest.mark.slow  # its two rigid boxes are derived whole (~20 s with a cold cache); the flexible pair below is quick
 def test_boxes_meeting_edge_on_edge_hit_when_the_fall_says_and_rest_there():
     """The upper box falls DROP onto the lower one's edge, crossed, no vertex on a face: an
     edge contact, hit at sqrt(2 DROP / g) and then held (balanced on the crossing point);
