@@ -74,13 +74,40 @@ def test_a_spinning_rigid_triangle_flies_on_a_parabola_with_a_constant_spin():
 
 
 @needs_cc
-def test_a_3d_rigid_body_keeps_its_angular_momentum_and_energy_in_free_flight():
-    tet = [[0.0, 0.0, 0.0], [0.3, 0.0, 0.0], [0.0, 0.2, 0.0], [0.05, 0.05, 0.25]]
-    masses = [0.1, 0.2, 0.15, 0.25]
-    scene = rigid_scene(tet, masses, position=[0.0, 0.0, 5.0], angle=[0.3, 0.2, 0.1], velocity=[0.5, -0.2, 1.0],
+def _locking_rotation(points) -> list[float]:
+    """The rotation vector that turns the frame of ``points``' gauge particles (x towards the
+    reference, x-y plane through the third) so that its z-axis lies along N's x-axis: the
+    gimbal lock of its X-Y-Z angles."""
+    from flexbody.state import gauge_frame
+    from flexbody.topology import gauge_particles
+
+    points = np.asarray(points, float)
+    R0, _ = gauge_frame(points, np.zeros_like(points), gauge_particles(points))
+    axis = np.cross(R0[:, 2], [1.0, 0.0, 0.0])
+    turn = np.arcsin(np.linalg.norm(axis)) if R0[0, 2] >= 0 else np.pi - np.arcsin(np.linalg.norm(axis))
+    return (axis / np.linalg.norm(axis) * turn).tolist()
+
+
+TET = [[0.0, 0.0, 0.0], [0.3, 0.0, 0.0], [0.0, 0.2, 0.0], [0.05, 0.05, 0.25]]
+
+
+@pytest.mark.parametrize("pose", ["turned", "gauge_lock"])
+def test_a_3d_rigid_body_keeps_its_angular_momentum_and_energy_in_free_flight(pose):
+    """Free flight from any pose: where its gauge particles' frame would start at the gimbal
+    lock of its angles (a fuzz's rigid sphere was refused there), a rigid body's frame T
+    starts along N's axes, its angles at 0."""
+    from flexbody.state import initial_coordinates
+
+    tet, masses = TET, [0.1, 0.2, 0.15, 0.25]
+    rotation = [0.3, 0.2, 0.1] if pose == "turned" else _locking_rotation(TET)
+    scene = rigid_scene(tet, masses, position=[0.0, 0.0, 5.0], angle=rotation, velocity=[0.5, -0.2, 1.0],
                         angular_velocity=[1.0, -2.0, 3.0], gravity=(0.0, 0.0, -G), t_end=0.4)
+    q, _ = initial_coordinates(scene, load_model(scene))
+    assert (q[3:6].tolist() == [0.0, 0.0, 0.0]) == (pose == "gauge_lock")
     r = simulate(scene, **TIGHT)
     assert r.success and len(r.events_kind) == 0, r.message
+    np.testing.assert_allclose(r.positions[0], scene.initial_positions(), atol=1e-15)
+    np.testing.assert_allclose(r.velocities[0], scene.initial_velocities(), atol=1e-14)
     m = np.asarray(masses)
     c = centre(r, masses)
     vc = np.einsum("i,tid->td", m / m.sum(), r.velocities)

@@ -26,11 +26,14 @@ def initial_coordinates(scene: Scene, model: Model) -> tuple[np.ndarray, np.ndar
     is the gauge particles' rigid rotation about the anchor, and the particles' velocities
     in T are what remains.
 
+    A rigid 3D body's T starts along its gauge particles' frame, or along N's axes where
+    that frame would start near the lock (:func:`_rigid_frame`).
+
     Raises
     ------
     InputError
-        A 3D floating body that starts within ``GIMBAL_MARGIN_DEG`` of its angles' gimbal
-        lock (T's z-axis along N's x-axis).
+        A flexible 3D floating body that starts within ``GIMBAL_MARGIN_DEG`` of its angles'
+        gimbal lock (T's z-axis along N's x-axis).
     """
     from .mixed import MixedModel
 
@@ -48,9 +51,8 @@ def initial_coordinates(scene: Scene, model: Model) -> tuple[np.ndarray, np.ndar
         if body.get("rigid") and n > 1:
             _check_rigid_motion(xb, vb, scene.bodies[k].name)
         if len(gauge) == 3 and n > 1:
-            qb, ub = _floating_3d(xb, vb, gauge, scene.bodies[k].name, bool(body.get("rigid")))
-            if body.get("rigid"):
-                qb, ub = qb[:6], ub[:6]  # T alone: its particles are fixed in it
+            qb, ub = (_rigid_3d(xb, vb, gauge) if body.get("rigid")  # T alone: its particles are fixed in it
+                      else _floating_3d(xb, vb, gauge, scene.bodies[k].name))
             q += qb
             u += ub
             first += n
@@ -114,7 +116,7 @@ def rigid_parameters(scene: Scene, topology) -> dict[str, float]:
         if body.rigid and n > 1:
             xb, vb = x[first : first + n], v[first : first + n]
             if len(gauge) == 3:
-                R = gauge_frame(xb, vb, gauge)[0]
+                R = _rigid_frame(xb, vb, gauge)
             else:
                 r = xb[gauge[1]] - xb[gauge[0]]
                 c, s = r / np.linalg.norm(r)
@@ -172,7 +174,27 @@ def xyz_rates(angles: np.ndarray, omega_t: np.ndarray) -> np.ndarray:
     return np.linalg.solve(B, omega_t)
 
 
-def _floating_3d(x: np.ndarray, v: np.ndarray, gauge, name: str, rigid: bool = False) -> tuple[list, list]:
+def _rigid_frame(x: np.ndarray, v: np.ndarray, gauge) -> np.ndarray:
+    """A rigid 3D body's T at the start, its axes in N as columns (3, 3): its gauge
+    particles' frame (:func:`gauge_frame`), or N's axes where that frame's X-Y-Z angles would
+    start within ``GIMBAL_MARGIN_DEG`` of their gimbal lock.  Any frame fixed in a rigid
+    body will do (its particles' places in T are parameters, :func:`rigid_parameters`), and
+    N's starts the angles at 0, as far from the lock as they can be (a fuzz's rigid sphere
+    was refused 2.3 deg from it)."""
+    R = gauge_frame(x, v, gauge)[0]
+    return R if abs(np.degrees(xyz_angles(R)[1])) <= 90.0 - GIMBAL_MARGIN_DEG else np.eye(3)
+
+
+def _rigid_3d(x: np.ndarray, v: np.ndarray, gauge) -> tuple[list, list]:
+    """A rigid 3D body's six coordinates and their rates: T's origin at the anchor particle,
+    its axes :func:`_rigid_frame`'s."""
+    R, omega = _rigid_frame(x, v, gauge), gauge_frame(x, v, gauge)[1]  # the body's spin, in any frame
+    angles = xyz_angles(R)
+    anchor = gauge[0]
+    return list(x[anchor]) + list(angles), list(v[anchor]) + list(xyz_rates(angles, R.T @ omega))
+
+
+def _floating_3d(x: np.ndarray, v: np.ndarray, gauge, name: str) -> tuple[list, list]:
     anchor, reference, third = gauge
     R, omega = gauge_frame(x, v, gauge)
     angles = xyz_angles(R)
@@ -181,9 +203,7 @@ def _floating_3d(x: np.ndarray, v: np.ndarray, gauge, name: str, rigid: bool = F
             f"body {name!r}: in the floating formulation its frame T (origin at particle {anchor}, x-axis through "
             f"particle {reference}, x-y plane through particle {third}) starts with its z-axis "
             f"{90.0 - abs(np.degrees(angles[1])):.3g} deg from N's x-axis; T's X-Y-Z angles must start at least "
-            f"{GIMBAL_MARGIN_DEG:g} deg from that gimbal lock: "
-            + ("rotate the body (its `rotation`; a rigid body has no other formulation)" if rigid else
-               "rotate the body, or use the particles formulation")
+            f"{GIMBAL_MARGIN_DEG:g} deg from that gimbal lock: rotate the body, or use the particles formulation"
         )
     rates = xyz_rates(angles, R.T @ omega)
     q, u = list(x[anchor]) + list(angles), list(v[anchor]) + list(rates)
