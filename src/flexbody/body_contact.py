@@ -95,7 +95,7 @@ from .held_rows import CompiledHeldRows
 from .mixed import MixedModel
 from .model import GeneratedModel, Model
 from .scene import Scene
-from .surface import closure_problem, crossings, edges, edges_through, piercings, signed_measure
+from .surface import STRICT, closure_problem, crossings, edges, edges_through, piercings, signed_measure
 from .surface_contact import (FACE, CompiledClosestFeatures, SurfaceContact, closest_features, segment_normals,
                               triangle_normals, vertex_elements)
 
@@ -1031,14 +1031,31 @@ class BodyContactModel(Model):
         self._slip[ng + first], self._slip[ng + second] = self._slip[ng + second], self._slip[ng + first].copy()
 
     # ------------------------------------------------------------------ geometry
-    def _concave(self, first: IntArray, second: IntArray, x: FloatArray) -> np.ndarray:
+    def _concave(self, first: IntArray, second: IntArray, x: FloatArray, strict: bool = False) -> np.ndarray:
         """Whether neighbouring elements ``first`` and ``second`` (k,) meet at a concave
         vertex or edge, bool (k,): a vertex of ``second`` off the shared feature lies
-        above ``first``'s line or plane (outside its body)."""
+        above ``first``'s line or plane (outside its body); with ``strict``, by more than
+        :data:`flexbody.surface.STRICT` of its distance (not flat by rounding)."""
         a, b = self.elements[first], self.elements[second]
         off = np.array([row_b[~np.isin(row_b, row_a)][0] for row_a, row_b in zip(a, b)], np.intp)
         normals = (segment_normals if self.dim == 2 else triangle_normals)(x, a)
-        return np.einsum("ij,ij->i", normals, x[off] - x[a[:, 0]]) > 0.0
+        reach = x[off] - x[a[:, 0]]
+        return np.einsum("ij,ij->i", normals, reach) > (STRICT * np.linalg.norm(reach, axis=1) if strict else 0.0)
+
+    def concave_hand_backs(self, twins: IntArray, y, p) -> np.ndarray:
+        """Of the held corner twins ``twins`` (contact indices) about to hand their elements
+        back to their released slots (:meth:`hand_to_slots`), those whose slot was released
+        from an element that meets the twin's at a strictly concave vertex or edge, bool
+        (k,): the particle sits in a dent, and past the twin's element's end it would be
+        inside the body (flat, it may slide on along the element's line)."""
+        ng = self.n_ground_contacts
+        twin_slots = np.asarray(twins, np.intp) - ng
+        left, kept = self.element_of[twin_slots % self.n_primary], self.element_of[twin_slots]
+        out = np.zeros(len(twin_slots), bool)
+        both = (left >= 0) & (kept >= 0) & (left != kept)
+        if both.any():
+            out[both] = self._concave(kept[both], left[both], self._state(np.asarray(y, float), p)[0], strict=True)
+        return out
 
     def _state(self, y, p) -> tuple[FloatArray, FloatArray]:
         """Particle positions and velocities (n, dim) each at state ``y``."""

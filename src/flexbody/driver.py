@@ -676,9 +676,10 @@ class _Run:
             self.phases.assign(res.phases)
             new, not_held, loss = res.events, res.not_held, res.impact_loss
             if self.model.n_slots:
-                self.settle_corners(new)
-                self.model.floor_margins(self.y, self.p, self.phases.held, self.phases.on_ground ^ held_before,
-                                         self.gap_tolerance)
+                dented = self.settle_corners(new)
+                changed = self.phases.on_ground ^ held_before  # held or released here
+                changed[dented] = True  # or handed back, in a dent, the element its twin held
+                self.model.floor_margins(self.y, self.p, self.phases.held, changed, self.gap_tolerance)
             self.indeterminate += [(t, note) for note in res.notes]
         self.events += new
         if self.windows is not None:
@@ -755,19 +756,28 @@ class _Run:
         renewed[np.concatenate([stay, corners, leave])] = True  # the released one's force is gone
         return touching, leaving, renewed
 
-    def settle_corners(self, new: list[Event]) -> None:
+    def settle_corners(self, new: list[Event]) -> np.ndarray:
         """Keep a held corner twin's slot held: where the slot was released and its twin
         holds on, the slot takes the twin's element and phase, and the lift-off just
-        recorded is the twin's (the particle left the slot's element, not the body)."""
+        recorded is the twin's (the particle left the slot's element, not the body).
+        Returns those slots (contact indices) released from an element that meets the one
+        handed back at a strictly concave vertex: each is held in the dent, at or a hair
+        past its element's end, which :meth:`flexbody.body_contact.BodyContactModel.
+        floor_margins` must see (a twin has no boundary event, and with the twin's floor the
+        slot slid on along the element's line, 1.5 mm into the other body in a fuzz's
+        pile).  Where the elements are flat, sliding on along the line is right: there the
+        released row was redundant, and re-armed at the end it was handed on and back every
+        1e-12 s."""
         model, phases = self.model, self.phases
         first_twin = model.n_ground_contacts + model.n_primary
         twins = first_twin + np.flatnonzero(phases.on_ground[first_twin : model.n_ground_contacts + model.first_edge])
         orphans = twins[~phases.on_ground[model.primary(twins)]]
         if not len(orphans):
-            return
+            return np.zeros(0, np.intp)
         # one per slot: a second held twin (3D) stays the twin of the slot it now has
         orphans = orphans[np.sort(np.unique(model.primary(orphans), return_index=True)[1])]
         slots = model.primary(orphans)
+        dented = model.concave_hand_backs(orphans, self.y, self.p)
         model.hand_to_slots(orphans)
         phases.phase[slots], phases.phase[orphans] = phases.phase[orphans], FREE
         phases.floor[orphans] = -self.gap_tolerance
@@ -775,6 +785,7 @@ class _Run:
         for e in new:
             if e.kind == "liftoff" and e.contact in twin_of:
                 e.contact = twin_of[e.contact]
+        return slots[dented]
 
     def track_windows(self, t: float, was_pushed: np.ndarray) -> None:
         """Record the thesis-mode windows that start or end at ``t`` (positions, constant force)."""
