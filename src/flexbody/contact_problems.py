@@ -596,9 +596,10 @@ def _newton_slips(W: np.ndarray, q: np.ndarray, mu: np.ndarray, drag: np.ndarray
         dx[2 * nc + S, k] = -mu[S] * x[S] * np.cos(slip[S])
         dx += Z @ np.linalg.lstsq((W @ Z)[rows], -(W @ dx)[rows], rcond=None)[0]
         dw = W[nc:] @ dx
-        J = (w[:, :1] * dw[nc + S] - w[:, 1:] * dw[S]) / (w**2).sum(axis=1)[:, None] - np.eye(S.size)
-        if not (np.isfinite(J).all() and np.isfinite(g).all()):
+        rates = (w**2).sum(axis=1)
+        if not ((rates > 0.0).all() and np.isfinite(g).all()):
             break  # a slide whose rate is 0 has no angle to align: its answer is checked as it stands
+        J = (w[:, :1] * dw[nc + S] - w[:, 1:] * dw[S]) / rates[:, None] - np.eye(S.size)
         step = np.linalg.lstsq(J, -g, rcond=None)[0]
         for t in 0.5 ** np.arange(10):
             trial = slip.copy()
