@@ -523,22 +523,22 @@ class _Run:
                 if not np.all(np.isfinite(solver.y)):
                     raise SimulationFailed(*_non_finite(solver.t))
                 dense = solver.dense_output()
-                g_new = events(solver.y)
-                hit = locate(events, dense, solver.t_old, solver.t, g_old, g_new)
-                t_stop = hit.t if hit else solver.t
-                y_stop = dense(t_stop) if hit else solver.y
-                drift = self.held_drift(y_stop)
-                if model.coupled and phases.on_ground.any() and t_stop - t_start > STALL_TIME and max(
-                        drift, self.held_drift(dense(0.5 * (t_start + t_stop)))) > SINK_GAPS * self.gap_tolerance:
+                drift = self.held_drift(solver.y)
+                if model.coupled and phases.on_ground.any() and solver.t - t_start > STALL_TIME and max(
+                        drift, self.held_drift(dense(0.5 * (t_start + solver.t)))) > SINK_GAPS * self.gap_tolerance:
                     # too long for the held contacts' constraints (at its end, or within it on
-                    # the dense output, which is less accurate): again from its start, shorter
+                    # the dense output, which is less accurate): again from its start, shorter,
+                    # before event location changes anything (it re-arms floors)
                     self.nfev += solver.nfev
                     self.shortened += 1
                     options["first_step"] = options["max_step"] = 0.5 * (solver.t - t_start)
                     solver = stepper(rhs, t_start, y_start, t_bound, **options)
                     renew_slips()
                     continue
-                self.y[:] = y_stop
+                g_new = events(solver.y)
+                hit = locate(events, dense, solver.t_old, solver.t, g_old, g_new)
+                t_stop = hit.t if hit else solver.t
+                self.y[:] = dense(t_stop) if hit else solver.y
                 self.record(dense, t_stop, solver.t_old)
                 if hit:
                     return _Stop(t_stop, hit.contacts & events.free, hit.contacts & events.held_mask, True)
