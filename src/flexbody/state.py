@@ -116,7 +116,7 @@ def rigid_parameters(scene: Scene, topology) -> dict[str, float]:
         if body.rigid and n > 1:
             xb, vb = x[first : first + n], v[first : first + n]
             if len(gauge) == 3:
-                R = _rigid_frame(xb, vb, gauge)
+                R = _rigid_frame(xb, vb, gauge)[0]
             else:
                 r = xb[gauge[1]] - xb[gauge[0]]
                 c, s = r / np.linalg.norm(r)
@@ -174,21 +174,21 @@ def xyz_rates(angles: np.ndarray, omega_t: np.ndarray) -> np.ndarray:
     return np.linalg.solve(B, omega_t)
 
 
-def _rigid_frame(x: np.ndarray, v: np.ndarray, gauge) -> np.ndarray:
+def _rigid_frame(x: np.ndarray, v: np.ndarray, gauge) -> tuple[np.ndarray, np.ndarray]:
     """A rigid 3D body's T at the start, its axes in N as columns (3, 3): its gauge
     particles' frame (:func:`gauge_frame`), or N's axes where that frame's X-Y-Z angles would
-    start within ``GIMBAL_MARGIN_DEG`` of their gimbal lock.  Any frame fixed in a rigid
-    body will do (its particles' places in T are parameters, :func:`rigid_parameters`), and
-    N's starts the angles at 0, as far from the lock as they can be (a fuzz's rigid sphere
-    was refused 2.3 deg from it)."""
-    R = gauge_frame(x, v, gauge)[0]
-    return R if abs(np.degrees(xyz_angles(R)[1])) <= 90.0 - GIMBAL_MARGIN_DEG else np.eye(3)
+    start within ``GIMBAL_MARGIN_DEG`` of their gimbal lock; and the body's angular velocity
+    in N (3,), the same in any frame fixed in it.  Any such frame will do (its particles'
+    places in T are parameters, :func:`rigid_parameters`), and N's starts the angles at 0,
+    as far from the lock as they can be (a fuzz's rigid sphere was refused 2.3 deg from it)."""
+    R, omega = gauge_frame(x, v, gauge)
+    return (R if abs(np.degrees(xyz_angles(R)[1])) <= 90.0 - GIMBAL_MARGIN_DEG else np.eye(3)), omega
 
 
 def _rigid_3d(x: np.ndarray, v: np.ndarray, gauge) -> tuple[list, list]:
     """A rigid 3D body's six coordinates and their rates: T's origin at the anchor particle,
     its axes :func:`_rigid_frame`'s."""
-    R, omega = _rigid_frame(x, v, gauge), gauge_frame(x, v, gauge)[1]  # the body's spin, in any frame
+    R, omega = _rigid_frame(x, v, gauge)
     angles = xyz_angles(R)
     anchor = gauge[0]
     return list(x[anchor]) + list(angles), list(v[anchor]) + list(xyz_rates(angles, R.T @ omega))
