@@ -332,6 +332,8 @@ MISTAKES = [
     (_two_rings(self_contact="no"), "`bodies[0].self_contact` = 'no'", "must be true or false"),
     (_two_rings(rigid=True, damping=None, damper=None), "`bodies[0].stiffness` = 2000.0",
      "is not used with rigid = true"),
+    (_two_rings(rigid=True, self_contact=True, stiffness=None, damping=None, damper=None),
+     "`bodies[0].self_contact` = True", "a rigid body cannot touch itself"),
     # a given surface
     (_two_rings(surface=[[1, 2], [2, 13]]), "`bodies[0].surface[1]` = [2, 13]",
      "refers to a missing particle (the body has particles 0..12)"),
@@ -480,12 +482,12 @@ def _refused(tmp_path, capsys, path, says: str) -> None:
 
 
 def test_the_refusal_is_exit_code_2_of_the_real_command(tmp_path):
-    path = _toml(tmp_path, TWO_RINGS.format(ball="self_contact = true", contacts=""))
+    text = TWO_RINGS.format(ball="collide = true", contacts='[[contacts]]\n    bodies = ["ball", "block"]')
+    path = _toml(tmp_path, text.replace("t_end = 0.01", 't_end = 0.01\n    impact = "thesis"\n    impact_dt = 0.001'))
     run = subprocess.run([sys.executable, "-m", "flexbody.cli", "run", str(path), "--out", str(tmp_path / "out")],
                          capture_output=True, text=True, timeout=300)
     assert run.returncode == 2 and "Traceback" not in run.stderr
-    assert "body 'ball' may touch itself (self_contact = true): self-contact is not simulated yet" \
-        in run.stderr
+    assert "`impact` = 'thesis' with bodies that may touch each other" in run.stderr
     assert not (tmp_path / "out").exists()
 
 

@@ -50,6 +50,12 @@ body lies on that element's outer side there, the other slot is carried by it (n
 its rate is read as 0; :meth:`BodyContactModel._made_from_the_other_side`); where both
 are hit at once, the lower-numbered is the contact (:meth:`BodyContactModel.same_contacts`).
 
+**Self-contact** (a body listed with itself): its surface particles have one slot each
+against its own surface, which leaves out each particle's neighbourhood (the elements its
+links reach within a few element sizes) and reads ``margin`` where the closest feature of
+the rest says nothing (:mod:`flexbody.own_surface`); a hand-over onto the neighbourhood
+sets the slot free.  Otherwise such a slot is any other.
+
 **Coulomb friction** (the pairs' ``friction``, and the grounds' where contacts couple): a
 held contact with friction sticks, its slip rates' accelerations kept at 0 too (the tangent
 rows ``[t, -w_1 t, ...]``, 2D: ``t = (-n_y, n_x)``; 3D: ``t1 = (b - a) / |b - a|``,
@@ -94,6 +100,7 @@ from .edge_contact import EdgeSlots, EdgeTerms
 from .held_rows import CompiledHeldRows
 from .mixed import MixedModel
 from .model import GeneratedModel, Model
+from .own_surface import OwnSurface
 from .scene import Scene
 from .surface import STRICT, closure_problem, crossings, edges, edges_through, piercings, signed_measure
 from .surface_contact import (FACE, CompiledClosestFeatures, SurfaceContact, closest_features, segment_normals,
@@ -135,7 +142,7 @@ class BodyContactModel(Model):
     Parameters
     ----------
     scene : Scene
-        With ``scene.contacts`` between bodies (no self-contact).
+        With ``scene.contacts`` between bodies (and a body with itself: self-contact).
     inner : AssembledModel or GeneratedModel
         The scene's model with its ground contacts, C or NumPy: assembled (particles
         formulation), or derived whole (floating formulation; rigid bodies).
@@ -170,7 +177,7 @@ class BodyContactModel(Model):
         for k, pair in enumerate(scene.contacts):
             first, second = pair.bodies
             allowed[first, second] = allowed[second, first] = True
-            for toucher, surface in ((first, second), (second, first)):
+            for toucher, surface in ((first, second),) if first == second else ((first, second), (second, first)):
                 touching = np.unique(self.elements[self.element_body == toucher])
                 particles.append(touching)
                 bodies.append(np.full(len(touching), surface))
@@ -215,8 +222,12 @@ class BodyContactModel(Model):
         # Within `margin` of a surface the broad phase finds the closest element, so the
         # gap is exact; farther, a slot reads `margin` (positive: nothing can happen there).
         self.margin = float(np.median(lengths)) if len(lengths) else 1.0
+        own = [pair.bodies[0] for pair in scene.contacts if pair.bodies[0] == pair.bodies[1]]
         self._candidates = CandidateList(self.elements, self.particle_body, self.margin, self.margin,
-                                         element_body=self.element_body)
+                                         element_body=self.element_body, self_contact=bool(own))
+        #: The self-contact neighbourhoods (:mod:`flexbody.own_surface`), or None without self-contact.
+        self.own = (OwnSurface(scene, self.elements, self.element_body, self.particle_body, own, self.margin,
+                               self._incident_start, self._incident_flat) if own else None)
         # The narrow phase runs at every gap evaluation: in C with a C model, its NumPy twin otherwise.
         self._narrow = (CompiledClosestFeatures(self.elements, self.n_particles, self.element_body)
                         if self.backend == "c" else None)
@@ -301,10 +312,11 @@ class BodyContactModel(Model):
             return super().gap(q, p, c)
         x = self._coordinates.particles(q, None, p)[0]
         pairs = self._candidates.kept(x, int(self.slot_particle[slot]))
-        pairs = pairs[self.element_body[pairs[:, 1]] == self.slot_body[slot]]
-        if not len(pairs):
+        pairs = self._touchable(pairs[self.element_body[pairs[:, 1]] == self.slot_body[slot]])
+        contact = self._closest_features(x, pairs) if len(pairs) else None
+        if contact is None or not len(contact.gap):
             return self.margin
-        gap = float(self._closest_features(x, pairs).gap[0])
+        gap = float(contact.gap[0])
         return gap if abs(gap) <= self.margin else self.margin
 
     def gaps_of(self, q, p, contacts: IntArray) -> FloatArray:
@@ -785,15 +797,30 @@ class BodyContactModel(Model):
         x = self._state(y, p)[0]
         slots = (np.asarray(contacts, np.intp) - self.n_ground_contacts if contacts is not None
                  else np.flatnonzero(self._surface_gaps(x)[1]))
+        if self.own is not None and contacts is not None:  # a self-contact decided at a jump of its gap
+            own = slots[(slots < self.n_primary) & (self.slot_body[slots] == self.particle_body[self.slot_particle[slots]])]
+            gaps = self._surface_gaps(x, own)[0][own]
+            particle = self.own.from_inside(self.slot_particle[own], gaps)
+            if particle is not None:
+                return int(self.particle_body[particle]), (
+                    f"its particle {particle} came at its own surface from inside, "
+                    f"{-gaps[self.slot_particle[own] == particle][0]:.3g} m deep: a hollow body crushed flat, or one "
+                    "pressed through its thickness; self-contact is between the outer sides of its surface")
         for body in np.unique(self.slot_body[slots]):
-            mine = self.elements[self._body_elements[body]]
+            own, mine = self._body_elements[body], self.elements[self._body_elements[body]]
+            # with self-contact only a crossing within a neighbourhood is a fold (farther: a contact missed)
+            folded = (lambda a, b: np.ones(len(a), bool)) if not self.allowed[body, body] else \
+                (lambda a, b: self.own.near(a, b))
             if self.dim == 2:
                 crossed = crossings(x, mine)
+                crossed = crossed[folded(mine[crossed[:, 0]], own[crossed[:, 1]])
+                                  | folded(mine[crossed[:, 1]], own[crossed[:, 0]])]
                 if len(crossed):
                     a, b = mine[crossed[0]].tolist()
                     return int(body), f"its segments {a} and {b} cross"
             else:
                 pierced = piercings(x, mine)
+                pierced = pierced[folded(edges(mine)[pierced[:, 1]], own[pierced[:, 0]])]
                 if len(pierced):
                     return int(body), (f"its edge {edges(mine)[pierced[0, 1]].tolist()} passes through its "
                                        f"triangle {mine[pierced[0, 0]].tolist()}")
@@ -821,7 +848,7 @@ class BodyContactModel(Model):
         near = np.zeros(len(self.elements), bool)
         for first in bodies:
             for second in bodies:
-                if second <= first or not self.allowed[first, second]:
+                if second < first or not self.allowed[first, second]:
                     continue
                 lo, hi = np.maximum(box[first][0], box[second][0]), np.minimum(box[first][1], box[second][1])
                 if (lo <= hi).all():  # the two bodies' elements in the overlap
@@ -834,6 +861,10 @@ class BodyContactModel(Model):
         rows, depths = edges_through(x, self._edges[segments], self.elements[triangles], depth)
         edge_body, triangle_body = self._edge_body[segments[rows[:, 1]]], self.element_body[triangles[rows[:, 0]]]
         between = (edge_body != triangle_body) & self.allowed[edge_body, triangle_body]
+        if self.own is not None:  # a self-contact body's edge through its own far triangle: the same
+            own = (edge_body == triangle_body) & self.allowed[edge_body, triangle_body]
+            own[own] = ~self.own.near(self._edges[segments[rows[own, 1]]], triangles[rows[own, 0]])
+            between |= own
         if not between.any():
             return None
         k = int(np.flatnonzero(between)[np.argmax(depths[between])])
@@ -1002,6 +1033,13 @@ class BodyContactModel(Model):
         came_from = self.element_of[out].copy()
         corner = np.argmin(weights[moving], axis=1)
         self.element_of[out] = self._neighbour[came_from, corner]
+        if self.own is not None:  # onto its own neighbourhood, which it does not watch: it is set free
+            home = self.own.left_out(self.slot_particle[out], self.element_of[out])
+            self.element_of[out[home]], self.margin_floor[out[home]] = -1, 0.0
+            ended, out, came_from = np.concatenate([ended, out[home]]), out[~home], came_from[~home]
+            if not len(out):
+                return HandOvers(empty, empty, ng + ended, empty, empty,
+                                 ng + np.column_stack([relabel % self.n_primary, relabel]))
         terms, margin, _ = self._margins(out, x, v, held)
         # a hand-over a hair past the boundary (a particle a hair inside a corner) starts
         # below 0 on the new element too: its floor keeps its next pass findable
@@ -1196,10 +1234,12 @@ class BodyContactModel(Model):
     def _closest(self, x, slots: IntArray | None = None):
         if slots is None and self._narrow is not None:
             # the whole sweep in C: the allowed kept pairs, boxed there (no NumPy pass over them)
-            contact = self._narrow(x, x, self._allowed_kept(x), reach=self._candidates.margin)
+            contact = self._readable(self._narrow(x, x, self._allowed_kept(x), reach=self._candidates.margin))
             return contact if len(contact.particle) else None
         pairs = self._candidates.pairs(x, None if slots is None else np.unique(self.slot_particle[slots]))
         keep = self.allowed[self.particle_body[pairs[:, 0]], self.element_body[pairs[:, 1]]]
+        if self.own is not None:
+            keep &= self.own.touchable(pairs)
         if slots is not None:  # only the asked slots' bodies
             wanted = np.zeros(self.n_slots, bool)
             wanted[slots] = True
@@ -1208,7 +1248,8 @@ class BodyContactModel(Model):
         pairs = pairs[keep]
         if not len(pairs):
             return None
-        return self._closest_features(x, pairs)
+        contact = self._closest_features(x, pairs)
+        return contact if len(contact.particle) else None
 
     def _allowed_kept(self, x) -> IntArray:
         """The broad phase's kept pairs at x between bodies that may touch, shape (k, 2):
@@ -1216,13 +1257,29 @@ class BodyContactModel(Model):
         kept = self._candidates.all_kept(x)
         if self._allowed_pairs is None or self._allowed_pairs[0] is not kept:
             allowed = self.allowed[self.particle_body[kept[:, 0]], self.element_body[kept[:, 1]]]
+            if self.own is not None:
+                allowed &= self.own.touchable(kept)
             self._allowed_pairs = (kept, np.ascontiguousarray(kept[allowed], np.intc))
         return self._allowed_pairs[1]
 
     def _closest_features(self, x, pairs) -> SurfaceContact:
         if self._narrow is not None:
-            return self._narrow(x, x, pairs)
-        return closest_features(x, x, self.elements, pairs, self.element_body)
+            return self._readable(self._narrow(x, x, pairs))
+        return self._readable(closest_features(x, x, self.elements, pairs, self.element_body))
+
+    def _touchable(self, pairs: IntArray) -> IntArray:
+        """``pairs`` (k, 2) without those in a particle's own neighbourhood (self-contact)."""
+        return pairs if self.own is None else pairs[self.own.touchable(pairs)]
+
+    def _readable(self, contact: SurfaceContact) -> SurfaceContact:
+        """``contact`` without the rows whose gap says nothing (self-contact:
+        :meth:`flexbody.own_surface.OwnSurface.readable`): their slots read ``margin``."""
+        if self.own is None:
+            return contact
+        keep = self.own.readable(contact)
+        if keep.all():
+            return contact
+        return SurfaceContact(*(getattr(contact, f.name)[keep] for f in dataclasses.fields(SurfaceContact)))
 
     def _slots_of(self, particle, body) -> tuple[IntArray, np.ndarray]:
         key = np.asarray(particle) * self._body_count + np.asarray(body)
@@ -1273,7 +1330,7 @@ class BodyContactModel(Model):
         """Every (particle, element) pair of these slots with their bodies' whole surfaces."""
         surfaces = [self._body_elements[b] for b in self.slot_body[slots]]
         counts = [len(k) for k in surfaces]
-        return np.column_stack([np.repeat(self.slot_particle[slots], counts), np.concatenate(surfaces)])
+        return self._touchable(np.column_stack([np.repeat(self.slot_particle[slots], counts), np.concatenate(surfaces)]))
 
     def _element_terms(self, slots, x, v):
         """Each slot's particle against its element (:class:`ElementTerms`)."""

@@ -228,12 +228,7 @@ def _body_contact_problems(scene: Scene, values: dict) -> list[str]:
                    "compiled loop knows one model, not the two side by side)")
             return [_scipy_only(values["method"], why)]
         return []
-    names = [b.name for b in scene.bodies]
     out = []
-    for c in scene.contacts:
-        first, second = (names[k] for k in c.bodies)
-        if first == second:
-            out.append(f"body {first!r} may touch itself (self_contact = true): self-contact is not simulated yet")
     if values["impact"] == "thesis":
         out.append("`impact` = 'thesis' with bodies that may touch each other: the window force -m v_n / dT "
                    "(eq. 4.6) takes one particle's mass, not a contact between bodies' effective mass; use "
@@ -915,8 +910,9 @@ class _Run:
             raise SimulationFailed(
                 "unsupported",
                 f"at t = {t:.9g} s body {self.scene.bodies[body].name!r} has folded over ({how}): inside and outside of it "
-                "are not defined and contacts against it would be wrong (self-contact, which would stop the fold, "
-                "is not modelled); stiffen the body, give it more particles, or soften what hits it.",
+                "are not defined and contacts against it would be wrong (with self_contact = true a body's outer "
+                "surface stops at itself, except near each particle: see the README's self-contact); stiffen the "
+                "body, give it more particles, or soften what hits it.",
             )
 
     def check_stick_slip(self, t: float, e: Event) -> None:

@@ -8,15 +8,17 @@ and raises one :class:`SceneError` listing every problem (field, value, rule).
 Units are SI throughout: m, kg, s, N/m, N·s/m.
 
 Bodies touching each other (DESIGN.md §6; simulated by :mod:`flexbody.body_contact`
-between flexible and rigid bodies, with friction; what it cannot run yet, such as
-self-contact, ``flexbody run`` refuses, naming the bodies)::
+between flexible and rigid bodies, with friction, and a flexible body's outer surface
+with itself (:mod:`flexbody.own_surface`); what it cannot run yet ``flexbody run``
+refuses, naming the bodies)::
 
     [[bodies]]
     name = "ball"
     rigid = false          # default; true: no springs or dampers (stiffness, damping,
                            # damper, rest_lengths are then an error)
     collide = false        # default; true: may touch every other body with collide = true
-    self_contact = false   # default; true: may touch its own surface
+    self_contact = false   # default; true: may touch its own surface (flexible bodies;
+                           # not near each particle, see flexbody.own_surface)
     surface = [[1, 2], [2, 3], ...]   # optional: [i, j] segments in 2D, [i, j, k] triangles
                                       # in 3D, outward; default: the shape's (below)
 
@@ -753,6 +755,9 @@ def _body(r: TableReader, dim: int, folder: Path) -> Body | None:
         masses = None if total is None else (total * share).tolist()
     else:
         masses = r.scalar_or_list("masses", n, minimum=0.0, strict=True, item="particle")
+    if rigid and self_contact:
+        r.fail("self_contact", True, "a rigid body cannot touch itself (its shape never changes): remove it, or set "
+               "rigid = false")
     if rigid:  # no springs or dampers: their constants would be ignored, so they are a mistake
         for key in ELASTIC_KEYS:
             if r.has(key):
