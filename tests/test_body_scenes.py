@@ -83,6 +83,22 @@ def test_colliding_rings_conserve_momentum_and_angular_momentum(collision, e):
 
 
 @pytest.mark.parametrize("e", [0.0, 1.0])
+def test_each_collision_event_names_the_other_ring_as_what_it_touched(collision, e, tmp_path):
+    """``events_surface``: the ring whose surface the particle touched, the other one (the
+    ground is 10 m below: no -1), kept through saving; fig. 5.3 then shows no particle as
+    touching the ground."""
+    r = collision[e]
+    back = flexbody.load_result(r.save(tmp_path / "run"))
+    own = (back.events_particle >= 12).astype(int)  # 12 particles a ring: 0-11 the left, 12-23 the right
+    assert len(back.events_surface) == len(back.events_time) > 0
+    np.testing.assert_array_equal(back.events_surface, 1 - own)
+    from flexbody.figures import figure_colliding_points
+
+    title = figure_colliding_points(back, flexbody.load_scene("colliding_rings").grounds).axes[0].get_title()
+    assert "no particle touched the ground" in title
+
+
+@pytest.mark.parametrize("e", [0.0, 1.0])
 def test_colliding_rings_stay_symmetric_about_the_x_axis(collision, e):
     # The equations and the stepper's error norm are unchanged by the reflection y -> -y (which
     # also permutes the particles), so only rounding can break the symmetry: ~1e-13 m here.  An

@@ -289,6 +289,7 @@ def test_result_contract(ball, tmp_path):
         assert getattr(back, key).shape == (nt,)
     assert set(back.events_kind) == {"impact", "liftoff"}
     assert back.events_time.shape == back.events_particle.shape == back.events_kind.shape
+    np.testing.assert_array_equal(back.events_surface, np.full(len(back.events_time), -1))  # every one a ground's
     np.testing.assert_array_equal(back.masses, np.full(n, 0.05))
     for key in ("scene", "method", "rtol", "atol", "backend", "formulation", "wall_time_s", "rhs_evaluations",
                 "steps", "events", "max_penetration_m", "energy_drift_J", "versions"):

@@ -142,6 +142,13 @@ def _scipy_version() -> str:
     return version("scipy")
 
 
+def _surface_of(model: Model, contact: int) -> int:
+    """The body whose surface ``contact`` touches (its index in the scene's bodies), or -1 for a ground."""
+    if contact < model.n_ground_contacts:
+        return -1
+    return int(model.contacts[contact][1]) - model.n_grounds
+
+
 def _lowest_gaps(positions: np.ndarray, grounds, held: np.ndarray) -> tuple[float, float]:
     """The lowest gap of any particle to any ground over samples ``positions (nt, n, dim)``,
     of the contacts free there and of those held there (``held (nt, n * n_grounds)``, the
@@ -1046,6 +1053,7 @@ class _Run:
             events_particle=np.array([model.contacts[e.contact][0] for e in ev], dtype=int),
             events_kind=np.array([e.kind for e in ev], dtype="<U7"),
             events_held=np.array([e.held for e in ev], dtype=bool),
+            events_surface=np.array([_surface_of(model, e.contact) for e in ev], dtype=int),
             masses=self.scene.masses.copy(), links=self.scene.links(), status=status, message=message,
         )
         total = result.total_energy

@@ -258,7 +258,7 @@ def figure_colliding_points(result: SimulationResult, grounds: Sequence | None =
     fig = _figure((8, 5.5), top=0.3, grid=(1, 2), gap=(0.0, 0.35))
     top, bottom = fig.subplots(2, 1, sharex=True)
     h = gaps(result.positions, grounds)
-    touched = np.unique(result.events_particle)
+    touched = np.unique(result.events_particle[result.events_surface < 0])  # a ground's events, not a body's
     shown = touched if len(touched) else np.argsort(h.min(axis=0))[:3]
     for i in shown:
         top.plot(result.t, h[:, i], lw=0.9, label=f"particle {i}")

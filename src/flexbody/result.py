@@ -11,11 +11,11 @@ import numpy as np
 
 from .paths import check_output_dir, staged_folder
 
-#: Array keys of result.npz, in the order of DESIGN.md §2 (plus events_held and links).
+#: Array keys of result.npz, in the order of DESIGN.md §2 (plus events_held, events_surface and links).
 ARRAY_KEYS = (
     "t", "positions", "velocities", "contact_force", "kinetic", "spring", "gravity", "damping_work",
     "impact_loss", "friction_force", "friction_work", "events_time", "events_particle", "events_kind",
-    "events_held", "masses", "links",
+    "events_held", "events_surface", "masses", "links",
 )  # fmt: skip
 
 #: Status values and what each means.
@@ -49,6 +49,9 @@ class SimulationResult:
     events_time, events_particle, events_kind, events_held : ndarray, shape (ne,)
         Each impact or lift-off; ``events_held`` is False for an impacted particle that
         leaves at once because holding it would need a pulling force.
+    events_surface : ndarray of int, shape (ne,)
+        What each event's particle touches: the index of the body whose surface it is (in
+        the scene's bodies; its own for a self-contact), or -1 for a ground.
     masses : ndarray, shape (n,)
     links : ndarray of int, shape (n_links, 2)
         Particle pairs joined by a spring and damper (for drawing the body).
@@ -80,6 +83,7 @@ class SimulationResult:
     links: np.ndarray
     friction_force: np.ndarray | None = None  # zeros when not given (a run without friction)
     friction_work: np.ndarray | None = None
+    events_surface: np.ndarray | None = None  # all -1 (grounds) when not given (a result from before the key)
     status: str = "success"
     message: str = STATUSES["success"]
     stats: dict = field(default_factory=dict)
@@ -89,6 +93,8 @@ class SimulationResult:
             self.friction_force = np.zeros(np.shape(self.velocities))
         if self.friction_work is None:
             self.friction_work = np.zeros(len(self.t))
+        if self.events_surface is None:
+            self.events_surface = np.full(len(self.events_time), -1, dtype=int)
 
     @property
     def success(self) -> bool:
@@ -146,7 +152,7 @@ def load_result(out_dir: str | Path) -> SimulationResult:
     """Read a result written by :meth:`SimulationResult.save`."""
     out_dir = Path(out_dir)
     with np.load(out_dir / "result.npz") as data:
-        arrays = {key: data[key] for key in ARRAY_KEYS if key in data}  # older results lack the friction keys
+        arrays = {key: data[key] for key in ARRAY_KEYS if key in data}  # older results lack the friction keys, events_surface
     summary = json.loads((out_dir / "summary.json").read_text())
     status, message = summary.pop("status"), summary.pop("message")
     return SimulationResult(**arrays, status=status, message=message, stats=summary)
