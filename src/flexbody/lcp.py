@@ -28,6 +28,13 @@ Problem*, 1992, ch. 4):
   pile's many two- and three-contact blocks); it returns None for any other ``M``.
 * other matrices (friction, :mod:`flexbody.contact_problems`): a secondary ray says that the
   method found no solution; for the frictional force problem that is Painlevé's paradox.
+
+Rounding: with a nearly singular ``M`` (a rigid body's redundant contacts in a pile) the
+pivots can end on a complementary basis whose ``z`` is infeasible (below 0).  Then
+:func:`solve_lcp` runs again on ``M + s I`` for tiny ``s`` (:data:`SHIFTS`), and accepts an
+answer of the same size only where it passes the check on the original ``M``: every answer
+returned as solved solves the problem asked.  So does a secondary ray (its problem has
+an answer of the same size, or the ray stands).
 """
 
 from __future__ import annotations
@@ -55,6 +62,14 @@ PIVOT_TOL = 1e-11
 CHECK_TOL = 1e-9
 #: Relative tolerance for ties in the lexicographic ratio test.
 TIE_TOL = 1e-12
+#: Where Lemke's method ends on a complementary basis whose answer fails the check, or on a
+#: secondary ray, it runs again on ``M + s I`` for each of these ``s`` (relative to M's
+#: largest diagonal entry) until one answer solves the original problem (a fuzzed pile of
+#: rigid and flexible discs: M's condition 2.6e16, a z below 0 by 0.2 after the pivots,
+#: then 5e16 and a ray where enumerating the bases finds a solution; both solved at 1e-12) ...
+SHIFTS = (1e-13, 1e-12, 1e-11)
+#: ... and is at most this many times the size of the pivots' last point (or of |q| / M_ii).
+SHIFT_GROWTH = 10.0
 
 
 @dataclass(frozen=True)
@@ -147,6 +162,32 @@ def solve_lcp(
     if np.all(q >= 0.0):  # z = 0 already solves it
         return LcpSolution(np.zeros(n), q.copy(), "solved", 0, "q >= 0: z = 0 with no pivots.")
     limit = 100 * (n + 1) if max_pivots is None else int(max_pivots)
+    answer = _lemke(M, q, d, limit, pivot_tol, check_tol)
+    if answer.status not in ("inaccurate", "ray"):
+        return answer
+    # A nearly singular M (redundant contacts) can lose the pivots' feasibility to rounding,
+    # or end them on a ray: again on M + shift I, a compliance far below the check's
+    # tolerance.  Its answer counts only if it solves the original problem and is of the
+    # size of the pivots' last point (M + s I has an answer of size ~1/s where the original
+    # problem has none).
+    size = float(np.abs(np.diag(M)).max()) or float(np.abs(M).max()) or 1.0
+    largest = SHIFT_GROWTH * max(float(np.abs(answer.z).max()), float(np.abs(q).max()) / size)
+    for relative in SHIFTS:
+        shift = relative * size
+        retry = _lemke(M + shift * np.eye(n), q, d, limit, pivot_tol, check_tol)
+        if retry.status == "solved" and np.abs(retry.z).max() <= largest:
+            floor = 16 * n * np.finfo(float).eps * (np.abs(M).max() * np.abs(retry.z).max() + np.abs(q).max())
+            checked = _checked_solution(M, q, retry.z, answer.pivots + retry.pivots, check_tol, floor,
+                                        f"{retry.message[:-1]} on M + {shift:.1e} I (without: {answer.message[:-1]}).")
+            if checked.solved:
+                return checked
+    return answer
+
+
+def _lemke(M: np.ndarray, q: np.ndarray, d: np.ndarray, limit: int, pivot_tol: float,
+           check_tol: float) -> LcpSolution:
+    """Lemke's method on checked ``M``, ``q`` (not all >= 0), covering ``d`` (see :func:`solve_lcp`)."""
+    n = q.size
     # z(a q) = a z(q): pivot on q / max|q| so the ratio and tie tests, whose tolerances are
     # absolute below 1, see every entry of q at its relative size (a contact approaching at
     # 3e-11 m/s beside one at 1.6e-3 m/s was otherwise left out, its w below 0).
