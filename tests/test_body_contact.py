@@ -907,3 +907,18 @@ def test_a_slot_handed_back_its_corner_twins_element_keeps_its_boundary_event():
     assert r.stats["events"] > 100
     assert r.stats["max_penetration_m"] < 1e-9  # 1.5e-3 m before; measured 3.0e-11 m
     assert r.stats["energy_drift_relative"] < 1e-6  # measured 1.1e-7
+
+
+@pytest.mark.slow  # two rigid discs derived whole (~8 s with a cold cache); the run ~75 s
+def test_a_pile_whose_redundant_contacts_lose_lemkes_pivots_runs_to_its_end():
+    """A fuzz's pile (tests/reference/fuzz_redundant_friction_pile.json: two rigid and three
+    flexible discs, friction): the force LCPs of its held contacts are singular to rounding
+    (redundant contacts), and Lemke's pivots ended inaccurate at 0.164 s and on a ray at
+    0.168 s, each stopping it `unsupported` as if Painlevé's; solved again on M + s I, it
+    runs to its end (:mod:`flexbody.lcp`)."""
+    table = json.loads((Path(__file__).parent / "reference" / "fuzz_redundant_friction_pile.json").read_text())
+    r = flexbody.simulate(flexbody.load_scene(table), max_wall_time=400.0)
+    assert r.status == "success", r.message
+    assert r.stats["events"] > 1000  # measured 1 687
+    assert r.stats["max_penetration_m"] < 1e-9  # measured 2.7e-11 m
+    assert r.stats["energy_drift_relative"] < 1e-6  # measured 6.6e-8
