@@ -225,3 +225,16 @@ def test_a_3d_body_closing_on_itself_keeps_its_arms_out_of_each_other():
             assert np.abs(p).max() < 1e-12 and np.abs(L).max() < 1e-12
             assert result.stats["energy_drift_relative"] < 1e-6
     assert deepest[True] > -1e-9 and deepest[False] < -1e-3
+
+
+def test_the_bundled_u_closing_is_the_tested_u():
+    """``flexbody run u_closing`` runs the U of :func:`_u_body` (e = 0, frictionless)."""
+    bundled, tested = flexbody.load_scene("u_closing"), flexbody.load_scene(_u_body(True))
+    a, b = bundled.bodies[0], tested.bodies[0]
+    np.testing.assert_allclose(a.initial_positions(), b.initial_positions(), rtol=0, atol=1e-15)
+    np.testing.assert_allclose(a.initial_velocities(), b.initial_velocities(), rtol=0, atol=1e-15)
+    assert a.links == b.links and np.array_equal(a.surface, b.surface) and a.self_contact
+    np.testing.assert_array_equal(a.masses, b.masses)
+    np.testing.assert_array_equal(a.stiffness, b.stiffness)
+    np.testing.assert_array_equal(a.damping, b.damping)
+    assert bundled.contacts == tested.contacts and bundled.simulation == tested.simulation
