@@ -170,6 +170,7 @@ class BodyContactModel(Model):
                              else _MixedCoordinates(inner) if isinstance(inner, MixedModel)
                              else _FrameCoordinates(inner))
         self.elements, self.element_body = scene.surfaces()
+        self.scene_names = [b.name for b in scene.bodies]
         counts = [b.n_particles for b in scene.bodies]
         self.particle_body = np.repeat(np.arange(len(counts)), counts)
         particles, bodies, pairs = [np.zeros(0, np.intp)], [np.zeros(0, np.intp)], [np.zeros(0, np.intp)]
@@ -797,30 +798,17 @@ class BodyContactModel(Model):
         x = self._state(y, p)[0]
         slots = (np.asarray(contacts, np.intp) - self.n_ground_contacts if contacts is not None
                  else np.flatnonzero(self._surface_gaps(x)[1]))
-        if self.own is not None and contacts is not None:  # a self-contact decided at a jump of its gap
-            own = slots[(slots < self.n_primary) & (self.slot_body[slots] == self.particle_body[self.slot_particle[slots]])]
-            gaps = self._surface_gaps(x, own)[0][own]
-            particle = self.own.from_inside(self.slot_particle[own], gaps)
-            if particle is not None:
-                return int(self.particle_body[particle]), (
-                    f"its particle {particle} came at its own surface from inside, "
-                    f"{-gaps[self.slot_particle[own] == particle][0]:.3g} m deep: a hollow body crushed flat, or one "
-                    "pressed through its thickness; self-contact is between the outer sides of its surface")
         for body in np.unique(self.slot_body[slots]):
-            own, mine = self._body_elements[body], self.elements[self._body_elements[body]]
-            # with self-contact only a crossing within a neighbourhood is a fold (farther: a contact missed)
-            folded = (lambda a, b: np.ones(len(a), bool)) if not self.allowed[body, body] else \
-                (lambda a, b: self.own.near(a, b))
-            if self.dim == 2:
+            mine = self.elements[self._body_elements[body]]
+            if self.dim == 2:  # a 2D crossing is a particle inside: self-contact or not, a fold
                 crossed = crossings(x, mine)
-                crossed = crossed[folded(mine[crossed[:, 0]], own[crossed[:, 1]])
-                                  | folded(mine[crossed[:, 1]], own[crossed[:, 0]])]
                 if len(crossed):
                     a, b = mine[crossed[0]].tolist()
                     return int(body), f"its segments {a} and {b} cross"
             else:
                 pierced = piercings(x, mine)
-                pierced = pierced[folded(edges(mine)[pierced[:, 1]], own[pierced[:, 0]])]
+                if self.allowed[body, body]:  # beyond a neighbourhood: edges passing, as two bodies' (crossed_edges)
+                    pierced = pierced[self.own.near(edges(mine)[pierced[:, 1]], self._body_elements[body][pierced[:, 0]])]
                 if len(pierced):
                     return int(body), (f"its edge {edges(mine)[pierced[0, 1]].tolist()} passes through its "
                                        f"triangle {mine[pierced[0, 0]].tolist()}")
@@ -1262,24 +1250,51 @@ class BodyContactModel(Model):
             self._allowed_pairs = (kept, np.ascontiguousarray(kept[allowed], np.intc))
         return self._allowed_pairs[1]
 
-    def _closest_features(self, x, pairs) -> SurfaceContact:
+    def _closest_features(self, x, pairs, read: bool = True) -> SurfaceContact:
+        """Each particle's closest feature per body over ``pairs`` (k, 2); with ``read``, as
+        read (:meth:`_readable`), else as measured."""
         if self._narrow is not None:
-            return self._readable(self._narrow(x, x, pairs))
-        return self._readable(closest_features(x, x, self.elements, pairs, self.element_body))
+            contact = self._narrow(x, x, pairs)
+        else:
+            contact = closest_features(x, x, self.elements, pairs, self.element_body)
+        return self._readable(contact) if read else contact
 
     def _touchable(self, pairs: IntArray) -> IntArray:
         """``pairs`` (k, 2) without those in a particle's own neighbourhood (self-contact)."""
         return pairs if self.own is None else pairs[self.own.touchable(pairs)]
 
     def _readable(self, contact: SurfaceContact) -> SurfaceContact:
-        """``contact`` without the rows whose gap says nothing (self-contact:
-        :meth:`flexbody.own_surface.OwnSurface.readable`): their slots read ``margin``."""
+        """``contact`` as read (self-contact, :meth:`flexbody.own_surface.OwnSurface.read`):
+        without the rows whose gap says nothing (their slots read ``margin``), and with the
+        gaps of particles deep inside their own bodies reflected."""
         if self.own is None:
             return contact
-        keep = self.own.readable(contact)
-        if keep.all():
+        keep, gap = self.own.read(contact)
+        if keep.all() and gap is contact.gap:
             return contact
-        return SurfaceContact(*(getattr(contact, f.name)[keep] for f in dataclasses.fields(SurfaceContact)))
+        return dataclasses.replace(contact, gap=gap) if keep.all() else SurfaceContact(
+            *((gap if f.name == "gap" else getattr(contact, f.name))[keep] for f in dataclasses.fields(SurfaceContact)))
+
+    def from_inside(self, y, p, touching: np.ndarray) -> str | None:
+        """Where a touching contact (bool (nc,)) is a particle come at its own surface from
+        inside (:meth:`flexbody.own_surface.OwnSurface.inside`): what happened, in words; else None."""
+        if self.own is None:
+            return None
+        slots = np.flatnonzero(np.asarray(touching)[self.n_ground_contacts : self.n_ground_contacts + self.n_primary])
+        slots = slots[self.slot_body[slots] == self.particle_body[self.slot_particle[slots]]]
+        if not len(slots):
+            return None
+        x = self._state(np.asarray(y, float), p)[0]
+        contact = self._closest_features(x, self._pairs_with_body(slots), read=False)
+        deep = np.flatnonzero(self.own.inside(contact))
+        if not len(deep):
+            return None
+        k = deep[0]
+        body = self.scene_names[self.particle_body[contact.particle[k]]]
+        return (f"particle {contact.particle[k]} of body {body!r} came at its own surface from inside, "
+                f"{-contact.gap[k]:.3g} m behind it (a hollow body crushed flat, or one pressed through its "
+                "thickness): self-contact is between the outer sides of a surface, and its inside is taken for "
+                "material")
 
     def _slots_of(self, particle, body) -> tuple[IntArray, np.ndarray]:
         key = np.asarray(particle) * self._body_count + np.asarray(body)
@@ -1757,7 +1772,8 @@ class HandOvers(NamedTuple):
     stay, approach, leave : ndarray of int
         The moved slots that meet their new element tangentially (normal speed within the
         speed tolerance: still held), approach it (an impact) and leave it; ``leave`` also
-        holds the edge contacts set free where their closest points reached an edge's end.
+        holds the edge contacts set free where their closest points reached an edge's end,
+        and the self-contact slots whose new element is in their particle's neighbourhood.
     corners, sources : ndarray of int
         The free corner twins now on the elements that ``sources`` (those of the moved that
         passed a concave vertex or edge: all of ``approach``, and those of ``stay`` there)

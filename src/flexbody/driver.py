@@ -666,6 +666,9 @@ class _Run:
         else:
             renewed = held_before = None
             if self.model.n_slots:
+                inside = self.model.from_inside(self.y, self.p, touching)
+                if inside:  # no contact to resolve: a particle inside its own body reached its far side
+                    raise SimulationFailed("unsupported", f"at t = {t:.9g} s {inside}.")
                 held_before = self.phases.on_ground.copy()
                 touching, leaving, renewed = self.switch_elements(t, touching, leaving)
             res = resolve(self.model, t, self.y, self.p, self.phases, touching, leaving,

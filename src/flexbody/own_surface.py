@@ -12,18 +12,22 @@ bent far: two parts of its outer surface meeting (a dent closing, a bent strip's
 Such a contact is one between two bodies, with the same gaps, events, LCPs and friction
 (:mod:`flexbody.body_contact`).
 
-Two closest features of the rest read as no contact (``margin``, as a surface farther
-than anything that can happen in a step):
+Two closest features of the rest read otherwise:
 
-* one on the rim of the neighbourhood (a vertex, or a 3D edge, one of whose elements is
-  in it): its gap's sign comes from the pseudo-normal of the whole surface, which leans
-  over the left-out elements, so it does not say on which side of the rest the particle is;
-* one the particle lies more than ``INSIDE`` margins behind: the particle is inside its
-  own body, under its far surface (a body pressed through its thickness), not at a
-  contact.  A particle that comes at its own surface from inside (a hollow ring crushed
-  flat: its inside is not material but the surface's orientation says it is) meets that
-  bound as a jump of its gap, which :meth:`OwnSurface.from_inside` names so that the run
-  stops there instead of resolving a contact that is not one.
+* one on the rim of the neighbourhood (a vertex one of whose elements is in it, or a 3D
+  edge one of whose two triangles is) reads ``margin``, as a surface farther than anything
+  that can happen in a step: its gap's sign comes from a pseudo-normal that leans over the
+  left-out elements, so it does not say on which side of the rest the particle is;
+* one the particle lies more than ``INSIDE`` margins behind is inside its own body, under
+  its far surface (a body pressed through its thickness), not at a contact.  Its gap is
+  reflected there, ``-2 INSIDE margin - gap``: continuous, negative only within
+  ``2 INSIDE`` margins behind the surface, and positive deeper.  So a particle that comes
+  at its own surface from inside (a hollow ring crushed flat: its inside is not material,
+  but the surface's orientation says it is) makes its gap cross 0 at ``2 INSIDE`` margins
+  deep, an event located as any other, which :meth:`OwnSurface.inside` recognises:
+  the run stops there (``unsupported``) instead of resolving a contact that is not one.
+  (Without the reflection its gap would jump from ``margin`` to that depth where it comes
+  within reach, and an event on a jump is located on either side of it by rounding.)
 """
 
 from __future__ import annotations
@@ -42,8 +46,9 @@ IntArray = np.ndarray
 #: A particle's neighbourhood on its own surface reaches this many times the larger of the
 #: contact margin and its body's median element size (a box test at the start: see the docstring).
 NEIGHBOURHOOD = 2.0
-#: A particle more than this many margins behind its own surface is inside its body, not at a contact.
-INSIDE = 0.5
+#: A particle more than this many margins behind its own surface is inside its body, not at
+#: a contact: its gap is reflected there (see the module docstring).
+INSIDE = 0.25
 #: Surface particles whose neighbourhoods are searched at once (a dense (CHUNK, n) table of distances).
 CHUNK = 256
 
@@ -71,6 +76,7 @@ class OwnSurface:
         self.n_elements = len(elements)
         self.element_body, self.particle_body = element_body, particle_body
         self.margin = margin
+        self._elements = elements
         self._start, self._incident = incident_start, incident
         first = np.r_[0, np.cumsum([b.n_particles for b in scene.bodies])]
         keys = [np.zeros(0, np.int64)]
@@ -104,33 +110,38 @@ class OwnSurface:
             out[own] = ~self.left_out(pairs[own, 0], pairs[own, 1])
         return out
 
-    def readable(self, contact) -> np.ndarray:
-        """Which rows of a :class:`flexbody.surface_contact.SurfaceContact` give a gap, bool
-        (k,): all but a particle's own features on the rim of its neighbourhood or more than
-        ``INSIDE`` margins behind them (see the module docstring)."""
-        out = np.ones(len(contact.particle), bool)
+    def read(self, contact) -> tuple[np.ndarray, FloatArray]:
+        """The rows of a :class:`flexbody.surface_contact.SurfaceContact` (k) that give a gap,
+        bool (k,), and their gaps, shape (k,): a particle's own features on the rim of its
+        neighbourhood give none, and those it lies more than ``INSIDE`` margins behind are
+        reflected (see the module docstring)."""
+        keep, gap = np.ones(len(contact.particle), bool), contact.gap
         own = np.flatnonzero(self.particle_body[contact.particle] == self.element_body[contact.element])
         if not len(own):
-            return out
-        out[own[contact.gap[own] < -INSIDE * self.margin]] = False
+            return keep, gap
+        deep = own[gap[own] < -INSIDE * self.margin]
+        if len(deep):
+            gap = gap.copy()
+            gap[deep] = -2.0 * INSIDE * self.margin - gap[deep]
         rim = own[contact.kind[own] != FACE]
         if len(rim):
-            features = contact.feature[rim]
-            row, column = np.nonzero(features >= 0)
-            vertex = features[row, column]
-            start, stop = self._start[vertex], self._start[vertex + 1]
-            owner = np.repeat(row, stop - start)
+            first = contact.feature[rim, 0]  # a vertex, or an edge's lower end
+            start, stop = self._start[first], self._start[first + 1]
+            owner = np.repeat(np.arange(len(rim)), stop - start)
             around = self._incident[slices(start, stop)]
-            hit = self.left_out(contact.particle[rim][owner], around)
-            out[rim[np.unique(owner[hit])]] = False
-        return out
+            second = contact.feature[rim, 1][owner]  # an edge's other end (-1 after a vertex)
+            # a vertex: every element at it; an edge: the two triangles that have both its ends
+            sides = (second < 0) | (self._elements[around] == second[:, None]).any(axis=1)
+            hit = sides & self.left_out(contact.particle[rim][owner], around)
+            keep[rim[np.unique(owner[hit])]] = False
+        return keep, gap
 
-    def from_inside(self, particles: IntArray, gaps: FloatArray) -> int | None:
-        """The first of ``particles`` (k,) whose gap to its own surface (k,) is more than half
-        ``INSIDE`` margins deep (a contact decided there was a jump of its gap, not a
-        crossing: see the module docstring), or None."""
-        deep = np.flatnonzero(np.asarray(gaps) < -0.5 * INSIDE * self.margin)
-        return int(particles[deep[0]]) if len(deep) else None
+    def inside(self, contact) -> np.ndarray:
+        """Which rows of a :class:`flexbody.surface_contact.SurfaceContact` (its gaps as
+        measured, not read) put a particle more than ``INSIDE`` margins behind its own
+        surface, bool (k,): at an instant, a contact that is not one (the module docstring)."""
+        own = self.particle_body[contact.particle] == self.element_body[contact.element]
+        return own & (contact.gap < -INSIDE * self.margin)
 
 
 def _neighbourhoods(body, mine: IntArray, margin: float, own: IntArray, first: int, m: int) -> list[IntArray]:
