@@ -76,20 +76,22 @@ def test_two_parts_of_one_body_touch_each_other_as_two_bodies_do(table):
     np.testing.assert_allclose(one.positions, apart.positions, rtol=0, atol=1e-9)
 
 
-def _u_lattice(layers: int = 0) -> tuple[np.ndarray, np.ndarray]:
-    """A U of 1 cm cells: arms 3 cells thick and 10 tall, 8 cells apart, on a 3-cell base,
-    triangulated mirror-symmetrically; with ``layers`` > 1, extruded in z into that many
-    layers of particles 1 cm apart, each prism split into 3 tetrahedra.  The particles
-    (n, 2 or 3) and the cells (triangles or tetrahedra)."""
-    cells = [(i, j) for i in range(14) for j in range(10) if i < 3 or i >= 11 or j < 3]
+def _u_lattice(layers: int = 0, gap: int = 8, height: int = 10) -> tuple[np.ndarray, np.ndarray]:
+    """A U of 1 cm cells: arms 3 cells thick and ``height`` tall, ``gap`` cells apart, on a
+    3-cell base, triangulated mirror-symmetrically; with ``layers`` > 1, extruded in z into
+    that many layers of particles 1 cm apart, each prism split into 3 tetrahedra.  The
+    particles (n, 2 or 3) and the cells (triangles or tetrahedra)."""
+    width = 6 + gap
+    cells = [(i, j) for i in range(width) for j in range(height) if i < 3 or i >= 3 + gap or j < 3]
     nodes = sorted({(i + a, j + b) for i, j in cells for a in (0, 1) for b in (0, 1)})
     index = {n: k for k, n in enumerate(nodes)}
     triangles = []
     for i, j in cells:
         a, b, c, d = index[(i, j)], index[(i + 1, j)], index[(i + 1, j + 1)], index[(i, j + 1)]
-        rising = ((min(i, 13 - i) + j) % 2 == 0) == (i < 7)  # the right half mirrors the left's diagonals
+        # the right half mirrors the left's diagonals
+        rising = ((min(i, width - 1 - i) + j) % 2 == 0) == (i < width / 2)
         triangles += [(a, b, c), (a, c, d)] if rising else [(a, b, d), (b, c, d)]
-    x = (np.array(nodes, float) - [7.0, 0.0]) * H
+    x = (np.array(nodes, float) - [width / 2, 0.0]) * H
     if layers < 2:
         return x, np.array(triangles)
     n = len(x)
@@ -372,3 +374,31 @@ def test_a_hollow_ring_crushed_flat_stops_where_its_top_reaches_its_bottom_from_
     result = flexbody.simulate(flexbody.load_scene(table))
     assert result.status == "unsupported" and "came at its own surface from inside" in result.message, result.message
     assert result.stats["max_penetration_m"] < 1e-9
+
+
+def test_two_far_parts_held_vertex_on_vertex_are_no_fold_at_rounding_depth():
+    """A fuzzed U (arms 6 cells apart, 10 tall) whose arms' tips meet and are held vertex
+    on vertex (tests/reference/u_apex_crossing.npz: the positions at that moment): the two
+    inner faces, hinged at the held point, cross there by 1.8e-11 m of rounding.  Two bodies'
+    faces are never tested so; one body's are: within a neighbourhood any crossing is a fold,
+    beyond them only one deeper than ``depth`` (the driver's 1e3 gap tolerances)."""
+    x0, cells = _u_lattice(gap=6, height=13)
+    links = sorted({tuple(sorted((int(t[p]), int(t[q])))) for t in cells for p in range(3) for q in range(p)})
+    table = {"name": "u", "gravity": [0.0, 0.0], "grounds": [{"point": [0.0, -10.0], "normal": [0.0, 1.0]}],
+             "bodies": [{"name": "u", "particles": x0.tolist(), "links": [list(k) for k in links],
+                         "surface": boundary(x0, cells).tolist(), "mass": 0.01, "stiffness": 100.0, "damping": 0.0,
+                         "position": [0.0, 0.0], "self_contact": True}],
+             "simulation": {"t_end": 0.1}}
+    scene = flexbody.load_scene(table)
+    model = load_model(scene)
+    x = np.load(Path(__file__).parent / "reference" / "u_apex_crossing.npz")["x"]
+    y = np.concatenate([x.ravel(), np.zeros(x.size), np.zeros(model.ny - 2 * x.size)])
+    p = model.parameters(scene)
+    crossed = crossings(x, np.array(table["bodies"][0]["surface"]))
+    assert len(crossed) == 1
+    assert model.fold(y, p, depth=1e-9) is None
+    assert "cross" in model.fold(y, p, depth=1e-12)[1]
+    x_folded = x.copy()
+    x_folded[[54, 88]] = x[[88, 54]]  # the faces' lower ends swapped: a crossing 3.2e-6 m deep
+    y[: x.size] = x_folded.ravel()
+    assert "cross" in model.fold(y, p, depth=1e-9)[1]

@@ -787,14 +787,17 @@ class BodyContactModel(Model):
             np.add.at(out, (sample, ends[:, 1]), s * force)
         return out
 
-    def fold(self, y, p, contacts: IntArray | None = None) -> tuple[int, str] | None:
+    def fold(self, y, p, contacts: IntArray | None = None, depth: float = 0.0) -> tuple[int, str] | None:
         """A body whose surface slot contacts ``contacts`` touch (default: every surface a
         free slot is within ``margin`` of) and how it has folded (its index and a
         description), or None.  Folded: two of its 2D segments cross, an edge of its 3D
         surface passes through one of its triangles, or its closed surface encloses no
         positive area or volume (turned inside out).  On a folded surface inside and outside
         are not defined, so a gap's sign against it is not either: another body's particle
-        can read "inside" far from any contact."""
+        can read "inside" far from any contact.  With self-contact, two segments of a body
+        crossing beyond each other's neighbourhoods by at most ``depth`` (m) are two parts
+        touching (a vertex held on a vertex crosses the other's flank by rounding), as two
+        bodies' would be; deeper they are a contact missed, a fold too."""
         x = self._state(y, p)[0]
         slots = (np.asarray(contacts, np.intp) - self.n_ground_contacts if contacts is not None
                  else np.flatnonzero(self._surface_gaps(x)[1]))
@@ -802,6 +805,10 @@ class BodyContactModel(Model):
             mine = self.elements[self._body_elements[body]]
             if self.dim == 2:  # a 2D crossing is a particle inside: self-contact or not, a fold
                 crossed = crossings(x, mine)
+                if len(crossed) and self.allowed[body, body]:  # but two parts touching, to rounding
+                    ids, a, b = self._body_elements[body], mine[crossed[:, 0]], mine[crossed[:, 1]]
+                    apart = ~(self.own.near(a, ids[crossed[:, 1]]) | self.own.near(b, ids[crossed[:, 0]]))
+                    crossed = crossed[~(apart & (_crossing_depth(x, a, b) <= depth))]
                 if len(crossed):
                     a, b = mine[crossed[0]].tolist()
                     return int(body), f"its segments {a} and {b} cross"
@@ -1954,6 +1961,17 @@ def _touched_vertex(contact: SurfaceContact) -> tuple[IntArray, np.ndarray]:
     rows = np.arange(len(contact.particle))
     corner = np.argmax(contact.weights, axis=1)
     return contact.feature[rows, corner], contact.weights[rows, corner] >= 1.0 - AT_VERTEX
+
+
+def _crossing_depth(x: FloatArray, a: IntArray, b: IntArray) -> FloatArray:
+    """How deep 2D segments ``a`` and ``b`` (k, 2 particles each; crossing) cross, shape (k,):
+    the nearest of their four ends to the other's line (m)."""
+    def to_line(ends, line):
+        t = x[line[:, 1]] - x[line[:, 0]]
+        normal = np.column_stack([t[:, 1], -t[:, 0]]) / np.linalg.norm(t, axis=1, keepdims=True)
+        return np.abs(np.einsum("kjd,kd->kj", x[ends] - x[line[:, 0]][:, None], normal)).min(axis=1)
+
+    return np.minimum(to_line(b, a), to_line(a, b))
 
 
 def _an_element_of(segments: IntArray, elements: IntArray) -> IntArray:

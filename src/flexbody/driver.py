@@ -95,7 +95,8 @@ def _non_finite(t: float) -> tuple[str, str]:
 #: Two 3D bodies' surfaces crossing edge through face by more than this many gap tolerances
 #: are measured and warned of (:meth:`_Run.track_edges`): 1e-9 of the scene's size, the
 #: penetration the tests allow a particle, so that a face resting on a face (edges in the
-#: other's plane to round-off, held contacts drifting by up to 2 gap tolerances) is not one.
+#: other's plane to round-off, held contacts drifting by up to 2 gap tolerances) is not one;
+#: two far parts of a 2D body with self-contact crossing no deeper are no fold either.
 EDGE_DEPTH = 1e3
 #: A free contact between bodies found inside the other body by more than this many gap
 #: tolerances at a step's end has its surfaces checked for a fold at once (not only at the
@@ -904,14 +905,14 @@ class _Run:
         """Refuse to go on where a contact decided at this instant is against a surface that
         crosses itself (a body folded over: its particles passed through its boundary)."""
         touched = [e.contact for e in new_events if e.contact >= self.model.n_ground_contacts]
-        self.refuse_fold(t, self.model.fold(self.y, self.p, touched) if touched else None)
+        self.refuse_fold(t, self.model.fold(self.y, self.p, touched, EDGE_DEPTH * self.gap_tolerance) if touched else None)
 
     def check_surfaces(self, t: float) -> None:
         """:meth:`check_folds` for every surface a free contact is within reach of at the
         end ``t`` of a step that passed an output sample, or where a contact between bodies
         reads deep inside: a body can fold with no contact against it decided, and then a
         particle beside it reads inside."""
-        self.refuse_fold(t, self.model.fold(self.y, self.p))
+        self.refuse_fold(t, self.model.fold(self.y, self.p, depth=EDGE_DEPTH * self.gap_tolerance))
 
     def refuse_fold(self, t: float, fold: tuple[int, str] | None) -> None:
         """Stop with ``unsupported`` at ``t`` if ``fold`` (a body and how it folded) is one."""

@@ -47,7 +47,8 @@ IntArray = np.ndarray
 #: contact margin and its body's median element size (a box test at the start: see the docstring).
 NEIGHBOURHOOD = 2.0
 #: A particle more than this many margins behind its own surface is inside its body, not at
-#: a contact: its gap is reflected there (see the module docstring).
+#: a contact: its gap is reflected there (see the module docstring).  Below 1/2, so that the
+#: reflected gap's 0, at twice this depth, lies within the broad phase's reach (``margin``).
 INSIDE = 0.25
 #: Surface particles whose neighbourhoods are searched at once (a dense (CHUNK, n) table of distances).
 CHUNK = 256
