@@ -1291,6 +1291,19 @@ int fb_sys_friction(const FbSystem *s, const double *y, const int *held, const d
     return s->friction ? s->friction(s, y, held, push, c, vt, ft, slack, lam_c) : -2;
 }
 
+/* fb_sys_friction for contacts 0 .. n - 1 (one call from Python, not n): vt and ft (n, 3),
+ * slack and lam (n,).  0, -1 at the first contact whose call fails, -2 without friction. */
+int fb_sys_friction_all(const FbSystem *s, const double *y, const int *held, const double *push, int n, double *vt,
+                        double *ft, double *slack, double *lam)
+{
+    if (!s->friction) return -2;
+    for (int c = 0; c < n; c++) {
+        int status = s->friction(s, y, held, push, c, vt + 3 * c, ft + 3 * c, slack + c, lam + c);
+        if (status) return status;
+    }
+    return 0;
+}
+
 void fb_sys_outputs(const FbSystem *s, const double *y, double *x, double *v, double *energies)
 {
     s->outputs(s, y, x, v, energies);

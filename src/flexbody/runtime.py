@@ -53,7 +53,7 @@ SIGNATURES = {
     "fb_sys_contact_state": (_int, [_ptr, _ptr, _ptr, _ptr, _ptr, _ptr, _ptr]),
     "fb_sys_impact": (_int, [_ptr, _ptr, _ptr, _ptr, _ptr]),
     "fb_sys_outputs": (None, [_ptr, _ptr, _ptr, _ptr, _ptr]),
-    "fb_sys_friction": (_int, [_ptr, _ptr, _ptr, _ptr, _int, _ptr, _ptr, _ptr, _ptr]),
+    "fb_sys_friction_all": (_int, [_ptr, _ptr, _ptr, _ptr, _int, _ptr, _ptr, _ptr, _ptr]),
     "fb_sys_contact": (_int, [_ptr, _ptr, _ptr, _ptr, _int, _ptr, _ptr, _ptr, _ptr, _int, _ptr]),
     "fb_sys_settle": (_int, [_ptr, _ptr, _ptr]),
     "fb_closest_features": (_int, [_int, _int, _ptr, _ptr, _ptr, _ptr, _ptr, _ptr, _ptr, _double, _ptr, _ptr, _ptr,
@@ -198,19 +198,15 @@ class SystemModel:
         ``held`` (phase codes: HELD sticks, SLIDING slips).  Zeros and inf for systems without
         contact laws (whole-scene models)."""
         y, held, push = _floats(y), _ints(held), _floats(push)
-        vt, ft = np.zeros((self.n_contacts, self.dim)), np.zeros((self.n_contacts, self.dim))
-        slack = np.full(self.n_contacts, np.inf)
-        out = [np.zeros(3), np.zeros(3), ctypes.c_double(0.0), ctypes.c_double(0.0)]
-        address, call = self._address(p), library().fb_sys_friction
-        for c in range(self.n_contacts):
-            status = call(address, y.ctypes.data, held.ctypes.data, push.ctypes.data, c, out[0].ctypes.data,
-                          out[1].ctypes.data, ctypes.addressof(out[2]), ctypes.addressof(out[3]))
-            if status == -2:
-                break
-            if status:
-                raise singular_matrix_error()
-            vt[c], ft[c], slack[c] = out[0][: self.dim], out[1][: self.dim], out[2].value
-        return vt, ft, slack
+        nc = self.n_contacts
+        vt, ft, slack, lam = np.zeros((nc, 3)), np.zeros((nc, 3)), np.full(nc, np.inf), np.zeros(nc)
+        status = library().fb_sys_friction_all(self._address(p), y.ctypes.data, held.ctypes.data, push.ctypes.data,
+                                               nc, vt.ctypes.data, ft.ctypes.data, slack.ctypes.data, lam.ctypes.data)
+        if status == -2:  # no contact laws
+            return vt[:, : self.dim], ft[:, : self.dim], np.full(nc, np.inf)
+        if status:
+            raise singular_matrix_error()
+        return vt[:, : self.dim], ft[:, : self.dim], slack
 
     def settle(self, y, p, stop) -> np.ndarray:
         """``y`` with each particle with ``stop[c]`` set onto the grounds it is below (a copy;
