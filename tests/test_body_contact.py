@@ -922,3 +922,34 @@ def test_a_pile_whose_redundant_contacts_lose_lemkes_pivots_runs_to_its_end():
     assert r.stats["events"] > 1000  # measured 1 687
     assert r.stats["max_penetration_m"] < 1e-9  # measured 2.7e-11 m
     assert r.stats["energy_drift_relative"] < 1e-6  # measured 6.6e-8
+
+
+def test_two_blocks_flying_at_each_other_meet_at_the_default_tolerances():
+    """Two 3 x 2-cell blocks 0.4 m apart flying at each other at 1 m/s each in free space:
+    free flight is exact for RK45, whose steps then grow without bound, and one step carried
+    each block through the other (0 events, every gap read beyond reach at both ends; found
+    by a fuzz).  A step now moves no particle relative to another by more than half a margin
+    (``BodyContactModel.step_reach``): they meet, and no vertex gets inside."""
+    cell = 0.01
+    nodes = [(i, j) for i in range(4) for j in range(3)]
+    index = {n: k for k, n in enumerate(nodes)}
+    triangles = []
+    for i in range(3):
+        for j in range(2):
+            a, b, c, d = index[(i, j)], index[(i + 1, j)], index[(i + 1, j + 1)], index[(i, j + 1)]
+            triangles += [(a, b, c), (a, c, d)]
+    corner, triangles = np.array(nodes, float) * cell, np.array(triangles)
+    links = sorted({tuple(sorted((int(t[p]), int(t[q])))) for t in triangles for p in range(3) for q in range(p)})
+    from flexbody.surface import boundary
+
+    bodies = [{"name": name, "particles": (corner + [dx, 0.2 + dy]).tolist(), "links": [list(k) for k in links],
+               "surface": boundary(corner, triangles).tolist(), "mass": 0.005, "stiffness": 5000.0, "damping": 0.0,
+               "damper": "axial", "position": [0.0, 0.0], "velocity": [v, 0.0], "collide": True}
+              for name, dx, dy, v in (("a", -0.23, 0.0, 1.0), ("b", 0.2, 0.004, -1.0))]
+    table = {"name": "blocks", "gravity": [0.0, 0.0], "grounds": [{"point": [0.0, -10.0], "normal": [0.0, 1.0]}],
+             "bodies": bodies, "contacts": [{"bodies": ["a", "b"], "restitution": 0.5}],
+             "simulation": {"t_end": 0.3, "output_dt": 0.0005}}
+    result = flexbody.simulate(flexbody.load_scene(table))
+    assert result.status == "success", result.message
+    assert result.stats["impacts"] > 10 and result.stats["max_penetration_m"] < 1e-9
+    assert result.positions[-1, :12, 0].max() < result.positions[-1, 12:, 0].min()  # a still left of b

@@ -512,9 +512,12 @@ class _Run:
 
         renew_slips()
         g_old = events(self.y)
+        reach = model.step_reach if model.n_slots and s.method != "LSODA" else None  # LSODA fixes it at its start
         try:
             while True:
                 t_start, y_start = solver.t, solver.y.copy()
+                if reach is not None:  # bodies may touch: no step carries a particle through a surface unseen
+                    solver.max_step = min(options.get("max_step", np.inf), reach(solver.y, self.p))
                 message = solver.step()
                 self.steps += 1
                 if solver.status == "failed":
