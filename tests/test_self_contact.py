@@ -9,6 +9,7 @@ the run without self-contact, whose surface passes through itself (so each check
 from __future__ import annotations
 
 import dataclasses
+import json
 import re
 from pathlib import Path
 
@@ -402,3 +403,17 @@ def test_two_far_parts_held_vertex_on_vertex_are_no_fold_at_rounding_depth():
     x_folded[[54, 88]] = x[[88, 54]]  # the faces' lower ends swapped: a crossing 3.2e-6 m deep
     y[: x.size] = x_folded.ravel()
     assert "cross" in model.fold(y, p, depth=1e-9)[1]
+
+
+def test_a_lattice_collapsing_with_nothing_near_is_refused_at_the_first_sample_it_crosses_itself():
+    """A fuzz's strip (tests/reference/fuzz_flap_hinge.json: 78 particles on a ground, its end
+    flipped over onto it): its hinge's triangles invert and two boundary segments one apart
+    cross, within a neighbourhood, with no contact near (each particle's neighbourhood is
+    not watched).  A body with self-contact has its own surface checked at every output
+    sample: refused there (before: `success`, crossing at 8 samples, up to 0.6 mm deep)."""
+    table = json.loads((Path(__file__).parent / "reference" / "fuzz_flap_hinge.json").read_text())
+    result = flexbody.simulate(flexbody.load_scene(table))
+    surface = np.array(table["bodies"][0]["surface"])
+    assert result.status == "unsupported" and "has folded over" in result.message, result.message
+    crossed = [k for k, x in enumerate(result.positions) if len(crossings(x, surface))]
+    assert crossed in ([], [len(result.t) - 1])  # none before the stop

@@ -793,7 +793,7 @@ class BodyContactModel(Model):
 
     def fold(self, y, p, contacts: IntArray | None = None, depth: float = 0.0) -> tuple[int, str] | None:
         """A body whose surface slot contacts ``contacts`` touch (default: every surface a
-        free slot is within ``margin`` of) and how it has folded (its index and a
+        free slot is within ``margin`` of, and every body with self-contact) and how it has folded (its index and a
         description), or None.  Folded: two of its 2D segments cross, an edge of its 3D
         surface passes through one of its triangles, or its closed surface encloses no
         positive area or volume (turned inside out).  On a folded surface inside and outside
@@ -805,7 +805,10 @@ class BodyContactModel(Model):
         x = self._state(y, p)[0]
         slots = (np.asarray(contacts, np.intp) - self.n_ground_contacts if contacts is not None
                  else np.flatnonzero(self._surface_gaps(x)[1]))
-        for body in np.unique(self.slot_body[slots]):
+        bodies = np.unique(self.slot_body[slots])
+        if contacts is None and self.own is not None:  # a body touching itself is always near its own surface
+            bodies = np.union1d(bodies, np.flatnonzero(np.diag(self.allowed)))
+        for body in bodies:
             mine = self.elements[self._body_elements[body]]
             if self.dim == 2:  # a 2D crossing is a particle inside: self-contact or not, a fold
                 crossed = crossings(x, mine)
