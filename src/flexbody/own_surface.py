@@ -97,7 +97,8 @@ class OwnSurface:
     def near(self, vertices: IntArray, elements: IntArray) -> np.ndarray:
         """Whether any of each row of surface ``vertices`` (k, a) has the element (k,) in its
         neighbourhood, bool (k,): two crossing elements of a body so near each other are a
-        fold of its surface (its lattice collapsed there), farther ones a contact missed."""
+        fold of its surface (its lattice collapsed there, or a concave corner closed), farther ones two
+        parts touching or a contact missed."""
         if not len(elements):
             return np.zeros(0, bool)
         vertices = np.asarray(vertices).reshape(len(elements), -1)
