@@ -1285,13 +1285,7 @@ int fb_sys_impact(const FbSystem *s, const double *y, const int *stop, double *y
     return s->impact(s, y, stop, y_out, loss);
 }
 
-int fb_sys_friction(const FbSystem *s, const double *y, const int *held, const double *push, int c, double *vt,
-                    double *ft, double *slack, double *lam_c)
-{
-    return s->friction ? s->friction(s, y, held, push, c, vt, ft, slack, lam_c) : -2;
-}
-
-/* fb_sys_friction for contacts 0 .. n - 1 (one call from Python, not n): vt and ft (n, 3),
+/* FbSystem.friction for contacts 0 .. n - 1 (one call from Python, not n): vt and ft (n, 3),
  * slack and lam (n,).  0, -1 at the first contact whose call fails, -2 without friction. */
 int fb_sys_friction_all(const FbSystem *s, const double *y, const int *held, const double *push, int n, double *vt,
                         double *ft, double *slack, double *lam)

@@ -202,9 +202,7 @@ class SystemModel:
         vt, ft, slack, lam = np.zeros((nc, 3)), np.zeros((nc, 3)), np.full(nc, np.inf), np.zeros(nc)
         status = library().fb_sys_friction_all(self._address(p), y.ctypes.data, held.ctypes.data, push.ctypes.data,
                                                nc, vt.ctypes.data, ft.ctypes.data, slack.ctypes.data, lam.ctypes.data)
-        if status == -2:  # no contact laws
-            return vt[:, : self.dim], ft[:, : self.dim], np.full(nc, np.inf)
-        if status:
+        if status not in (0, -2):  # -2: no contact laws, the zeros and inf stand
             raise singular_matrix_error()
         return vt[:, : self.dim], ft[:, : self.dim], slack
 
