@@ -174,7 +174,6 @@ class BodyContactModel(Model):
                              else _MixedCoordinates(inner) if isinstance(inner, MixedModel)
                              else _FrameCoordinates(inner))
         self.elements, self.element_body = scene.surfaces()
-        self.scene_names = [b.name for b in scene.bodies]
         counts = [b.n_particles for b in scene.bodies]
         self.particle_body = np.repeat(np.arange(len(counts)), counts)
         particles, bodies, pairs = [np.zeros(0, np.intp)], [np.zeros(0, np.intp)], [np.zeros(0, np.intp)]
@@ -1233,10 +1232,13 @@ class BodyContactModel(Model):
         np.add.at(outward, owner, (segment_normals if self.dim == 2 else triangle_normals)(x, elements))
         return (np.bincount(edge_owner[falling], minlength=len(w)) == 0) & (np.einsum("kd,kd->k", outward, normal) < 0.0)
 
-    def _closest(self, x, slots: IntArray | None = None):
+    def _closest(self, x, slots: IntArray | None = None, read: bool = True):
+        """The closest features at ``x`` of every slot within reach (or of ``slots``'s), as
+        read or, with ``read`` false, as measured (:meth:`_closest_features`); None if none."""
         if slots is None and self._narrow is not None:
             # the whole sweep in C: the allowed kept pairs, boxed there (no NumPy pass over them)
-            contact = self._readable(self._narrow(x, x, self._allowed_kept(x), reach=self._candidates.margin))
+            contact = self._narrow(x, x, self._allowed_kept(x), reach=self._candidates.margin)
+            contact = self._readable(contact) if read else contact
             return contact if len(contact.particle) else None
         pairs = self._candidates.pairs(x, None if slots is None else np.unique(self.slot_particle[slots]))
         keep = self.allowed[self.particle_body[pairs[:, 0]], self.element_body[pairs[:, 1]]]
@@ -1250,7 +1252,7 @@ class BodyContactModel(Model):
         pairs = pairs[keep]
         if not len(pairs):
             return None
-        contact = self._closest_features(x, pairs)
+        contact = self._closest_features(x, pairs, read)
         return contact if len(contact.particle) else None
 
     def _allowed_kept(self, x) -> IntArray:
@@ -1299,26 +1301,20 @@ class BodyContactModel(Model):
         spread = float(np.linalg.norm(v.max(axis=0) - v.min(axis=0))) if len(v) else 0.0
         return STEP_REACH * self.margin / spread if spread > 0.0 else np.inf
 
-    def from_inside(self, y, p, touching: np.ndarray) -> str | None:
+    def from_inside(self, y, p, touching: np.ndarray) -> tuple[int, int, float] | None:
         """Where a touching contact (bool (nc,)) is a particle come at its own surface from
-        inside (:meth:`flexbody.own_surface.OwnSurface.inside`): what happened, in words; else None."""
+        inside (:meth:`flexbody.own_surface.OwnSurface.inside`): the particle, its body and
+        how far (m) behind its surface it is; else None."""
         if self.own is None:
             return None
         slots = np.flatnonzero(np.asarray(touching)[self.n_ground_contacts : self.n_ground_contacts + self.n_primary])
         slots = slots[self.slot_body[slots] == self.particle_body[self.slot_particle[slots]]]
-        if not len(slots):
-            return None
-        x = self._state(np.asarray(y, float), p)[0]
-        contact = self._closest_features(x, self._pairs_with_body(slots), read=False)
-        deep = np.flatnonzero(self.own.inside(contact))
+        contact = self._closest(self._state(np.asarray(y, float), p)[0], slots, read=False) if len(slots) else None
+        deep = np.flatnonzero(self.own.inside(contact)) if contact is not None else ()
         if not len(deep):
             return None
-        k = deep[0]
-        body = self.scene_names[self.particle_body[contact.particle[k]]]
-        return (f"particle {contact.particle[k]} of body {body!r} came at its own surface from inside, "
-                f"{-contact.gap[k]:.3g} m behind it (a hollow body crushed flat, a body pressed through its "
-                "thickness, or a part of it that passed through another): self-contact is between the outer sides "
-                "of a surface, and its inside is taken for material")
+        particle = int(contact.particle[deep[0]])
+        return particle, int(self.particle_body[particle]), float(-contact.gap[deep[0]])
 
     def _slots_of(self, particle, body) -> tuple[IntArray, np.ndarray]:
         key = np.asarray(particle) * self._body_count + np.asarray(body)

@@ -672,7 +672,13 @@ class _Run:
             if self.model.n_slots:
                 inside = self.model.from_inside(self.y, self.p, touching)
                 if inside:  # no contact to resolve: a particle inside its own body reached its far side
-                    raise SimulationFailed("unsupported", f"at t = {t:.9g} s {inside}.")
+                    particle, body, depth = inside
+                    raise SimulationFailed(
+                        "unsupported",
+                        f"at t = {t:.9g} s particle {particle} of body {self.scene.bodies[body].name!r} came at its own "
+                        f"surface from inside, {depth:.3g} m behind it (a hollow body crushed flat, a body pressed "
+                        "through its thickness, or a part of it that passed through another): self-contact is between "
+                        "the outer sides of a surface, and its inside is taken for material.")
                 held_before = self.phases.on_ground.copy()
                 touching, leaving, renewed = self.switch_elements(t, touching, leaving)
             res = resolve(self.model, t, self.y, self.p, self.phases, touching, leaving,
