@@ -316,3 +316,68 @@ def test_a_face_creased_by_a_hair_along_its_diagonal_is_an_edge_from_its_first_c
             assert got.gap[0] == pytest.approx(height, abs=1e-12)
             np.testing.assert_allclose(got.parameters[0], [0.5, 0.5], atol=1e-6)
             np.testing.assert_allclose(got.normal[0], turn @ [0.0, 0.0, 1.0], atol=1e-6)
+
+
+def test_a_flexible_bodys_flat_diagonal_is_an_edge_while_it_creases_outward():
+    """A bar's bottom edge 1 mm above the ridge of a square roof creased along its diagonal
+    (two corners 1 cm lower), the roof flat at the start: for a flexible roof the ridge is
+    an edge contact (gap h exactly), as it would be had it started creased; a rigid roof's
+    diagonal, flat at the start, stays flat and is none.  Creased inward (the two corners 1
+    cm higher, a valley) the diagonal is none either: the bar meets the rims first.  Before,
+    every body's flat diagonals were left out (a fuzzed stack of boxes: a rigid box's rim
+    went 0.5 mm through a flexible box's bottom diagonal)."""
+    from flexbody.edge_contact import EdgeSlots
+
+    h = 1e-3
+
+    def roof(drop: float) -> np.ndarray:
+        return np.array([[0.0, 0.0, 0.0], [1.0, 1.0, 0.0], [1.0, 0.0, -drop], [0.0, 1.0, -drop], [0.5, 0.5, -1.0]])
+
+    along, across, up = np.array([1.0, -1.0, 0.0]) / np.sqrt(2.0), np.array([1.0, 1.0, 0.0]) / np.sqrt(2.0), np.eye(3)[2]
+    bar = np.array([np.array([0.6, 0.6, 0.0]) + a * 1.5 * along + b * 0.1 * across + z * 0.2 * up
+                    for a in (-1.0, 1.0) for b in (0.0, 1.0) for z in (0.0, 1.0)])
+    triangles = hull(roof(0.01))  # the roof's surface: split along the ridge (8, 9)
+    elements = np.vstack([hull(bar), triangles + 8])
+    element_body = np.repeat([0, 1], [len(hull(bar)), len(triangles)])
+    x0 = np.vstack([bar + h * up, roof(0.0)])
+    for drop, deforming, ridge in ((0.01, {1}, True), (0.01, set(), False), (-0.01, {1}, False)):
+        x = np.vstack([bar + (h + max(0.0, -drop)) * up, roof(drop)])
+        slots = EdgeSlots(elements, element_body, [(0, 1)], x0, deforming=deforming)
+        row = next(r for r in range(slots.n_primary) if np.allclose(np.sum(x[slots.edges[slots.own[r]], :2], axis=1), 1.2)
+                   and np.allclose(x[slots.edges[slots.own[r]], 2], x[:8, 2].min()))
+        gap, edge, _ = slots.closest(x, slots.siblings(np.array([row]))[0], np.full(len(slots), -1), reach=0.05)
+        found = [sorted(slots.edges[e].tolist()) for e in edge[edge >= 0]]
+        assert ([8, 9] in found) == ridge, (drop, deforming, found)
+        if ridge:
+            assert gap[0] == pytest.approx(h, rel=1e-9) and found[0] == [8, 9]
+        else:  # the rims alone, apart
+            assert len(found) == 2 and (gap[edge >= 0] > h).all()
+
+
+def test_an_edge_crossed_past_an_acute_rim_is_seen_crossed():
+    """A wedge's bottom edge (along y) 1 mm below the rim (along x) of a prism whose rim is
+    acute (73 deg: its side face leans in under the top face): the lines' closest point on
+    the wedge's edge lies outside the prism, beyond its side face, by 0.29 of the depth, yet
+    the edges have crossed (each passes through one of the other's triangles): the pair
+    reads gap -1 mm, as a step's end that went past the touch must see it.  Before, its
+    closest point had to be inside the prism, and the crossing read no contact (in a fuzzed
+    stack of boxes a flexible box's rim, bent acute, let a rigid box's edge through)."""
+    from flexbody.edge_contact import EdgeSlots
+
+    h = 1e-3
+    prism = np.array([[x, y, z] for x in (-1.0, 1.0) for (y, z) in ((0.0, 0.0), (1.0, 0.0), (0.3, -1.0))])
+    wedge = np.array([[0.0, y, -h] for y in (-0.5, 0.5)] + [[x, y, 0.3] for x in (-0.2, 0.2) for y in (-0.5, 0.5)])
+    x = np.vstack([prism, wedge])
+    elements = np.vstack([hull(prism), hull(wedge) + 6])
+    slots = EdgeSlots(elements, np.repeat([0, 1], [len(hull(prism)), len(hull(wedge))]), [(0, 1)], x)
+    rim = next(r for r in range(slots.n_primary) if sorted(slots.edges[slots.own[r]].tolist()) == [0, 3])
+    gap, edge, side = slots.closest(x, np.array([rim]), np.full(len(slots), -1), reach=0.05)
+    assert sorted(slots.edges[edge[0]].tolist()) == [6, 7]
+    assert gap[0] == pytest.approx(-h, rel=1e-9)
+    # the closest point (0, 0, -h) is outside the prism: its side face passes y = 0.3 h there
+    side_normal = np.array([0.0, -1.0, -0.3]) / np.linalg.norm([1.0, 0.3])
+    assert side_normal @ (np.array([0.0, 0.0, -h]) - prism[0]) == pytest.approx(0.3 * h / np.linalg.norm([1.0, 0.3]))
+    # the same edge 1 mm above the rim: apart by h
+    wedge_above = wedge + np.array([0.0, 0.0, 2.0 * h])
+    gap_above = slots.closest(np.vstack([prism, wedge_above]), np.array([rim]), np.full(len(slots), -1), reach=0.05)[0]
+    assert gap_above[0] == pytest.approx(h, rel=1e-9)

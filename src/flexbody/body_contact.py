@@ -195,11 +195,12 @@ class BodyContactModel(Model):
         self.allowed = allowed
         x0 = scene.initial_positions()
         #: Then the edge contacts of the pairs with ``edges = true`` (3D, frictionless): each
-        #: convex surface edge of a pair's first body against the second body's edges, three
+        #: surface edge that may touch of a pair's first body against the second body's edges, three
         #: times (``EdgeSlots``), from slot ``first_edge`` on; their particle is the edge's first end.
         self.first_edge = len(self.slot_particle)
         pairs = [tuple(c.bodies) for c in scene.contacts if c.edges]  # 3D, frictionless (the scene checks)
-        self._edge_slots = EdgeSlots(self.elements, self.element_body, pairs, x0, self.backend) if pairs else None
+        flexible = {k for k, body in enumerate(scene.bodies) if not body.rigid}
+        self._edge_slots = EdgeSlots(self.elements, self.element_body, pairs, x0, self.backend, flexible) if pairs else None
         if self._edge_slots is not None:
             es = self._edge_slots
             self.slot_particle = np.concatenate([self.slot_particle, es.edges[es.own, 0]])

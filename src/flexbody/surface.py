@@ -255,8 +255,28 @@ def piercings(points: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     tri, ed = _within_reach(corners, ends)
     apart = _share_none(triangles[tri], edge[ed])
     tri, ed = tri[apart], ed[apart]
-    a, b, c = (corners[tri, k] for k in range(3))
-    p, q = ends[ed, 0], ends[ed, 1]
+    hit = segments_through(ends[ed, 0], ends[ed, 1], corners[tri])
+    return np.column_stack([tri[hit], ed[hit]])
+
+
+def segments_through(p: np.ndarray, q: np.ndarray, corners: np.ndarray) -> np.ndarray:
+    """Whether each segment ``p -> q`` passes through its triangle, pair by pair: its ends
+    strictly on either side of the triangle's plane (beyond :data:`STRICT` of its length: a
+    segment in the plane does not count) and its line strictly inside the triangle's three
+    edges (signed volumes, no division).
+
+    Parameters
+    ----------
+    p, q : ndarray, shape (k, 3)
+        The segments' ends.
+    corners : ndarray, shape (k, 3, 3)
+        Each one's triangle.
+
+    Returns
+    -------
+    ndarray of bool, shape (k,)
+    """
+    a, b, c = (corners[:, k] for k in range(3))
 
     def volume(u, v, w, x):  # six times the signed volume of the tetrahedron (u, v, w, x)
         return np.einsum("ij,ij->i", np.cross(v - u, w - u), x - u)
@@ -266,8 +286,7 @@ def piercings(points: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     through_plane = (at_p * at_q < 0.0) & (np.minimum(np.abs(at_p), np.abs(at_q)) > STRICT * size)
     sides = np.stack([volume(p, q, a, b), volume(p, q, b, c), volume(p, q, c, a)])
     inside = ((sides > 0.0).all(axis=0)) | ((sides < 0.0).all(axis=0))
-    hit = through_plane & inside
-    return np.column_stack([tri[hit], ed[hit]])
+    return through_plane & inside
 
 
 def edges_through(points: np.ndarray, segments: np.ndarray, triangles: np.ndarray,
