@@ -226,3 +226,22 @@ def test_a_fuzzed_stack_of_boxes_with_edge_contacts_keeps_its_edges_apart():
     assert r.stats["max_edge_crossing_m"] == 0.0  # 4.9e-4 m before
     assert r.stats["max_penetration_m"] < 1e-9  # 6.1e-4 m before; measured 4.1e-12 m
     assert r.stats["energy_drift_relative"] < 1e-6  # measured 1.8e-8
+
+
+@pytest.mark.slow  # a rigid box derived whole (cold cache); the run ~4 s
+def test_a_flexible_boxs_corner_handed_across_a_diagonal_still_slides_off_the_rim():
+    """A fuzz's scene (tests/reference/fuzz_box_corner_over_rim.json: a flexible 3 x 2 x 2
+    box, a sphere and a rigid box, `edges = true`).  A corner of the flexible box, held on a
+    face of the rigid box, slid across the face's diagonal; the hand-over left a twin on
+    the old triangle a hair past its boundary with a margin floor of 0, so its boundary
+    event never fired: swapped back into the slot, the corner slid 0.08 m past the rim held
+    on the old triangle's plane, its force down to -7 N with no lift-off.  And an edge of
+    the flexible box went 1.9e-6 m through a triangle of the sphere (its face edges, flat
+    at the start, were no edge contacts)."""
+    table = json.loads((Path(__file__).parent / "reference" / "fuzz_box_corner_over_rim.json").read_text())
+    r = flexbody.simulate(flexbody.load_scene(table), max_wall_time=300.0)
+    assert r.status == "success", r.message
+    assert r.stats["min_held_contact_force_N"] > -1e-6  # -6.9 N before
+    assert r.stats["max_edge_crossing_m"] == 0.0  # 1.9e-6 m before
+    assert r.stats["max_penetration_m"] < 1e-9
+    assert r.stats["energy_drift_relative"] < 1e-6
