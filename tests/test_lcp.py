@@ -217,6 +217,7 @@ def test_lexicographic_rule_ends_where_a_naive_tie_break_cycles(seed, monkeypatc
     else:  # M is not copositive-plus, so a ray proves nothing; but no basic solution exists here
         assert not brute_force(M, q)
     monkeypatch.setattr(flexbody.lcp, "_lex_min_row", _naive_tie_break)
+    monkeypatch.setattr(flexbody.lcp, "COVERINGS", 0)  # (other covering vectors break the ties)
     assert solve_lcp(M, q, max_pivots=500).status == "iterations"  # the same path without the rule cycles
 
 
@@ -833,6 +834,7 @@ def test_a_basis_that_rounding_left_infeasible_is_solved_again_on_a_shifted_matr
     last point is not taken (an infeasible problem has one of size ~1/s on M + s I)."""
     data = np.load(Path(__file__).parent / "reference" / f"{name}.npz")
     M, q = data["M"], data["q"]
+    monkeypatch.setattr(flexbody.lcp, "COVERINGS", 0)  # the shifts alone (other covering vectors solve it too)
     sol = solve_lcp(M, q)
     assert sol.status == "solved" and "on M +" in sol.message, sol.message
     assert_solves(sol, M, q)
@@ -841,3 +843,41 @@ def test_a_basis_that_rounding_left_infeasible_is_solved_again_on_a_shifted_matr
     monkeypatch.setattr(flexbody.lcp, "SHIFTS", (1e-13, 1e-12, 1e-11))
     monkeypatch.setattr(flexbody.lcp, "SHIFT_GROWTH", 0.5)  # no answer of the same size is ever this small
     assert solve_lcp(M, q).status == without
+
+
+@pytest.mark.parametrize("name, without", [("lcp_fuzz_frictional_impact_ray", "ray"),
+                                           ("lcp_fuzz_frictional_impact_2d", "inaccurate")])
+def test_a_frictional_lcp_whose_path_ends_on_a_ray_is_solved_from_another_covering_vector(monkeypatch, name, without):
+    """Frictional impact LCPs of a fuzz (a 3D slab on a rigid box, 30 rows, all plastic; a 2D
+    pile, 24 rows): Lemke's path from the covering vector of ones ends on a secondary ray
+    or on a basis whose z fails the check, and the run stopped `unsupported`; M is not
+    copositive-plus (friction), so neither proves there is no solution, and 31 and 32 of
+    50 orders of their rows solve them.  From another covering vector the path ends on a
+    solution of the original problem."""
+    data = np.load(Path(__file__).parent / "reference" / f"{name}.npz")
+    M, q = data["M"], data["q"]
+    sol = solve_lcp(M, q)
+    assert "covering vector" in sol.message, sol.message
+    assert_solves(sol, M, q)
+    monkeypatch.setattr(flexbody.lcp, "COVERINGS", 0)
+    assert solve_lcp(M, q).status == without
+
+
+def test_a_shifted_answer_is_checked_with_the_shift_s_compliance(monkeypatch):
+    """A fuzz's frictional impact LCP (two flexible 3D bodies, 18 rows): a secondary ray from
+    every order of its rows, yet 21 of its 2^18 bases solve it (the best to 3.5e-19).  On
+    M + s I the pivots find an answer, which solves the original problem but for s z_i in
+    each row: it was refused by 1.0e-11 = s z.  Now each row may be off by that much more,
+    and no more."""
+    data = np.load(Path(__file__).parent / "reference" / "lcp_fuzz_frictional_impact_shift.npz")
+    M, q = data["M"], data["q"]
+    monkeypatch.setattr(flexbody.lcp, "COVERINGS", 0)
+    sol = solve_lcp(M, q)
+    assert sol.status == "solved" and "on M +" in sol.message, sol.message
+    size = np.abs(np.diag(M)).max()
+    shift = next(r * size for r in flexbody.lcp.SHIFTS if f"on M + {r * size:.1e} I" in sol.message)
+    assert np.all(sol.z >= 0.0)
+    assert np.all(sol.w >= -(shift * sol.z.max() + 1e-9 * (np.abs(M) @ sol.z + np.abs(q))))
+    assert np.abs(sol.w * sol.z).max() <= shift * sol.z.max() ** 2 + 1e-12
+    monkeypatch.setattr(flexbody.lcp, "SHIFTS", ())
+    assert solve_lcp(M, q).status == "ray"
