@@ -49,6 +49,10 @@ PARALLEL = 1e-6
 #: edge row read 3e-6 m crossed and the ledger missed 1e-5 of the energy; with the slack
 #: 3.5e-12 m and 8.5e-9 (1 and 5 degrees alike).
 CONE_SLACK = float(np.cos(np.radians(5.0)))
+#: A crossed pair read deeper than this many times its inside test's slack (1e-3 of the
+#: search's reach) with a closest point nearer an end of its edge than that depth is not
+#: taken on that test (:meth:`EdgeSlots._crossing_inside`).
+DEEP_CROSSING = 1e3
 #: An edge whose two triangles' unit normals differ by less than this (about the angle of
 #: its crease, rad) lies in a flat face (a box face's diagonal): no edge of the body's shape,
 #: and no edge contact.  Linear in the angle, and small: an edge pressed across a face whose
@@ -512,6 +516,16 @@ class EdgeSlots:
             pairs = np.column_stack([np.repeat(np.arange(len(crossed)), [len(e) for e in surfaces]),
                                      np.concatenate(surfaces)])
             inside &= closest_features(point, x, self._elements, pairs).gap <= slack
+        # ... a deep one (beyond DEEP_CROSSING slacks) only with both closest points that far
+        # inside their edges: nearer an edge's end the crossing is the end vertex's (a box's
+        # vertex held on a face, its edge standing off it: with the other body's edge lying
+        # on that face the lines read "crossed" along a normal in the contact plane, each
+        # point on the other body; measured: two rigid boxes face on face, -0.032 m, and an
+        # impact on it).  A crossing just begun is shallow wherever it is.
+        lengths = [np.linalg.norm(x[e[:, 1]] - x[e[:, 0]], axis=1) for e in (first, second)]
+        ends = np.minimum(np.minimum(s, 1.0 - s) * lengths[0], np.minimum(t, 1.0 - t) * lengths[1])
+        depth = -found.gap[crossed]
+        inside &= (depth <= DEEP_CROSSING * slack) | (ends >= depth)
         through = np.ones(len(crossed), bool)
         for edge, other_edge in ((first, found.pair[crossed, 1]), (second, found.pair[crossed, 0])):
             triangles = x[self._elements[self.edge_faces[other_edge]]]  # (k, 2, 3, 3)
