@@ -522,16 +522,17 @@ class EdgeSlots:
         # on that face the lines read "crossed" along a normal in the contact plane, each
         # point on the other body; measured: two rigid boxes face on face, -0.032 m, and an
         # impact on it).  A crossing just begun is shallow wherever it is.
-        lengths = [np.linalg.norm(x[e[:, 1]] - x[e[:, 0]], axis=1) for e in (first, second)]
-        ends = np.minimum(np.minimum(s, 1.0 - s) * lengths[0], np.minimum(t, 1.0 - t) * lengths[1])
         depth = -found.gap[crossed]
-        inside &= (depth <= DEEP_CROSSING * slack) | (ends >= depth)
-        through = np.ones(len(crossed), bool)
-        for edge, other_edge in ((first, found.pair[crossed, 1]), (second, found.pair[crossed, 0])):
+        inside &= (depth <= DEEP_CROSSING * slack) | (_inside_edges(x, first, second, s, t) >= depth)
+        # the triangles' test where the inside test did not take it
+        rest = np.flatnonzero(~inside)
+        through = np.ones(len(rest), bool)
+        for edge, other_edge in ((first[rest], found.pair[crossed[rest], 1]), (second[rest], found.pair[crossed[rest], 0])):
             triangles = x[self._elements[self.edge_faces[other_edge]]]  # (k, 2, 3, 3)
             through &= (segments_through(x[edge[:, 0]], x[edge[:, 1]], triangles[:, 0])
                         | segments_through(x[edge[:, 0]], x[edge[:, 1]], triangles[:, 1]))
-        out[crossed] = inside | through
+        inside[rest] = through
+        out[crossed] = inside
         return out
 
     def gaps(self, x: FloatArray, rows: IntArray, codes: IntArray) -> FloatArray:
@@ -563,9 +564,15 @@ class EdgeSlots:
         rate, _, bias = kernels.edge_3d_velocity(*ends, sides, *rates)
         s, t = parameters
         coefficients = np.column_stack([1.0 - s, s, -(1.0 - t), -t])
-        lengths = [np.linalg.norm(x[points[:, 1 + 2 * j]] - x[points[:, 2 * j]], axis=1) for j in range(2)]
-        margin = np.minimum(np.minimum(s, 1.0 - s) * lengths[0], np.minimum(t, 1.0 - t) * lengths[1])
+        margin = _inside_edges(x, points[:, :2], points[:, 2:], s, t)
         return EdgeTerms(gap[0], coefficients, normal.T, rate[0], bias[0], margin)
+
+
+def _inside_edges(x: FloatArray, first: IntArray, second: IntArray, s: FloatArray, t: FloatArray) -> FloatArray:
+    """How far the closest points at ``s`` on edges ``first`` and ``t`` on ``second`` ((k, 2)
+    particle indices each) are inside both edges (m, the lesser), shape (k,): 0 at an end."""
+    lengths = [np.linalg.norm(x[e[:, 1]] - x[e[:, 0]], axis=1) for e in (first, second)]
+    return np.minimum(np.minimum(s, 1.0 - s) * lengths[0], np.minimum(t, 1.0 - t) * lengths[1])
 
 
 def _common_normals(a: FloatArray, b: FloatArray, c: FloatArray, d: FloatArray) -> tuple[FloatArray, np.ndarray]:
