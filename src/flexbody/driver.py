@@ -409,6 +409,10 @@ class _Run:
         self.segment_log: list | None = None  # set to [] to log (RHS evaluations, y0, held, push) per segment
         self.min_gap = np.inf  # lowest gap of a free contact (an impact missed between event checks)
         self.min_held_gap = np.inf  # ... and of a held one (its constraint drifted)
+        # the lowest gaps before the last step's end was tracked, and that step's start: a
+        # surface found folded there has no inside, its gaps measure nothing (refuse_fold)
+        self.gaps_before, self.step_start = (np.inf, np.inf), 0.0
+        self.folded_from = np.inf  # samples after this time are of a folding step (see refuse_fold)
         self.stalled = 0
         self.compiled = None
         if model.backend == "c" and model.compiled_segments:
@@ -611,6 +615,7 @@ class _Run:
         for k in range(start, stop):
             self.Y[k] = dense(self.grid[k])
         self.keep_samples(start, stop)
+        self.gaps_before, self.step_start = (self.min_gap, self.min_held_gap), t_start
         lowest = self.track_gaps(self.y)
         if self.model.n_slots and (stop > start or lowest < -FOLD_PROBE * self.gap_tolerance):
             self.check_surfaces(t_stop)  # at the step's end: its surfaces' sweep is kept (the event functions')
@@ -924,8 +929,13 @@ class _Run:
         self.refuse_fold(t, self.model.fold(self.y, self.p, depth=EDGE_DEPTH * self.gap_tolerance))
 
     def refuse_fold(self, t: float, fold: tuple[int, str] | None) -> None:
-        """Stop with ``unsupported`` at ``t`` if ``fold`` (a body and how it folded) is one."""
+        """Stop with ``unsupported`` at ``t`` if ``fold`` (a body and how it folded) is one.
+        The gaps read at the folded state, and on the samples of the step it folded in, are
+        left out of the penetration (a particle beside a folded surface reads deep inside
+        it: measured 1.7e-3 to 0.021 m in runs whose states before the fold read none)."""
         if fold is not None:
+            self.min_gap, self.min_held_gap = self.gaps_before
+            self.folded_from = self.step_start
             body, how = fold
             raise SimulationFailed(
                 "unsupported",
@@ -1030,7 +1040,7 @@ class _Run:
         else:
             X, V, E, lam = model.trajectory(Y, p, held, push)
         force = model.particle_forces(lam + push, X, None if self.sample_elements is None else self.sample_elements[:k])
-        if len(Y):
+        if len(Y) and T[-1] <= self.folded_from:
             self.track_gaps(Y[-1])
         # Energy taken by instant impacts strictly before each sample time (losses come in time order).
         loss_t = np.array([x[0] for x in self.losses], dtype=float)
