@@ -187,14 +187,13 @@ class AssembledC(runtime.SystemModel, AssembledModel):
         super().__init__(scene)
         self.lib = runtime.library()
         self._axial = np.ascontiguousarray(self.axial, dtype=np.intc)
-        self._system_cache: tuple[bytes, runtime.FbSystem] | None = None
+        self._system_cache: tuple[np.ndarray, runtime.FbSystem] | None = None  # (the parameters bound, their system)
         self._threads_wanted = 0
 
     def system(self, p: np.ndarray) -> runtime.FbSystem:
         """An FbSystem of this assembly with parameters ``p`` bound (copied into C)."""
         p = np.ascontiguousarray(p, dtype=float)
-        key = p.tobytes()
-        if self._system_cache is not None and self._system_cache[0] == key:
+        if self._system_cache is not None and runtime.same_parameters(self._system_cache[0], p):
             return self._system_cache[1]
         lib = self.lib
         handle = lib.fb_asm_new(self.dim, self.n_particles, len(self.links), self.n_grounds,
@@ -212,7 +211,7 @@ class AssembledC(runtime.SystemModel, AssembledModel):
             system.slip_held = None
             system.tangential_push = None
         system.owner = _AssemblyHandle(lib, handle)
-        self._system_cache = (key, system)
+        self._system_cache = (runtime.bound_parameters(p), system)
         return system
 
     def free_accelerations(self, y, p, push, particles: IntArray) -> FloatArray:

@@ -362,6 +362,7 @@ class _Run:
         self.progress, self.max_events = progress, max_events
         self.deadline = time.perf_counter() + max_wall_time
         self.p = model.parameters(scene)
+        self.p.flags.writeable = False  # fixed for the run: C calls know it unchanged (runtime.same_parameters)
         q, u = initial_coordinates(scene, model)
         _check_apart(scene, model, q, self.p)
         self.y = np.concatenate([q, u, [0.0, 0.0]])

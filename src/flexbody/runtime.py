@@ -116,6 +116,27 @@ def singular_matrix_error() -> FloatingPointError:
     return FloatingPointError("mass or contact matrix not positive definite at this state")
 
 
+def same_bits(a: np.ndarray, b: np.ndarray) -> bool:
+    """Whether float arrays ``a`` and ``b`` (C-contiguous) hold the same values bit for bit,
+    as their bytes would compare (NaNs and signed zeros included), without copying either."""
+    return a.shape == b.shape and bool(np.array_equal(a.view(np.int64), b.view(np.int64)))
+
+
+def same_parameters(bound: np.ndarray, p: np.ndarray) -> bool:
+    """Whether parameters ``p`` (float, C-contiguous) are ``bound``, those a model bound last
+    (:func:`bound_parameters`), bit for bit.  The same read-only array is unchanged without
+    looking (the driver's, asked for at every C call: a comparison reads every parameter);
+    another is compared (:func:`same_bits`)."""
+    return p is bound or same_bits(bound, p)
+
+
+def bound_parameters(p: np.ndarray) -> np.ndarray:
+    """What a model keeps of the parameters ``p`` (float, C-contiguous) it binds, for
+    :func:`same_parameters`: ``p`` itself where it is read-only and owns its values (nobody
+    changes them), else a copy."""
+    return p if p.base is None and not p.flags.writeable else p.copy()
+
+
 def _ints(a) -> np.ndarray:
     return np.ascontiguousarray(a, dtype=np.intc)
 
