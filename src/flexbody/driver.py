@@ -170,6 +170,23 @@ def _dense(matrix) -> np.ndarray:
     return matrix.toarray() if hasattr(matrix, "toarray") else matrix
 
 
+def _remembered(dense: Callable[[float], np.ndarray]) -> Callable[[float], np.ndarray]:
+    """A step's dense output ``t -> y (ny,)`` that evaluates each time once: event location
+    asks for the same points again (a root's bracket ends, the instant found, the step's
+    midpoint), each a pass over the whole state.  The states are handed out read-only: each
+    is kept for whoever asks for that time next."""
+    states: dict[float, np.ndarray] = {}
+
+    def at(t: float) -> np.ndarray:
+        key = float(t)
+        if key not in states:
+            states[key] = dense(t)
+            states[key].flags.writeable = False
+        return states[key]
+
+    return at
+
+
 def _settings(scene: Scene, overrides: dict) -> SimulationSettings:
     """The scene's settings with the given overrides, each validated.
 
@@ -533,7 +550,7 @@ class _Run:
                     raise SimulationFailed(*failure)
                 if not np.all(np.isfinite(solver.y)):
                     raise SimulationFailed(*_non_finite(solver.t))
-                dense = solver.dense_output()
+                dense = _remembered(solver.dense_output())
                 drift = self.held_drift(solver.y)
                 if model.coupled and phases.on_ground.any() and solver.t - t_start > STALL_TIME and max(
                         drift, self.held_drift(dense(0.5 * (t_start + solver.t)))) > SINK_GAPS * self.gap_tolerance:
