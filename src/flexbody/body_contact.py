@@ -91,6 +91,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from . import runtime
 from .assembly import AssembledModel, _kernels_module
 from .broadphase import CandidateList, slices
 from .constants import FREE, HELD, SLIDING
@@ -254,7 +255,7 @@ class BodyContactModel(Model):
         self._slip_held = np.zeros(self.n_contacts, np.intc)  # read by the grounds' law alone: coupled rows always hold
         self._frictional = bool((self.mu > 0.0).any())  # else the slip directions change no answer
         self._last: tuple[tuple[np.ndarray, ...], _Solved] | None = None  # the last state's answer (see _dynamics)
-        self._swept: dict[bytes, tuple] = {}  # positions -> the whole surface sweep (see _surface_contacts)
+        self._swept: list[tuple[FloatArray, tuple]] = []  # (positions, the whole surface sweep; see _surface_contacts)
         self._edges_swept: dict[bytes, tuple] = {}  # positions and edges held -> every edge row's gap (the same)
         self._layouts: dict[tuple, _Layout] = {}  # held rows -> where their terms go (see _rows)
         self._allowed_pairs: tuple[IntArray, IntArray] | None = None  # (kept pairs, the allowed ones; see _allowed_kept)
@@ -667,7 +668,10 @@ class BodyContactModel(Model):
             label = connected_components(graph, directed=False)[1][: len(nodes)]
         order = np.concatenate([grounds, ng + slots])
         out = np.zeros(self.n_contacts, bool)
-        out[order] = np.isin(label, label[np.isin(order, np.flatnonzero(seeds))])
+        # the blocks (labels 0, 1, ...) holding a seed, by table: np.isin would sort both
+        seeded = np.zeros(int(label.max(initial=-1)) + 1, bool)
+        seeded[label[seeds[order]]] = True
+        out[order] = seeded[label]
         return out
 
     def _moves(self, particles: np.ndarray) -> np.ndarray:
@@ -947,19 +951,28 @@ class BodyContactModel(Model):
         ``margin_floor``; ``inf`` for the other contacts and the rows of a pinning corner.
         It reaches 0 where the particle passes onto a neighbour (an event)."""
         out = np.full(self.n_contacts, np.inf)
+        contacts, margins = self.held_margins(y, p, held)
+        out[contacts] = margins
+        return out
+
+    def held_margins(self, y, p, held) -> tuple[IntArray, FloatArray]:
+        """:meth:`element_margins` of the contacts that have one, shape (k,) each: those
+        contacts and their margins (the others' are ``inf``).  Event location asks for them
+        thousands of times, a few contacts of many: no array of every contact."""
         ng = self.n_ground_contacts
         slots = np.flatnonzero(np.asarray(held)[ng:] != 0)
         edges, slots = slots[slots >= self.first_edge], slots[slots < self.first_edge]
         slots = slots[self._bounded(held, slots)]
+        margins = [np.zeros(0), np.zeros(0)]
         if len(slots) or len(edges):
             x, v = self._state(np.asarray(y, float), p)
         if len(slots):
             self._constrain_elements(slots, x)
-            out[ng + slots] = self._margins(slots, x, v, held)[1] - self.margin_floor[slots]
+            margins[0] = self._margins(slots, x, v, held)[1] - self.margin_floor[slots]
         if len(edges):  # an edge contact's closest points reaching an end of either edge
             self._constrain_edges(edges, x)
-            out[ng + edges] = self._edge_terms(edges, x, v).margin - self.margin_floor[edges]
-        return out
+            margins[1] = self._edge_terms(edges, x, v).margin - self.margin_floor[edges]
+        return ng + np.concatenate([slots, edges]), np.concatenate(margins)
 
     def floor_margins(self, y, p, held: np.ndarray, changed: np.ndarray, gap_tolerance: float) -> None:
         """Held rows of the groups of the contacts ``changed`` at this instant (bool (nc,):
@@ -1129,8 +1142,7 @@ class BodyContactModel(Model):
             # The whole sweep depends on x alone, and an instant asks for it at the same state
             # several times (the step's end, the instant's resolve, the next segment's start):
             # the last few answers are kept, read-only.
-            gaps, near, found = _kept(self._swept, np.ascontiguousarray(x).tobytes(), lambda: _read_only(self._sweep(x)),
-                                      SWEEPS_KEPT)
+            gaps, near, found = _kept_at(self._swept, x, lambda: _read_only(self._sweep(x)), SWEEPS_KEPT)
             rows = np.arange(self.n_slots - self.first_edge)
         if len(rows):  # the edge contacts': an edge held against another reads that pair's gap
             gaps, near = gaps.copy(), near.copy()
@@ -1338,15 +1350,14 @@ class BodyContactModel(Model):
         missing = slots[self.element_of[slots] < 0]
         if not len(missing):
             return
-        if swept is not None and np.isin(missing % self.n_primary, swept[1]).all():
+        rows = None
+        if swept is not None:
             contact, slot_rows = swept
-            found = slot_rows >= 0
-        else:
+            rows = self._rows_of(slot_rows, slot_rows >= 0)[missing % self.n_primary]  # a twin: its slot's answer
+        if rows is None or (rows < 0).any():  # not all of them swept: theirs, over their bodies' surfaces
             contact = self._closest_features(x, self._pairs_with_body(missing))
             slot_rows, found = self._slots_of(contact.particle, self.element_body[contact.element])
-        row_of = np.full(self.n_primary, -1, np.intp)
-        row_of[slot_rows[found]] = np.flatnonzero(found)
-        rows = row_of[missing % self.n_primary]  # a twin: its slot's answer
+            rows = self._rows_of(slot_rows, found)[missing % self.n_primary]
         if (rows < 0).any():
             raise KeyError(f"slots {missing[rows < 0].tolist()} have no closest feature on their bodies")
         on_face = contact.kind[rows] == FACE
@@ -1361,6 +1372,13 @@ class BodyContactModel(Model):
                 around = np.intersect1d(around, self._elements_at(other))
             around = around[self.element_body[around] == self.slot_body[slot]]
             self.element_of[slot] = around[np.argmax(normals[around] @ contact.normal[r])]
+
+    def _rows_of(self, slot_rows: IntArray, found: np.ndarray) -> IntArray:
+        """Each primary slot's row among closest features whose slots are ``slot_rows`` (k,),
+        those ``found`` (bool (k,)) only; -1 for a slot with none, shape (n_primary,)."""
+        row_of = np.full(self.n_primary, -1, np.intp)
+        row_of[slot_rows[found]] = np.flatnonzero(found)
+        return row_of
 
     def _elements_at(self, vertex: int) -> IntArray:
         """The elements ``vertex`` is a corner of, ascending."""
@@ -1930,6 +1948,20 @@ def _kept(store: dict, key, make, size: int):
             del store[next(iter(store))]
         store[key] = make()
     return store[key]
+
+
+def _kept_at(store: list, x: FloatArray, make, size: int):
+    """As :func:`_kept` for answers that depend on positions ``x`` (n, dim) alone, ``store``
+    a list of (positions, answer): the positions are compared bit for bit (as their bytes),
+    not hashed (hashing every coordinate's bytes cost more than the comparison)."""
+    x = np.ascontiguousarray(x, dtype=float)
+    for at, answer in store:
+        if runtime.same_bits(at, x):
+            return answer
+    if len(store) == size:
+        del store[0]
+    store.append((x.copy(), make()))
+    return store[-1][1]
 
 
 def _read_only(answer):

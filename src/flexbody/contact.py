@@ -71,7 +71,7 @@ class Phases:
     def held(self) -> np.ndarray:
         """The contact-law code of each held contact (HELD, or SLIDING), 0 elsewhere: the
         ``held`` array of the right-hand side (np.intc, as the C ABI wants it)."""
-        return np.where(self.on_ground, self.phase, 0).astype(np.intc)
+        return np.where(self.on_ground, self.phase, 0).astype(np.intc, copy=False)  # a new array either way
 
     @property
     def on_ground(self) -> np.ndarray:
@@ -280,6 +280,7 @@ def resolve(
     nc = model.n_contacts
     e = np.zeros(nc) if restitution is None else np.asarray(restitution, float)
     slowest = np.zeros(nc) if min_rebound is None else np.asarray(min_rebound, float)
+    bouncy = e > 0.0
     events: list[Event] = []
     notes: list[str] = []
     loss = 0.0
@@ -309,7 +310,9 @@ def resolve(
         impacted |= hit
         settled |= ending | (hit & (impact == "instant"))  # stopped on the ground at this instant
         # A rebound too slow to rise ZENO_RISE of the scene is plastic: no endless bouncing.
-        rebounds = hit & (e > 0.0) & (-e * vn >= slowest)
+        rebounds = hit & bouncy
+        if rebounds.any():
+            rebounds &= -e * vn >= slowest
         started = hit if impact == "thesis" else np.zeros_like(hit)
         if started.any():
             # eq. 4.6: the impulse -(1 + e) m v_n spread as a force over dT; no velocity jump now.
@@ -403,9 +406,10 @@ def resolve(
         loss += lost
         events += found
     phases.arm(model.gaps(y[: model.nq], p), gap_tolerance)
+    unpushed = phases.phase != PUSHED
     if friction is not None and friction.any():
-        model.tangential_pushes(p)[phases.phase != PUSHED] = 0.0
-    phases.push[phases.phase != PUSHED] = 0.0
-    phases.push_until[phases.phase != PUSHED] = np.inf
+        model.tangential_pushes(p)[unpushed] = 0.0
+    phases.push[unpushed] = 0.0
+    phases.push_until[unpushed] = np.inf
     return Resolution(y=y, phases=phases, events=events, not_held=not_held, impact_loss=loss, iterations=iterations,
                       notes=notes)

@@ -47,10 +47,12 @@ class EventFunctions:
         self.speed_tolerance, self.masses = speed_tolerance, masses
         self.hold_slips = masses is not None and model.dim == 3
         self.free = phases.phase == FREE
+        self._not_free = np.flatnonzero(~self.free)
         self.held_mask = phases.on_ground
+        self._held_rows = np.flatnonzero(self.held_mask)
         self.held = phases.held
-        # held slots' element margins (all inf where the segment holds no slot)
-        self.margins = model.element_margins if phases.on_ground[model.n_ground_contacts :].any() else None
+        # held slots' element margins, by contact (None where the segment holds no slot)
+        self.margins = model.held_margins if phases.on_ground[model.n_ground_contacts :].any() else None
         # Contacts between bodies (past the grounds'): a just released one is checked more densely.
         self.between_bodies = np.arange(model.n_contacts) >= model.n_ground_contacts
         self.friction = bool(self.held_mask.any() and model.laws[:, 0].any())
@@ -69,7 +71,7 @@ class EventFunctions:
             self.direction[phases.phase == SLIDING] = 0.0
             if self.hold_slips:
                 model.slips_held(p)[:] = 0
-        self._coupled: dict[int, np.ndarray] = {}  # each held contact's block (see one)
+        self._coupled: dict[int, tuple] = {}  # each held contact's block (see one, _block)
         self._forces = model.forces_function(p, self.held, phases.push)  # the segment's contact set, laid out once
 
     def renew(self, y: np.ndarray, step: float = 0.0) -> bool:
@@ -128,7 +130,9 @@ class EventFunctions:
         with ``only`` (bool (nc,)), those of these contacts alone."""
         m = self.model
         if only is None and self.free.any():  # one pass over every contact: no masked copies
-            return np.where(self.free, m.gaps(y[: m.nq], self.p) - self.phases.floor, np.inf)
+            g = m.gaps(y[: m.nq], self.p) - self.phases.floor
+            g[self._not_free] = np.inf  # the held and pushed ones: a few of many
+            return g
         g = np.full(m.n_contacts, np.inf)
         if only is not None:
             watched = np.flatnonzero(self.free & only)
@@ -143,16 +147,32 @@ class EventFunctions:
         all that locating a lift-off, slip or hand-over needs (no gaps); with ``among`` (bool
         (nc,), a block of contacts that couple to no other held one), theirs alone, solved as
         if no other were held."""
+        if among is None:
+            return self._held_functions(y, self.held_mask, self._held_rows, self.held, False)
+        return self._held_functions(y, *self._block(among), True)
+
+    def _block(self, among: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The held contacts of ``among`` (bool (nc,)) as a mask and as indices, and the held
+        codes with them alone held (read-only: :meth:`one` keeps them)."""
+        mask = self.held_mask & among
+        held = np.where(mask, self.held, 0).astype(self.held.dtype)
+        held.flags.writeable = False
+        return mask, np.flatnonzero(mask), held
+
+    def _held_functions(self, y: np.ndarray, mask: np.ndarray, rows: np.ndarray, held: np.ndarray,
+                        block: bool) -> np.ndarray:
+        """:meth:`held_functions` of the held contacts ``mask`` (bool (nc,)), ``rows`` (their
+        indices: a few of many contacts, indexed without passing over the mask again) with
+        the held codes ``held``; with ``block``, from their own rows' forces."""
         m = self.model
         g = np.full(m.n_contacts, np.inf)
-        mask = self.held_mask if among is None else self.held_mask & among
-        held = self.held if among is None else np.where(mask, self.held, 0).astype(self.held.dtype)
-        if mask.any():
+        if len(rows):
             # a block's forces from its own rows (a lift-off's root evaluates nothing else)
-            lam = m.held_forces(y, self.p, held, self.phases.push) if among is not None else self._forces(y)
-            g[mask] = lam[mask] + self.force_tolerance[mask]
+            lam = m.held_forces(y, self.p, held, self.phases.push) if block else self._forces(y)
+            g[rows] = lam[rows] + self.force_tolerance[rows]
             if self.margins is not None:  # a contact held on another body's element passes onto the next
-                g[mask] = np.minimum(g[mask], self.margins(y, self.p, held)[mask])
+                bounded, margins = self.margins(y, self.p, held)  # held ones: among rows
+                g[bounded] = np.minimum(g[bounded], margins)
             if self.friction:
                 vt, _, slack = m.friction(y, self.p, held, self.phases.push)
                 sticking, sliding = mask & (self.phases.phase == HELD), mask & (self.phases.phase == SLIDING)
@@ -174,8 +194,8 @@ class EventFunctions:
         if c not in self._coupled:  # the held contacts coupled to c: its force is theirs to solve
             seed = np.zeros(self.model.n_contacts, bool)
             seed[c] = True
-            self._coupled[c] = self.model.coupled_with(y[: self.model.nq], self.p, seed, self.held_mask)
-        return float(self.held_functions(y, self._coupled[c])[c])
+            self._coupled[c] = self._block(self.model.coupled_with(y[: self.model.nq], self.p, seed, self.held_mask))
+        return float(self._held_functions(y, *self._coupled[c], True)[c])
 
 
 @dataclass
