@@ -281,3 +281,22 @@ def test_the_last_sample_is_read_with_the_contacts_held_then():
     assert r.stats["max_penetration_m"] < 1e-9  # 3.0e-4 m before; measured 1.5e-10 m (a held row's sink)
     assert r.stats["max_edge_crossing_m"] == 0.0
     assert not any("between event checks" in w for w in r.stats["warnings"])
+
+
+@pytest.mark.slow  # two rigid boxes derived whole (cold cache); the run ~7 s
+def test_an_edge_row_that_fired_as_its_sibling_passed_an_end_is_not_held_apart():
+    """A fuzz's stack (tests/reference/fuzz_edge_released_past_an_end.json: two rigid boxes
+    and a flexible one, `edges = true`).  An edge of a rigid box, held on two edges of the
+    flexible box's face, slid past a vertex onto the third edge there; its row held on the
+    first was set free at that end as a third row of the same edge hit the third edge.
+    Free, the released row watches the closest edge again (rows share their edge's
+    contacts by rank), so the row that hit was held on the next closest, 2e-3 m apart,
+    and putting it back moved the two bodies by that: the run stalled (`too_slow` at
+    0.15 s, 0.77 mm inside).  A row that fired but watches an edge apart once its sibling
+    is released is no longer touching."""
+    table = json.loads((Path(__file__).parent / "reference" / "fuzz_edge_released_past_an_end.json").read_text())
+    r = flexbody.simulate(flexbody.load_scene(table), max_wall_time=60.0)
+    assert r.status == "success", r.message
+    assert r.stats["max_penetration_m"] < 1e-9  # 7.7e-4 m before; measured 6.5e-11 m
+    assert r.stats["max_edge_crossing_m"] == 0.0
+    assert r.stats["energy_drift_relative"] < 1e-6  # measured 5.0e-8
