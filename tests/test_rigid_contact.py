@@ -185,7 +185,8 @@ def test_held_contacts_that_drift_are_put_back_on_their_surfaces(monkeypatch):
     1.2e-10 m by 0.6 s (and the run said so).  With it (after any step that leaves one more
     than 2 gap tolerances off) they stay within a few gap tolerances.  The projection itself
     puts a held contact exactly back (gap and normal velocity 0) by a change along
-    M^-1 J^T: the smallest in the kinetic metric."""
+    M^-1 J^T: the smallest in the kinetic metric.  A put-back from farther off than
+    ``PUT_BACK_WARNING`` gap tolerances moves the bodies by that much and is flagged."""
     from flexbody import driver
     from flexbody.coupled import _coupling, project_held
     from flexbody.state import initial_coordinates
@@ -196,6 +197,10 @@ def test_held_contacts_that_drift_are_put_back_on_their_surfaces(monkeypatch):
     kept = flexbody.simulate(scene, formulation="floating")
     assert kept.status == "success" and kept.stats["projections"] > 0
     assert kept.stats["max_penetration_m"] < 1e-11 and not kept.stats["warnings"]
+    assert 0.0 < kept.stats["max_put_back_m"] < 1e-11  # each put back from a few gap tolerances off
+    monkeypatch.setattr(driver, "PUT_BACK_WARNING", 1.0)  # a put-back from farther than 1 gap tolerance is flagged
+    flagged = flexbody.simulate(scene, formulation="floating")
+    assert any(w.startswith("held contacts were put back onto their surfaces from up to") for w in flagged.stats["warnings"])
     monkeypatch.setattr(driver, "PROJECT_GAPS", np.inf)
     monkeypatch.setattr(driver, "SINK_GAPS", np.inf)  # nor a step taken again shorter
     monkeypatch.setattr(driver, "SINK_WARNING", 10.0)  # warned of from 1e-11 m (100 gap tolerances by default)

@@ -74,6 +74,10 @@ SINK_GAPS = 100.0
 #: A held contact that sank deeper than this many gap tolerances is warned of: deeper than a
 #: step lets it sink (one that could not be shortened).
 SINK_WARNING = 100.0
+#: ... and one put back from farther off its surface than this many: the move shifts the
+#: bodies by that much (the held contacts of 3D piles are put back from 1.5e-10 m at most,
+#: ~300 gap tolerances; a row held on the wrong edge, 2e-3 m apart, was put back unflagged).
+PUT_BACK_WARNING = 1e4
 #: Names of the compiled fixed point's event kinds.
 EVENT_KINDS = {IMPACT: "impact", LIFTOFF: "liftoff", STICK: "stick", SLIP: "slip"}
 #: Event instants closer than this (s) count as no progress; this many in a row is a failure.
@@ -421,6 +425,7 @@ class _Run:
         self.losses: list[tuple[float, float]] = []
         self.indeterminate: list[tuple[float, str]] = []  # instants whose contact forces may not be unique or Coulomb's
         self.projections = 0  # held contacts put back on their surfaces (coupled models, SciPy's steppers)
+        self.max_put_back = 0.0  # ... the farthest one was off its surface then (m)
         self.shortened = 0  # steps taken again shorter: a held contact sank too deep within them
         self.nfev = self.njev = self.steps = self.segments = 0
         self.h_next = 0.0  # the step an explicit stepper proposed where the last segment ended (s)
@@ -605,11 +610,13 @@ class _Run:
         """Put the held contacts back on their surfaces where they have drifted off them by
         more than :data:`PROJECT_GAPS` gap tolerances (the state ``y`` changes; ``drift``:
         :meth:`held_drift` at ``y`` where known); whether they had."""
-        if (self.held_drift(self.y) if drift is None else drift) <= PROJECT_GAPS * self.gap_tolerance:
+        drift = self.held_drift(self.y) if drift is None else drift
+        if drift <= PROJECT_GAPS * self.gap_tolerance:
             return False
         model, phases = self.model, self.phases
         self.y[:] = project_held(model, self.y, self.p, np.flatnonzero(phases.on_ground))
         self.projections += 1
+        self.max_put_back = max(self.max_put_back, drift)
         # A free contact the move left at or below its floor (one just released against a
         # surface that moved) would start its segment unarmed, its next approach missed.
         phases.arm(model.gaps(self.y[: model.nq], self.p), self.gap_tolerance)
@@ -1027,6 +1034,10 @@ class _Run:
             out.append(f"a held contact sank {sink:.2g} m into what holds it: its constraint is kept on accelerations, "
                        "and where its gap is not linear in the coordinates (a rigid body's or a floating frame's) the "
                        "integrator's error drifts it: tighten --rtol/--atol")
+        if self.max_put_back > PUT_BACK_WARNING * self.gap_tolerance:
+            out.append(f"held contacts were put back onto their surfaces from up to {self.max_put_back:.2g} m off "
+                       "them, which moved the bodies by about that: a held contact drifted that far (tighten "
+                       "--rtol/--atol) or was held where it did not touch (please report the scene)")
         if min_force < -float(self.force_tolerance.max(initial=0.0)):
             out.append(f"a held contact's force turned negative ({min_force:.2g} N) between event checks (a lift-off "
                        "was missed at this tolerance): tighten --rtol/--atol")
@@ -1136,7 +1147,7 @@ class _Run:
             "wall_time_s": wall, "rhs_evaluations": self.nfev + int(self.counters[0]),
             "jacobian_evaluations": self.njev, "steps": self.steps + int(self.counters[1]),
             "rejected_steps": int(self.counters[2]), "event_rhs_evaluations": int(self.counters[3]),
-            "segments": self.segments, "projections": self.projections,
+            "segments": self.segments, "projections": self.projections, "max_put_back_m": self.max_put_back,
             "steps_shortened": self.shortened,
             "events": len(ev), "impacts": len(impacts), "not_held": sum(not e.held for e in impacts),
             "liftoffs": sum(e.kind == "liftoff" for e in ev),
