@@ -805,7 +805,8 @@ class _Run:
             # A free edge row watches, by rank, the edge its free siblings leave it: with one
             # released here (past an end) the row that fired watches the next closest edge,
             # apart; held on it, it was put back onto it by moving two bodies (measured:
-            # 2e-3 m, in a pile of boxes). The released sibling watches the edge it fired on.
+            # 2e-3 m, in a pile of boxes). The released sibling, earlier in rank, now watches
+            # the edge the row fired on, and its own event takes it.
             rows = first_edge + np.flatnonzero(touching[first_edge:] & (phases.phase[first_edge:] == FREE))
             if len(rows):
                 gaps = model.gaps_of(self.y[: model.nq], self.p, rows)
@@ -970,7 +971,7 @@ class _Run:
         """Stop with ``unsupported`` at ``t`` if ``fold`` (a body and how it folded) is one.
         The gaps read at the folded state, and on the samples of the step it folded in, are
         left out of the penetration (a particle beside a folded surface reads deep inside
-        it: measured 1.7e-3 to 0.021 m in runs whose states before the fold read none)."""
+        it: measured, 1.7e-3 m in a run whose states before the fold read none)."""
         if fold is not None:
             self.min_gap, self.min_held_gap = self.gaps_before
             self.folded_from = self.step_start
