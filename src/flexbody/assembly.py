@@ -187,14 +187,10 @@ class AssembledC(runtime.SystemModel, AssembledModel):
         super().__init__(scene)
         self.lib = runtime.library()
         self._axial = np.ascontiguousarray(self.axial, dtype=np.intc)
-        self._system_cache: tuple[np.ndarray, runtime.FbSystem] | None = None  # (the parameters bound, their system)
         self._threads_wanted = 0
 
-    def system(self, p: np.ndarray) -> runtime.FbSystem:
+    def _bind(self, p: np.ndarray) -> runtime.FbSystem:
         """An FbSystem of this assembly with parameters ``p`` bound (copied into C)."""
-        p = np.ascontiguousarray(p, dtype=float)
-        if self._system_cache is not None and runtime.same_parameters(self._system_cache[0], p):
-            return self._system_cache[1]
         lib = self.lib
         handle = lib.fb_asm_new(self.dim, self.n_particles, len(self.links), self.n_grounds,
                                 self.links.ctypes.data, self._axial.ctypes.data)
@@ -211,7 +207,6 @@ class AssembledC(runtime.SystemModel, AssembledModel):
             system.slip_held = None
             system.tangential_push = None
         system.owner = _AssemblyHandle(lib, handle)
-        self._system_cache = (runtime.bound_parameters(p), system)
         return system
 
     def free_accelerations(self, y, p, push, particles: IntArray) -> FloatArray:

@@ -389,7 +389,6 @@ class CModel(runtime.SystemModel, GeneratedModel):
         self._fb_system.argtypes = [ptr, ptr]
         self._fb_system.restype = None
         self._zeros = np.zeros(max(self.nu, self.nq, 1))
-        self._system_cache: tuple[np.ndarray, runtime.FbSystem] | None = None  # (the parameters bound, their system)
 
     def _call(self, name, q, u, p, a=None):
         q = np.ascontiguousarray(q, dtype=float)
@@ -403,15 +402,12 @@ class CModel(runtime.SystemModel, GeneratedModel):
     def gaps(self, q, p):
         return self._call("gaps", q, None, p)
 
-    def system(self, p: np.ndarray) -> runtime.FbSystem:
-        """This model as an FbSystem with parameters ``p`` (a copy, kept alive by the struct)."""
-        p = np.array(p, dtype=float)
-        if self._system_cache is not None and runtime.same_parameters(self._system_cache[0], p):
-            return self._system_cache[1]
+    def _bind(self, p: np.ndarray) -> runtime.FbSystem:
+        """This model as an FbSystem with parameters ``p`` (read by C where they lie: kept
+        alive by the struct)."""
         system = runtime.FbSystem()
         self._fb_system(ctypes.addressof(system), p.ctypes.data)
         system.keep = p
-        self._system_cache = (p, system)
         return system
 
 

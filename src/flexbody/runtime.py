@@ -117,24 +117,10 @@ def singular_matrix_error() -> FloatingPointError:
 
 
 def same_bits(a: np.ndarray, b: np.ndarray) -> bool:
-    """Whether float arrays ``a`` and ``b`` (C-contiguous) hold the same values bit for bit,
-    as their bytes would compare (NaNs and signed zeros included), without copying either."""
+    """Whether arrays ``a`` and ``b`` of 8-byte items (float64, int64; C-contiguous) hold the
+    same values bit for bit, as their bytes would compare (NaNs and signed zeros included),
+    without copying either."""
     return a.shape == b.shape and bool(np.array_equal(a.view(np.int64), b.view(np.int64)))
-
-
-def same_parameters(bound: np.ndarray, p: np.ndarray) -> bool:
-    """Whether parameters ``p`` (float, C-contiguous) are ``bound``, those a model bound last
-    (:func:`bound_parameters`), bit for bit.  The same read-only array is unchanged without
-    looking (the driver's, asked for at every C call: a comparison reads every parameter);
-    another is compared (:func:`same_bits`)."""
-    return p is bound or same_bits(bound, p)
-
-
-def bound_parameters(p: np.ndarray) -> np.ndarray:
-    """What a model keeps of the parameters ``p`` (float, C-contiguous) it binds, for
-    :func:`same_parameters`: ``p`` itself where it is read-only and owns its values (nobody
-    changes them), else a copy."""
-    return p if p.base is None and not p.flags.writeable else p.copy()
 
 
 def _ints(a) -> np.ndarray:
@@ -151,7 +137,24 @@ class SystemModel:
     assembled and the whole-scene C models.  Needs ``ny, n_contacts, n_particles, dim``.
     """
 
-    def system(self, p: np.ndarray) -> FbSystem:  # pragma: no cover - abstract
+    _system_cache: tuple[np.ndarray, FbSystem] | None = None  # (the parameters bound, their system)
+
+    def system(self, p: np.ndarray) -> FbSystem:
+        """This model as an FbSystem with parameters ``p`` (n_p,) bound, kept for the next
+        call with the same parameters, bit for bit (:func:`same_bits`: a comparison reads
+        every parameter, no copy).  The driver's own ``p``, read-only, is known unchanged
+        without looking: it is asked for at every C call."""
+        p = _floats(p)
+        cached = self._system_cache
+        if cached is not None and (p is cached[0] or same_bits(cached[0], p)):
+            return cached[1]
+        kept = p if p.base is None and not p.flags.writeable else p.copy()  # nobody changes what is kept
+        system = self._bind(kept)
+        self._system_cache = (kept, system)
+        return system
+
+    def _bind(self, p: np.ndarray) -> FbSystem:  # pragma: no cover - abstract
+        """A new FbSystem with parameters ``p`` (unchanged while the system lives)."""
         raise NotImplementedError
 
     def _address(self, p) -> int:
