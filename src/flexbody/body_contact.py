@@ -255,8 +255,8 @@ class BodyContactModel(Model):
         self._slip_held = np.zeros(self.n_contacts, np.intc)  # read by the grounds' law alone: coupled rows always hold
         self._frictional = bool((self.mu > 0.0).any())  # else the slip directions change no answer
         self._last: tuple[tuple[np.ndarray, ...], _Solved] | None = None  # the last state's answer (see _dynamics)
-        self._swept: list[tuple[FloatArray, tuple]] = []  # (positions, the whole surface sweep; see _surface_contacts)
-        self._edges_swept: dict[bytes, tuple] = {}  # positions and edges held -> every edge row's gap (the same)
+        self._swept: list[tuple] = []  # ((positions,), the whole surface sweep; see _surface_contacts)
+        self._edges_swept: list[tuple] = []  # ((positions, edges held), every edge row's gap; the same)
         self._layouts: dict[tuple, _Layout] = {}  # held rows -> where their terms go (see _rows)
         self._allowed_pairs: tuple[IntArray, IntArray] | None = None  # (kept pairs, the allowed ones; see _allowed_kept)
         self._element = ElementKernels(self.dim, self.backend)
@@ -1142,13 +1142,13 @@ class BodyContactModel(Model):
             # The whole sweep depends on x alone, and an instant asks for it at the same state
             # several times (the step's end, the instant's resolve, the next segment's start):
             # the last few answers are kept, read-only.
-            gaps, near, found = _kept_at(self._swept, x, lambda: _read_only(self._sweep(x)), SWEEPS_KEPT)
+            gaps, near, found = _kept_at(self._swept, (x,), lambda: _read_only(self._sweep(x)), SWEEPS_KEPT)
             rows = np.arange(self.n_slots - self.first_edge)
         if len(rows):  # the edge contacts': an edge held against another reads that pair's gap
             gaps, near = gaps.copy(), near.copy()
             if slots is None:  # all of them: x and the edges held decide them (asked again as the sweep is)
-                key = np.ascontiguousarray(x).tobytes() + self.element_of[self.first_edge :].tobytes()
-                edge_gaps = _kept(self._edges_swept, key, lambda: _read_only(self._edge_gaps(x, rows)), SWEEPS_KEPT)
+                edge_gaps = _kept_at(self._edges_swept, (x, self.element_of[self.first_edge :]),
+                                     lambda: _read_only(self._edge_gaps(x, rows)), SWEEPS_KEPT)
             else:
                 edge_gaps = self._edge_gaps(x, rows)
             gaps[self.first_edge + rows], near[self.first_edge + rows] = edge_gaps
@@ -1950,17 +1950,18 @@ def _kept(store: dict, key, make, size: int):
     return store[key]
 
 
-def _kept_at(store: list, x: FloatArray, make, size: int):
-    """As :func:`_kept` for answers that depend on positions ``x`` (n, dim) alone, ``store``
-    a list of (positions, answer): the positions are compared bit for bit (as their bytes),
-    not hashed (hashing every coordinate's bytes cost more than the comparison)."""
-    x = np.ascontiguousarray(x, dtype=float)
+def _kept_at(store: list, state: tuple[np.ndarray, ...], make, size: int):
+    """As :func:`_kept` for answers that depend on the arrays ``state`` alone (positions
+    (n, dim), the edges held), ``store`` a list of (state, answer): the arrays are compared
+    bit for bit, as their bytes, not hashed (hashing every coordinate's bytes cost more than
+    the comparison)."""
+    state = tuple(np.ascontiguousarray(a) for a in state)
     for at, answer in store:
-        if runtime.same_bits(at, x):
+        if all(a.dtype == b.dtype and runtime.same_bits(a, b) for a, b in zip(at, state)):
             return answer
     if len(store) == size:
         del store[0]
-    store.append((x.copy(), make()))
+    store.append((tuple(a.copy() for a in state), make()))
     return store[-1][1]
 
 
