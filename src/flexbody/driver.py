@@ -383,7 +383,7 @@ class _Run:
         self.progress, self.max_events = progress, max_events
         self.deadline = time.perf_counter() + max_wall_time
         self.p = model.parameters(scene)
-        self.p.flags.writeable = False  # fixed for the run: C calls know it unchanged (runtime.same_parameters)
+        self.p.flags.writeable = False  # fixed for the run: C calls know it unchanged (runtime.SystemModel.system)
         q, u = initial_coordinates(scene, model)
         _check_apart(scene, model, q, self.p)
         self.y = np.concatenate([q, u, [0.0, 0.0]])
@@ -1069,6 +1069,12 @@ class _Run:
                        "event count against a run with a tighter --rtol")
         return out
 
+    def as_sampled(self, k: int):
+        """A context in which the model's contacts between bodies are held on the elements
+        they were held on at sample ``k`` (each slot on its element then); nothing to do
+        for a model without them."""
+        return nullcontext() if self.sample_elements is None else self.model.held_on(self.sample_elements[k])
+
     def result(self, status: str, message: str, wall: float) -> SimulationResult:
         model, p, s = self.model, self.p, self.settings
         nq, nu = model.nq, model.nu
@@ -1087,8 +1093,7 @@ class _Run:
             # the last sample as it was: its contacts held and their elements then (a free
             # edge contact read against the edge it was held on at the stop is no crossing:
             # measured, 3e-4 m in a pile stopped `chattering`)
-            on = nullcontext() if self.sample_elements is None else model.held_on(self.sample_elements[k - 1])
-            with on:
+            with self.as_sampled(k - 1):
                 self.track_gaps(Y[-1], held[-1].astype(bool))
         # Energy taken by instant impacts strictly before each sample time (losses come in time order).
         loss_t = np.array([x[0] for x in self.losses], dtype=float)
@@ -1102,9 +1107,7 @@ class _Run:
         friction_force = np.zeros_like(V)
         if self.friction:
             for j in np.flatnonzero(held.any(axis=1)):
-                # contacts between bodies: each slot on the element it was held on then
-                on = model.held_on(self.sample_elements[j]) if self.sample_elements is not None else nullcontext()
-                with on:
+                with self.as_sampled(j):
                     ft = model.friction(Y[j], p, held[j], push[j])[1]
                 friction_force[j] = model.particle_forces(ft.T).T
             if self.sample_tangential is not None:  # the windows' tangential forces
