@@ -94,7 +94,7 @@ import numpy as np
 from . import runtime
 from .assembly import AssembledModel, _kernels_module
 from .broadphase import CandidateList, slices
-from .constants import FREE, HELD, SLIDING
+from .constants import FREE, HELD, SLIDING, VELOCITY_ROUNDOFF
 from .contact import Phases
 from .dynamics import contact_solve
 from .edge_contact import EdgeSlots, EdgeTerms
@@ -115,9 +115,6 @@ IntArray = np.ndarray
 #: :data:`flexbody.dynamics.REDUNDANT` for the symmetric ones, their share is left to the others.
 DEPENDENT = 1e-12
 
-#: A slip rate below this (relative to the largest speed, at least 1 m/s) is round-off of
-#: the velocities (a joint stop leaves ~1e-17 m/s): it gives no sliding direction.
-SLIP_ROUNDOFF = 1e-13
 #: Contact rows on at most this many coordinates are multiplied densely (:func:`_gram`).
 DENSE_WIDTH = 64
 #: A closest point whose weight on one vertex is within this of 1 is at that vertex (a
@@ -252,7 +249,7 @@ class BodyContactModel(Model):
                                   np.array(pair_laws, float).reshape(-1, 2)[self.slot_pair, 0]])
         self._ground_friction = bool((self.mu[: self.n_ground_contacts] > 0.0).any())
         self._slip = np.zeros((self.n_contacts, self.dim))
-        self._slip_held = np.zeros(self.n_contacts, np.intc)  # read by the grounds' law alone: coupled rows always hold
+        self._slip_held = np.zeros(self.n_contacts, np.intc)  # 3D: where a slip keeps its step start's direction
         self._frictional = bool((self.mu > 0.0).any())  # else the slip directions change no answer
         self._last: tuple[tuple[np.ndarray, ...], _Solved] | None = None  # the last state's answer (see _dynamics)
         self._swept: list[tuple] = []  # ((positions,), the whole surface sweep; see _surface_contacts)
@@ -286,15 +283,17 @@ class BodyContactModel(Model):
         return self._slip
 
     def slips_held(self, p) -> np.ndarray:
-        """Where a sliding ground contact keeps its friction along its slip direction through
-        the step, shape (nc,), int, writable (:meth:`flexbody.assembly.AssembledModel.slips_held`);
-        a coupled contact's friction always does."""
+        """Where a sliding contact keeps its friction along its slip direction through the
+        step, shape (nc,), int, writable (:meth:`flexbody.assembly.AssembledModel.slips_held`):
+        a coupled 3D contact's as a ground's solved alone; a coupled 2D contact's always does
+        (its slip does not turn: it reverses, an event)."""
         return self._slip_held
 
     def solved_alone(self, y, p, held, push) -> np.ndarray:
         """Bool (ng,): the held ground contacts whose laws the inner model applies alone (no
         contact couples to them); their friction follows the slip within a step unless held
-        (:meth:`slips_held`), a coupled row's always keeps the step start's direction."""
+        (:meth:`slips_held`), as a coupled 3D row's does; a coupled 2D row keeps the step
+        start's direction."""
         return self._dynamics(y, p, np.asarray(held, np.intc), np.asarray(push, float)).fast != 0
 
     def tangential_pushes(self, p) -> FloatArray:
@@ -572,7 +571,16 @@ class BodyContactModel(Model):
         # or from rest (a slip at round-off of the velocities counts as none) against the pull
         # that slips it
         along = _unit_rows(np.einsum("kd,kmd->km", self._slip[rows], r.tangents))
-        moving = np.linalg.norm(slip, axis=1) > SLIP_ROUNDOFF * max(1.0, float(np.abs(u[r.columns]).max(initial=0.0)))
+        moving = np.linalg.norm(slip, axis=1) > VELOCITY_ROUNDOFF * max(1.0, float(np.abs(u[r.columns]).max(initial=0.0)))
+        if self.dim == 3:
+            # A 3D slip turns within a step: its friction follows it, as a ground contact's
+            # solved alone does, unless the phase machine holds it along the step start's
+            # direction (a slow slip, or one friction stops within the step: slips_held).
+            # Kept through a step, the direction was an error the stepper did not see: a
+            # sliding, turning rigid base's corner force read -0.62 N from the law at a
+            # sample where the step had pushed with +0.11 N (a fuzzed scene).
+            follow = sliding & moving & (self._slip_held[rows] == 0)
+            along[follow] = _unit_rows(slip[follow])
         none_yet = ~along.any(axis=1)
         along[none_yet & moving] = _unit_rows(slip[none_yet & moving])
         none_yet = ~along.any(axis=1)

@@ -20,6 +20,10 @@ KEEP, STOP, REBOUND, SETTLE = 0, 1, 2, 3
 ZENO_RISE = 1e-9
 #: Event roots closer than this (s) are one instant.
 GROUP_TIME = 1e-12
+#: A speed below this (relative to the largest speed, at least 1 m/s) is round-off of the
+#: velocities (a joint stop or a rigid body's spin leaves ~1e-17 m/s): a slip of that
+#: size gives no sliding direction, a normal speed of that size is at rest.
+VELOCITY_ROUNDOFF = 1e-13
 #: Status codes of the compiled integrator (``fb_integrate``).
 REACHED, EVENT, STEP_COLLAPSE, NON_FINITE, SINGULAR, TOO_SLOW = 0, 1, -1, -2, -3, -4
 

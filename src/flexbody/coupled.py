@@ -453,15 +453,15 @@ def _turned_back(model, y: np.ndarray, p: np.ndarray, phases, rows: np.ndarray, 
     microseconds, and held on sliding it fired that event 551 times in 1.5 ms (two
     icosahedra stacked).  Stopped like a slow slip (its kinetic energy is in the ledger), it
     then sticks or slides from rest as the force LCP decides.  A ground contact solved alone
-    (per particle) counts only where its slip was held (``slips_held``): else its friction
-    followed the slip through the step."""
+    (per particle), and in 3D any contact, counts only where its slip was held
+    (``slips_held``): else its friction followed the slip through the step."""
     vt = model.friction(y, p, phases.held, phases.push)[0][rows]
     along = np.einsum("kd,kd->k", vt, model.slip_directions(p)[rows])
     # a ground contact the inner model solves alone follows its slip within a step, unless held
     alone = np.zeros(len(rows), bool)
     ground = rows < model.n_ground_contacts
     alone[ground] = model.solved_alone(y, p, phases.held, phases.push)[rows[ground]]
-    held_along = ~alone | (model.slips_held(p)[rows] != 0)
+    held_along = (~alone & (model.dim == 2)) | (model.slips_held(p)[rows] != 0)
     return leaving[rows] & (phases.phase[rows] == SLIDING) & held_along & (along <= speed_tolerance)
 
 
