@@ -269,6 +269,23 @@ def test_a_turning_rigid_base_on_three_sliding_corners_reports_the_forces_it_was
     assert r.stats["max_penetration_m"] < 1e-9 and r.stats["energy_drift_relative"] < 1e-6
 
 
+@pytest.mark.slow  # two rigid boxes derived whole (cold cache); the run ~8 s
+def test_a_held_contact_that_a_renewed_slip_direction_pulls_is_an_instant():
+    """A fuzz's scene (tests/reference/fuzz_renewed_slip_pulls_a_corner.json: a rigid base,
+    a flexible sphere and a rigid box, rough).  A slow slip between the bodies keeps its
+    direction through a step and takes a new one at the step's end; with it the coupled
+    rows' forces jump, and one of the base's corners went from +3.8 N to -0.5 N there.  Its
+    event function started the next step below 0, so no sign change found it, and the
+    corner pulled for a whole step (warned: -0.48 N).  A held contact whose event function
+    the renewal takes to 0 or below is an instant now, its LCPs decide."""
+    table = json.loads((Path(__file__).parent / "reference" / "fuzz_renewed_slip_pulls_a_corner.json").read_text())
+    r = flexbody.simulate(flexbody.load_scene(table), max_wall_time=120.0)
+    assert r.status == "success", r.message
+    assert not any("turned negative" in w for w in r.stats["warnings"])
+    assert r.stats["min_held_contact_force_N"] > -1e-9  # measured 1.28 N
+    assert r.stats["max_penetration_m"] < 1e-9 and r.stats["energy_drift_relative"] < 1e-6
+
+
 def _icosahedra(friction: float) -> flexbody.SimulationResult:
     """Two flexible icosahedra (12 particles, axial dampers: central forces) meeting
     obliquely and off-centre in free space (the ground 10 m away), e = 0.5."""
