@@ -352,7 +352,7 @@ class BodyContactModel(Model):
             self._constrain_elements(slots, x)
             edge, gaps = slots >= self.first_edge, np.empty(len(slots))
             if (~edge).any():
-                gaps[~edge] = self._row_terms(slots[~edge], x, np.zeros_like(x)).gap
+                gaps[~edge] = self._element.gaps(x, self._slot_points(slots[~edge]).T)  # _row_terms' gap
             if edge.any():  # the gap kernel alone (this is asked at every step: drift)
                 gaps[edge] = self._edge_slots.gaps(x, slots[edge] - self.first_edge, self.element_of[slots[edge]])
             out[rows >= ng] = gaps
@@ -1400,8 +1400,7 @@ class BodyContactModel(Model):
 
     def _element_terms(self, slots, x, v):
         """Each slot's particle against its element (:class:`ElementTerms`)."""
-        moved = self._slot_points(slots).T
-        return self._element([x[i] for i in moved], [v[i] for i in moved])
+        return self._element(x, v, self._slot_points(slots).T)
 
     def _slot_points(self, slots) -> IntArray:
         """The particles each constrained slot moves, shape (k, 1 + dim): its own, then its
@@ -1912,15 +1911,12 @@ class ElementKernels:
         self._addresses = ([self._inputs[j].ctypes.data for j in range(2 * (d + 1))],
                            [z.ctypes.data for z in self._outputs])
 
-    def __call__(self, points: list[FloatArray], rates: list[FloatArray]) -> ElementTerms:
-        d, k = self.dim, len(points[0])
+    def __call__(self, x: FloatArray, v: FloatArray, points: IntArray) -> ElementTerms:
+        """The terms of k contacts whose particle and element vertices are the rows ``points``
+        (1 + dim, k) of the positions ``x`` and velocities ``v`` (n, dim)."""
+        d, k = self.dim, points.shape[1]
         if self.c is not None:
-            if k > self._inputs.shape[1]:
-                self._grow(max(k, 2 * self._inputs.shape[1]))
-            for buffer, z in zip(self._inputs, points + rates):
-                buffer[:k] = z
-            # each buffer's first k rows are contiguous: the addresses stand for any k up to its size
-            inputs, outputs = self._addresses
+            inputs, outputs = self._gathered(x, v, points)
             self.c[0](k, *inputs[: d + 1], *outputs[:4])
             self.c[1](k, *inputs, *outputs[4:])
             gap, weight, normal, _, rate, _, bias, *slip = (z[:k] for z in self._outputs)
@@ -1928,11 +1924,33 @@ class ElementKernels:
             slip_terms = (slip[0][:, 0].copy(), slip[1][:, 0].copy()) if d == 2 else (None, None)
             return ElementTerms(gap[:, 0].copy(), weights, normal.copy(), rate[:, 0].copy(), bias[:, 0].copy(),
                                 *slip_terms)
-        gap, weight, normal, _ = getattr(self.numpy, self.name)(*(z.T for z in points))
-        rate, _, bias, *slip = getattr(self.numpy, f"{self.name}_velocity")(*(z.T for z in points + rates))
+        at, rates = x[points], v[points]
+        gap, weight, normal, _ = getattr(self.numpy, self.name)(*(z.T for z in at))
+        rate, _, bias, *slip = getattr(self.numpy, f"{self.name}_velocity")(*(z.T for z in (*at, *rates)))
         weights = np.column_stack([1.0 - weight[0], weight[0]]) if d == 2 else weight.T
         slip_terms = (slip[0][0], slip[1][0]) if d == 2 else (None, None)
         return ElementTerms(gap[0], weights, normal.T, rate[0], bias[0], *slip_terms)
+
+    def gaps(self, x: FloatArray, points: IntArray) -> FloatArray:
+        """The gaps (k,) alone of :meth:`__call__`'s contacts: the position kernel only (the
+        held rows' drift is asked at every step, their velocities need not be gathered)."""
+        if self.c is not None:
+            inputs, outputs = self._gathered(x, None, points)
+            self.c[0](points.shape[1], *inputs[: self.dim + 1], *outputs[:4])
+            return self._outputs[0][: points.shape[1], 0].copy()
+        return getattr(self.numpy, self.name)(*(z.T for z in x[points]))[0][0]
+
+    def _gathered(self, x: FloatArray, v: FloatArray | None, points: IntArray) -> tuple[list[int], list[int]]:
+        """Rows ``points`` (1 + dim, k) of ``x`` (and ``v`` if given) copied into the input
+        buffers, one gather each, not one per vertex; the inputs' and outputs' addresses."""
+        d, k = self.dim, points.shape[1]
+        if k > self._inputs.shape[1]:
+            self._grow(max(k, 2 * self._inputs.shape[1]))
+        self._inputs[: d + 1, :k] = x[points]
+        if v is not None:
+            self._inputs[d + 1 :, :k] = v[points]
+        # each buffer's first k rows are contiguous: the addresses stand for any k up to its size
+        return self._addresses
 
     def slip_terms(self, points: list[FloatArray], rates: list[FloatArray]) -> tuple[FloatArray, FloatArray]:
         """3D: the velocity terms (k, 2) of the slip rates' accelerations along the
