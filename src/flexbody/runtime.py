@@ -120,7 +120,13 @@ def same_bits(a: np.ndarray, b: np.ndarray) -> bool:
     """Whether arrays ``a`` and ``b`` of 8-byte items (float64, int64; C-contiguous) hold the
     same values bit for bit, as their bytes would compare (NaNs and signed zeros included),
     without copying either."""
-    return a.shape == b.shape and bool(np.array_equal(a.view(np.int64), b.view(np.int64)))
+    if a.shape != b.shape:
+        return False
+    a, b = a.reshape(-1).view(np.int64), b.reshape(-1).view(np.int64)
+    # one item first: two states of a run differ in nearly every coordinate, and the kept
+    # answers' lookups compare against several states that differ (a whole pass each)
+    middle = len(a) // 2
+    return len(a) == 0 or (a.item(middle) == b.item(middle) and bool(np.array_equal(a, b)))
 
 
 def _ints(a) -> np.ndarray:
