@@ -71,7 +71,8 @@ class Phases:
     def held(self) -> np.ndarray:
         """The contact-law code of each held contact (HELD, or SLIDING), 0 elsewhere: the
         ``held`` array of the right-hand side (np.intc, as the C ABI wants it)."""
-        return np.where(self.on_ground, self.phase, 0).astype(np.intc, copy=False)  # a new array either way
+        # a product, not np.where: a third of the time over a pile's 40 000 contacts; a new array either way
+        return (self.phase * self.on_ground).astype(np.intc, copy=False)
 
     @property
     def on_ground(self) -> np.ndarray:
