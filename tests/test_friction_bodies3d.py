@@ -197,6 +197,20 @@ def _spinning_tripod_reference(points: np.ndarray, mass: float, v0: np.ndarray, 
     return corners
 
 
+def _spinning_tripod(t_end: float, output_dt: float) -> tuple[np.ndarray, flexbody.SimulationResult]:
+    """The tetrahedron's particles (4, 3), centred over the origin, and its run: placed on its
+    base on a rough ground, sliding at 0.5 m/s along S_HAT and turning at 4 rad/s."""
+    points = np.vstack([BASE, APEX])
+    points[:, :2] -= points.mean(axis=0)[:2]
+    tetra = {"name": "tetra", "rigid": True, "mass": 0.1, "particles": points.tolist(), "position": [0.0, 0.0, 0.0],
+             "links": [[0, 1], [1, 2], [2, 0], [0, 3], [1, 3], [2, 3]], "velocity": (0.5 * S_HAT).tolist(),
+             "angular_velocity": [0.0, 0.0, 4.0]}
+    table = {"name": "spinning_tripod", "gravity": [0.0, 0.0, -G],
+             "grounds": [{"point": [0.0, 0.0, 0.0], "normal": [0.0, 0.0, 1.0], "friction": MU}],
+             "bodies": [tetra], "simulation": {"t_end": t_end, "output_dt": output_dt}}
+    return points, flexbody.simulate(flexbody.load_scene(table))
+
+
 def test_a_rigid_tetrahedron_sliding_and_spinning_on_its_base_follows_coulombs_law_at_each_corner():
     """Placed on a rough ground, sliding and turning: three coupled contacts whose slips turn
     all the time.  At the run's default tolerances the corners follow the reference's paths
@@ -205,15 +219,7 @@ def test_a_rigid_tetrahedron_sliding_and_spinning_on_its_base_follows_coulombs_l
     1.8e-5 m (4.9e-7 m at rtol 1e-10).  Placed on the ground, the corners are held from the
     start: no impact (the spin left one's normal speed at +1e-17 m/s; left free, it fell
     1e-12 m and hit 0.5 us later)."""
-    points = np.vstack([BASE, APEX])
-    points[:, :2] -= points.mean(axis=0)[:2]
-    tetra = {"name": "tetra", "rigid": True, "mass": 0.1, "particles": points.tolist(), "position": [0.0, 0.0, 0.0],
-             "links": [[0, 1], [1, 2], [2, 0], [0, 3], [1, 3], [2, 3]], "velocity": (0.5 * S_HAT).tolist(),
-             "angular_velocity": [0.0, 0.0, 4.0]}
-    table = {"name": "spinning_tripod", "gravity": [0.0, 0.0, -G],
-             "grounds": [{"point": [0.0, 0.0, 0.0], "normal": [0.0, 0.0, 1.0], "friction": MU}],
-             "bodies": [tetra], "simulation": {"t_end": 0.1, "output_dt": 0.005}}
-    r = flexbody.simulate(flexbody.load_scene(table))
+    points, r = _spinning_tripod(0.1, 0.005)
     assert r.status == "success", r.message
     assert list(r.events_kind) == ["slip"] * 3 and not r.events_time.any()  # held and sliding from t = 0
     corners = _spinning_tripod_reference(points, 0.1, 0.5 * S_HAT, 4.0, 0.1)
@@ -231,15 +237,7 @@ def test_the_friction_reported_on_a_spinning_tripod_to_its_stop_is_what_moved_it
     the mass to 0.2 m/s^2 (measured 0.044: a held slip let go between two steps); read again
     at each sample's slip, the forces were 1.17 m/s^2 off that acceleration just before the
     first stick (mu g = 2.9 m/s^2)."""
-    points = np.vstack([BASE, APEX])
-    points[:, :2] -= points.mean(axis=0)[:2]
-    tetra = {"name": "tetra", "rigid": True, "mass": 0.1, "particles": points.tolist(), "position": [0.0, 0.0, 0.0],
-             "links": [[0, 1], [1, 2], [2, 0], [0, 3], [1, 3], [2, 3]], "velocity": (0.5 * S_HAT).tolist(),
-             "angular_velocity": [0.0, 0.0, 4.0]}
-    table = {"name": "spinning_tripod_stops", "gravity": [0.0, 0.0, -G],
-             "grounds": [{"point": [0.0, 0.0, 0.0], "normal": [0.0, 0.0, 1.0], "friction": MU}],
-             "bodies": [tetra], "simulation": {"t_end": 0.25, "output_dt": 1e-4}}
-    r = flexbody.simulate(flexbody.load_scene(table))
+    _, r = _spinning_tripod(0.25, 1e-4)
     assert r.status == "success", r.message
     assert list(r.events_kind[3:]) == ["stick"] * 3
     m = r.masses.sum()
