@@ -1509,9 +1509,7 @@ class BodyContactModel(Model):
             if tangents and d == 2:
                 slip_bias[k_g:, 0] = terms.slip_bias
             elif tangents:
-                points = self._slot_points(slots)
-                slip_bias[k_g:], element_axes = self._element.slip_terms([x[i] for i in points.T],
-                                                                         [v[i] for i in points.T])
+                slip_bias[k_g:], element_axes = self._element.slip_terms(x, v, self._slot_points(slots).T)
                 axes = np.concatenate([axes, element_axes])
         if not tangents:
             directions = [normals]
@@ -1952,17 +1950,16 @@ class ElementKernels:
         # each buffer's first k rows are contiguous: the addresses stand for any k up to its size
         return self._addresses
 
-    def slip_terms(self, points: list[FloatArray], rates: list[FloatArray]) -> tuple[FloatArray, FloatArray]:
+    def slip_terms(self, x: FloatArray, v: FloatArray, points: IntArray) -> tuple[FloatArray, FloatArray]:
         """3D: the velocity terms (k, 2) of the slip rates' accelerations along the
         triangle's t1 = (b - a) / |b - a| and t2 = n x t1, and those tangents (k, 2, 3) (the
-        ``triangle_3d_slip`` kernel; only friction asks for them)."""
-        k = len(points[0])
+        ``triangle_3d_slip`` kernel; only friction asks for them), of :meth:`__call__`'s
+        contacts (rows ``points`` (1 + dim, k) of ``x`` and ``v``)."""
+        k, columns = points.shape[1], [*x[points], *v[points]]
         if self.c is not None:
-            from .runtime import batched_call
-
-            _, bias, tangents = batched_call(self._slip_c, points + rates, [(2,), (2,), (2, 3)])
+            _, bias, tangents = runtime.batched_call(self._slip_c, columns, [(2,), (2,), (2, 3)])
             return bias, tangents
-        _, bias, tangents = self.numpy.triangle_3d_slip(*(z.T for z in points + rates))
+        _, bias, tangents = self.numpy.triangle_3d_slip(*(z.T for z in columns))
         return bias.T, tangents.T.reshape(k, 2, 3)
 
 

@@ -1136,14 +1136,20 @@ class _Run:
             X, V, E, lam = model.trajectory(Y, p, held, push, elements=self.sample_elements[:k])
         else:
             X, V, E, lam = model.trajectory(Y, p, held, push)
-        if self.sample_slips is not None:
-            # a sliding contact whose step kept its direction (a coupled 2D slip, a slow 3D
-            # one) pushed along that: measured, a rigid base's corner read 0.11 N from the
-            # law at the sample's own slip where the step had pushed with 0.41 N
-            for j in range(k):
-                if self.sample_slips[j] is not None and len(self.sample_slips[j][0]):
-                    with self.as_sampled(j):
+        friction_force = np.zeros_like(V)
+        if self.friction:
+            for j in np.flatnonzero(held.any(axis=1)):
+                with self.as_sampled(j):
+                    law = self.sample_slips[j]
+                    if law is not None and len(law[0]):
+                        # a sliding contact whose step kept its direction (a coupled 2D slip, a
+                        # slow 3D one) pushed along that: measured, a rigid base's corner read
+                        # 0.11 N from the law at the sample's own slip where the step pushed 0.41 N
                         lam[j] = model.held_forces(Y[j], p, held[j], push[j])
+                    ft = model.friction(Y[j], p, held[j], push[j])[1]
+                friction_force[j] = model.particle_forces(ft.T).T
+            if self.sample_tangential is not None:  # the windows' tangential forces
+                friction_force += self.sample_tangential[:k].reshape(len(T), n, model.n_contacts // n, -1).sum(axis=2)
         force = model.particle_forces(lam + push, X, None if self.sample_elements is None else self.sample_elements[:k])
         if len(Y) and T[-1] <= self.folded_from:
             # the last sample as it was: its contacts held and their elements then (a free
@@ -1160,14 +1166,6 @@ class _Run:
         # sliding friction; where both act, the windows' exact work splits them.
         contact_work = Y[:, nq + nu + 1]
         window_work = self.window_work(T, X) if self.windows is not None else None
-        friction_force = np.zeros_like(V)
-        if self.friction:
-            for j in np.flatnonzero(held.any(axis=1)):
-                with self.as_sampled(j):
-                    ft = model.friction(Y[j], p, held[j], push[j])[1]
-                friction_force[j] = model.particle_forces(ft.T).T
-            if self.sample_tangential is not None:  # the windows' tangential forces
-                friction_force += self.sample_tangential[:k].reshape(len(T), n, model.n_contacts // n, -1).sum(axis=2)
         if window_work is not None:
             impact_work, friction_work = window_work, contact_work - window_work
         elif self.friction:
