@@ -17,6 +17,20 @@ BACKENDS = ["numpy", "c"] if HAS_CC else ["numpy"]
 needs_cc = pytest.mark.skipif(not HAS_CC, reason="no C compiler: the default backend is compiled C")
 
 
+def reference_table(name: str) -> dict:
+    """The scene table ``tests/reference/<name>.json`` (a fuzz's scene kept as a test), a
+    mesh file it names (``"file"``) read from the package's bundled scenes, wherever the
+    package and the checkout are."""
+    import json
+    from pathlib import Path
+
+    table = json.loads((Path(__file__).parent / "reference" / f"{name}.json").read_text())
+    for entry in table.get("bodies", []):
+        if "file" in entry:
+            entry["file"] = str(Path(flexbody.__file__).parent / "scenes" / Path(entry["file"]).name)
+    return table
+
+
 def body(**overrides):
     """A body table with every required field; override any of them."""
     table = {

@@ -9,9 +9,7 @@ on what carries it; and the assembled model's own per-particle ground contacts.
 
 from __future__ import annotations
 
-import json
 import re
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -20,6 +18,8 @@ import flexbody
 from flexbody.body_contact import BodyContactModel
 from flexbody.coupled import coupled_impact
 from flexbody.model import load_model
+
+from .conftest import reference_table
 
 # Two triangles 0.1 m long moving head-on along x in free space (no gravity): A's apex
 # meets the middle of B's left face at s = 1/2.  Both are mirror-symmetric about y = 0.
@@ -780,7 +780,7 @@ def test_the_penetration_leaves_out_the_gaps_read_on_a_folded_surface():
     fold is found; a folded surface has no inside, so the stats leave that reading out (the
     last stop's code reported it, with the warning that an impact was missed) and report
     what the states before it read."""
-    table = json.loads((Path(__file__).parent / "reference" / "fuzz_fold_penetration.json").read_text())
+    table = reference_table("fuzz_fold_penetration")
     result = flexbody.simulate(flexbody.load_scene(table), max_wall_time=120.0)
     assert result.status == "unsupported", result.message
     assert "body 'b1' has folded over (its segments" in result.message
@@ -917,7 +917,7 @@ def test_a_slot_handed_back_its_corner_twins_element_keeps_its_boundary_event():
     below it and never fired: the vertex slid on along the flank's line, 1.5 mm into the
     disc, and the run ended too_slow.  The slot's floor is now lowered there as for any
     contact held at this instant."""
-    table = json.loads((Path(__file__).parent / "reference" / "fuzz_corner_pile.json").read_text())
+    table = reference_table("fuzz_corner_pile")
     r = flexbody.simulate(flexbody.load_scene(table), max_wall_time=120.0)  # 12 s; before, too_slow at any bound
     assert r.status == "success", r.message
     assert r.stats["events"] > 100
@@ -932,7 +932,7 @@ def test_a_pile_whose_redundant_contacts_lose_lemkes_pivots_runs_to_its_end():
     (redundant contacts), and Lemke's pivots ended inaccurate at 0.164 s and on a ray at
     0.168 s, each stopping it `unsupported` as if Painlevé's; solved again on M + s I, it
     runs to its end (:mod:`flexbody.lcp`)."""
-    table = json.loads((Path(__file__).parent / "reference" / "fuzz_redundant_friction_pile.json").read_text())
+    table = reference_table("fuzz_redundant_friction_pile")
     r = flexbody.simulate(flexbody.load_scene(table), max_wall_time=400.0)
     assert r.status == "success", r.message
     assert r.stats["events"] > 1000  # measured 1 687

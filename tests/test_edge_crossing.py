@@ -14,14 +14,13 @@ crossed under it (they meet at sqrt(2 h / g)), statics (the upper box's weight o
 
 from __future__ import annotations
 
-import json
-from pathlib import Path
-
 import numpy as np
 import pytest
 
 import flexbody
 from flexbody.surface import edges_through
+
+from .conftest import reference_table
 
 G = 9.81
 SIDE = 0.1
@@ -162,8 +161,10 @@ def test_a_recorded_sample_restores_an_edge_rows_side_with_its_edge():
     scene = flexbody.load_scene(_crossed_boxes(DROP, edges=True))
     model = load_model(scene)
     x = scene.initial_positions()
-    row = model.first_edge
-    edge = model._edge_slots.closest(x, np.array([0]), np.full(model.n_slots - row, -1), 1.0, loose=True)[1][0]
+    slots = model._edge_slots
+    found = slots.closest(x, np.arange(slots.n_primary), np.full(len(slots), -1), 1.0)[1]
+    first = int(np.flatnonzero(found >= 0)[0])  # the edge of a that b's edge crosses over
+    row, edge = model.first_edge + first, found[first]
     up, down = model._edge_slots.encode([edge, edge], [1.0, -1.0])
     model.element_of[row] = up
     normal = model._edge_terms(np.array([row]), x, np.zeros_like(x)).normal[0]
@@ -219,7 +220,7 @@ def test_a_fuzzed_stack_of_boxes_with_edge_contacts_keeps_its_edges_apart():
     then a rigid box's edge through the flexible box's top rim bent acute (the crossing's
     closest point lay outside the other body, so the crossing read no contact), and the run
     ended `too_slow` with particles 0.6 mm inside."""
-    table = json.loads((Path(__file__).parent / "reference" / "fuzz_stacked_boxes_edges.json").read_text())
+    table = reference_table("fuzz_stacked_boxes_edges")
     r = flexbody.simulate(flexbody.load_scene(table), max_wall_time=300.0)
     assert r.status == "success", r.message
     assert r.stats["events"] > 200  # measured 339
@@ -238,7 +239,7 @@ def test_a_flexible_boxs_corner_handed_across_a_diagonal_still_slides_off_the_ri
     on the old triangle's plane, its force down to -7 N with no lift-off.  And an edge of
     the flexible box went 1.9e-6 m through a triangle of the sphere (its face edges, flat
     at the start, were no edge contacts)."""
-    table = json.loads((Path(__file__).parent / "reference" / "fuzz_box_corner_over_rim.json").read_text())
+    table = reference_table("fuzz_box_corner_over_rim")
     r = flexbody.simulate(flexbody.load_scene(table), max_wall_time=300.0)
     assert r.status == "success", r.message
     assert r.stats["min_held_contact_force_N"] > -1e-6  # -6.9 N before
@@ -257,7 +258,7 @@ def test_a_vertex_held_beside_a_face_on_face_contact_is_no_deep_edge_crossing():
     test's), and the free edge row fired an impact on it; the run reported 0.032 m
     inside.  A deep crossing at an edge's end is now not taken on that test (it is the
     end vertex's)."""
-    table = json.loads((Path(__file__).parent / "reference" / "fuzz_boxes_face_on_face_edges.json").read_text())
+    table = reference_table("fuzz_boxes_face_on_face_edges")
     r = flexbody.simulate(flexbody.load_scene(table), max_wall_time=300.0)
     assert r.status == "success", r.message
     assert r.stats["max_penetration_m"] < 1e-9  # 0.032 m before; measured 1.5e-11 m
@@ -274,8 +275,7 @@ def test_the_last_sample_is_read_with_the_contacts_held_then():
     read against an edge it held later showed its lines "crossed" by 3e-4 m (reported as
     penetration, with the warning that an impact was missed).  Read as the sample was,
     nothing is inside anything."""
-    table = json.loads((Path(__file__).parent / "reference" / "fuzz_pile_stopped_chattering.json").read_text())
-    table["bodies"][2]["file"] = str(Path(flexbody.__file__).parent / "scenes" / "icosahedron.obj")
+    table = reference_table("fuzz_pile_stopped_chattering")
     r = flexbody.simulate(flexbody.load_scene(table), max_wall_time=300.0)
     assert r.status == "chattering", r.message  # the guard on a burst of impacts (README: "Piles of 3D bodies")
     assert r.stats["max_penetration_m"] < 1e-9  # 3.0e-4 m before; measured 1.5e-10 m (a held row's sink)
@@ -294,7 +294,7 @@ def test_an_edge_row_that_fired_as_its_sibling_passed_an_end_is_not_held_apart()
     and putting it back moved the two bodies by that: the run stalled (`too_slow` at
     0.15 s, 0.77 mm inside).  A row that fired but watches an edge apart once its sibling
     is released is no longer touching."""
-    table = json.loads((Path(__file__).parent / "reference" / "fuzz_edge_released_past_an_end.json").read_text())
+    table = reference_table("fuzz_edge_released_past_an_end")
     r = flexbody.simulate(flexbody.load_scene(table), max_wall_time=60.0)
     assert r.status == "success", r.message
     assert r.stats["max_penetration_m"] < 1e-9  # 7.7e-4 m before; measured 6.5e-11 m

@@ -13,7 +13,6 @@ colliding obliquely in free space with friction keep their momentum and angular 
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
@@ -21,6 +20,8 @@ import pytest
 from scipy.integrate import solve_ivp
 
 import flexbody
+
+from .conftest import reference_table
 
 G = 9.81
 MU = 0.3
@@ -259,7 +260,7 @@ def test_a_turning_rigid_base_on_three_sliding_corners_reports_the_forces_it_was
     read the law at each sample's own slip: one corner's force read -0.62 N (warned: a
     lift-off missed) where the step had pushed with +0.11 N.  Friction follows the slip
     within a step now, and the outputs are the forces that moved the bodies."""
-    table = json.loads((Path(__file__).parent / "reference" / "fuzz_sliding_base_turning.json").read_text())
+    table = reference_table("fuzz_sliding_base_turning")
     r = flexbody.simulate(flexbody.load_scene(table), max_wall_time=120.0)
     assert r.status == "success", r.message
     assert not any("turned negative" in w for w in r.stats["warnings"])
@@ -276,7 +277,7 @@ def test_a_held_contact_that_a_renewed_slip_direction_pulls_is_an_instant():
     event function started the next step below 0, so no sign change found it, and the
     corner pulled for a whole step (warned: -0.48 N).  A held contact whose event function
     the renewal takes to 0 or below is an instant now, its LCPs decide."""
-    table = json.loads((Path(__file__).parent / "reference" / "fuzz_renewed_slip_pulls_a_corner.json").read_text())
+    table = reference_table("fuzz_renewed_slip_pulls_a_corner")
     r = flexbody.simulate(flexbody.load_scene(table), max_wall_time=120.0)
     assert r.status == "success", r.message
     assert not any("turned negative" in w for w in r.stats["warnings"])
@@ -429,9 +430,7 @@ def test_a_slide_whose_rate_vanishes_while_its_direction_is_aligned_ends_the_ali
     least squares raised "SVD did not converge" out of the run (a traceback).  The
     alignment now stops there and the answer is checked as it stands (here "inaccurate",
     within Coulomb's disc, and said in the warnings); the run reaches its end."""
-    import json
-
-    table = json.loads((Path(__file__).parent / "reference" / "fuzz_slip_without_rate.json").read_text())
+    table = reference_table("fuzz_slip_without_rate")
     r = flexbody.simulate(flexbody.load_scene(table))
     assert r.status == "success", r.message
     assert r.stats["max_penetration_m"] < 1e-9  # measured 1.0e-11 m

@@ -13,14 +13,13 @@ meshes meet there, each case a run that used to stop.
 
 from __future__ import annotations
 
-import json
-from pathlib import Path
-
 import numpy as np
 import pytest
 
 import flexbody
 from flexbody.scene import load_scene
+
+from .conftest import reference_table
 
 
 def run_to(table: dict) -> flexbody.SimulationResult:
@@ -139,7 +138,7 @@ def test_a_held_contact_is_kept_on_its_surface_inside_a_step_not_only_at_its_end
     but 1.2e-9 m at 3/8 of it on the dense output (less accurate inside a step): the instant
     started from there, 1.07e-9 m inside (warned: "a held contact sank").  The step's
     quarter points are checked too: such a step is taken again, shorter."""
-    table = json.loads((Path(__file__).parent / "reference" / "fuzz_pile_sink_inside_a_step.json").read_text())
+    table = reference_table("fuzz_pile_sink_inside_a_step")
     r = flexbody.simulate(load_scene(table), max_wall_time=120.0)
     assert r.status == "success", r.message
     assert r.stats["max_penetration_m"] < 1e-9  # measured 3.2e-11 m

@@ -9,7 +9,6 @@ the run without self-contact, whose surface passes through itself (so each check
 from __future__ import annotations
 
 import dataclasses
-import json
 import re
 from pathlib import Path
 
@@ -21,7 +20,7 @@ from flexbody.model import load_model
 from flexbody.surface import boundary, crossings
 from flexbody.surface_contact import closest_features
 
-from .conftest import needs_cc
+from .conftest import needs_cc, reference_table
 
 pytestmark = needs_cc
 
@@ -411,7 +410,7 @@ def test_a_lattice_collapsing_with_nothing_near_is_refused_at_the_first_sample_i
     cross, within a neighbourhood, with no contact near (each particle's neighbourhood is
     not watched).  A body with self-contact has its own surface checked at every output
     sample: refused there (before: `success`, crossing at 8 samples, up to 0.6 mm deep)."""
-    table = json.loads((Path(__file__).parent / "reference" / "fuzz_flap_hinge.json").read_text())
+    table = reference_table("fuzz_flap_hinge")
     result = flexbody.simulate(flexbody.load_scene(table))
     surface = np.array(table["bodies"][0]["surface"])
     assert result.status == "unsupported" and "has folded over" in result.message, result.message
