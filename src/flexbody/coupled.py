@@ -398,10 +398,13 @@ def _sliding_rates(J: np.ndarray, u: np.ndarray, rows: np.ndarray, codes: np.nda
                    speed_tolerance: float = np.inf) -> np.ndarray:
     """Slip rates of the held contacts ``rows`` that slide (code SLIDING, or faster than
     ``speed_tolerance``), from the tangent rows of ``J`` (dim k, c): (k,) in 2D, (k, 2) in
-    3D; 0 for those that stick, and for a sliding one exactly at its stop, which the LCP
-    then treats as sticking."""
+    3D; 0 for those that stick, and for a sliding one at its stop (exactly, or within
+    ``speed_tolerance`` where one is given: the instant's friction stops such a slip, and
+    its direction there is round-off), which the LCP then treats as sticking."""
     slip = _slip_rates(J, u, len(rows))
-    sliding = (codes[rows] == SLIDING) | (_speeds(slip) > speed_tolerance)
+    speed = _speeds(slip)
+    sliding = ((codes[rows] == SLIDING) & ~(speed <= speed_tolerance if np.isfinite(speed_tolerance) else False)) \
+        | (speed > speed_tolerance)
     return np.where(sliding[:, None] if slip.ndim == 2 else sliding, slip, 0.0)
 
 
