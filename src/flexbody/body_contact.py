@@ -1368,17 +1368,25 @@ class BodyContactModel(Model):
             rows = self._rows_of(slot_rows, found)[missing % self.n_primary]
         if (rows < 0).any():
             raise KeyError(f"slots {missing[rows < 0].tolist()} have no closest feature on their bodies")
-        on_face = contact.kind[rows] == FACE
+        # on a face, inside it: that face (a face's closest point on its rim is its edge's or
+        # vertex's, whose elements all hold it)
+        on_face = (contact.kind[rows] == FACE) & (contact.weights[rows] > AT_VERTEX).all(axis=1)
         self.element_of[missing[on_face]] = contact.element[rows[on_face]]
         if on_face.all():
             return
         normals = (segment_normals if self.dim == 2 else triangle_normals)(x, self.elements)
         for slot, r in zip(missing[~on_face].tolist(), rows[~on_face].tolist()):
-            feature = contact.feature[r][contact.feature[r] >= 0]
+            feature = contact.feature[r][(contact.feature[r] >= 0) & (contact.weights[r] > AT_VERTEX)]
             around = self._elements_at(feature[0])
             for other in feature[1:]:
                 around = np.intersect1d(around, self._elements_at(other))
             around = around[self.element_body[around] == self.slot_body[slot]]
+            # of those whose plane has the particle's own body on its outer side, if any: at
+            # a vertex met to round-off the direction to it is noise (two boxes side by
+            # side, corners coincident: a corner was held on the other's top face, the other
+            # corner on this one's, two rows opposite each other and no force problem's answer)
+            apart = self._beside(np.full(len(around), self.slot_particle[slot]), normals[around], x)
+            around = around[apart] if apart.any() else around
             self.element_of[slot] = around[np.argmax(normals[around] @ contact.normal[r])]
 
     def _rows_of(self, slot_rows: IntArray, found: np.ndarray) -> IntArray:

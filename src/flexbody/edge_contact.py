@@ -368,9 +368,10 @@ class EdgeSlots:
         the least gap (:func:`edge_contacts` within ``reach``), leaving out those its
         siblings hold (``against``: every row's code (:meth:`encode`), -1: none, shape
         (ns,)); of an edge's free rows, the first in rank takes the closest edge, the next
-        the next closest, and so on.  ``loose``: every free row takes the closest edge no
-        sibling holds, and a crossing needs no inside test (an instant's fall-back for a row
-        that fired but whose edge the strict search no longer finds).
+        the next closest, and so on.  ``loose``: every free row takes the edge no sibling
+        holds whose gap is nearest 0, and a crossing needs no inside test, only a gap within
+        ``DEEP_CROSSING`` slacks of 0 (an instant's fall-back for a row that fired but whose
+        edge the strict search no longer finds).
 
         Returns
         -------
@@ -405,7 +406,11 @@ class EdgeSlots:
         found = edge_contacts(x, self.edges, normals, self.edges, normals, np.column_stack([mine, other]), reach,
                               self.kernels)
         which = which[found.index]
-        real = np.ones(len(found.gap), bool) if loose else self._crossing_inside(x, found, 1e-6 * reach)
+        # loosely, a pair within DEEP_CROSSING slacks of touching: the row fired at gap 0, and a
+        # deeper one is no contact, however its lines cross (measured: two boxes side by side,
+        # corners coincident: a row given an edge 0.1 m off and put back onto it by that)
+        real = (np.abs(found.gap) <= DEEP_CROSSING * 1e-6 * reach if loose
+                else self._crossing_inside(x, found, 1e-6 * reach))
         found = EdgeContact(*(getattr(found, f)[real] for f in ("pair", "side", "gap", "parameters", "normal", "index")))
         which = which[real]
         # each row's entries: its edge's contacts, in the order found, less those its siblings hold
@@ -416,7 +421,8 @@ class EdgeSlots:
         entry = grouped[np.repeat(first[row_primary], count) + np.arange(len(row)) - np.repeat(np.cumsum(count) - count, count)]
         kept = ~(found.pair[entry, 1][:, None] == left_out[row]).any(axis=1)
         row, entry = row[kept], entry[kept]
-        order = np.lexsort((found.gap[entry], row))  # by row, least gap first
+        # by row, least gap first (a crossing is the contact); loosely, the gap nearest 0
+        order = np.lexsort((np.abs(found.gap[entry]) if loose else found.gap[entry], row))
         start = np.searchsorted(row[order], np.arange(len(rows)))
         has = np.flatnonzero(np.bincount(row, minlength=len(rows)) > place)
         taken = entry[order[start[has] + place[has]]]
