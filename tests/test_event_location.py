@@ -160,6 +160,29 @@ def test_first_fired_is_on_the_fired_side_within_the_tolerance(g, root, most):
     assert len(seen) <= most  # SciPy's brentq and a bisection to the fired side took 16-20 in a pile
 
 
+def test_first_fired_finds_where_a_plateau_of_zeros_starts():
+    """A free contact's gap can read exactly 0 from its root on (a particle met on a coplanar
+    face's plane): with ``plateaus`` the root is the plateau's start, not the bracket's end,
+    whose value is 0 too (taken there, a box was held 1e-4 m past the face it met and slid
+    through the other box); an isolated zero costs one point beside it."""
+    from flexbody.events import first_fired
+
+    xtol, eps = 1e-15, np.finfo(float).eps
+    for root in (0.29, 0.5, 0.9):
+        seen = []
+
+        def g(t):
+            seen.append(t)
+            return max(0.0, root - t)
+
+        t = first_fired(g, 0.0, 1.0, root, 0.0, xtol, plateaus=True)
+        assert root <= t <= root + 2 * (xtol + 4 * eps) and len(seen) <= 110  # two per halving at most
+        assert first_fired(g, 0.0, 1.0, root, 0.0, xtol) == 1.0  # a held function's 0 is its root
+    seen = []
+    t = first_fired(lambda t: seen.append(t) or 0.3 - t, 0.0, 1.0, 0.3, -0.7, xtol, plateaus=True)
+    assert t == pytest.approx(0.3, abs=4 * eps) and len(seen) <= 5
+
+
 def test_first_fired_counts_a_nan_as_fired_and_takes_an_empty_bracket():
     from flexbody.events import first_fired
 

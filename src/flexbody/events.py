@@ -385,11 +385,13 @@ def _root(events: EventFunctions, dense: Callable[[float], np.ndarray], c: int, 
         return ta
     if fb > 0.0:  # the interpolant stays positive: the crossing is at the step's end
         return tb
-    return first_fired(g, ta, tb, fa, fb, xtol=1e-15)
+    # a free contact's gap reads exactly 0 on a plateau where a particle lies in a coplanar
+    # face's plane; a held one's function is 0 at its root only
+    return first_fired(g, ta, tb, fa, fb, xtol=1e-15, plateaus=bool(events.free[c]))
 
 
 def first_fired(g: Callable[[float], float], lo: float, hi: float, g_lo: float, g_hi: float,
-                xtol: float) -> float:
+                xtol: float, plateaus: bool = False) -> float:
     """The time where ``g`` fires (``g <= 0``; a NaN counts as fired) in ``[lo, hi]``, given
     ``g(lo) = g_lo > 0`` and ``g(hi) = g_hi <= 0``, within ``2 (xtol + 4 eps |t|)`` after
     the crossing (eps: the machine epsilon; the first one, if ``g`` crosses once):
@@ -405,7 +407,10 @@ def first_fired(g: Callable[[float], float], lo: float, hi: float, g_lo: float, 
     again, and the search stops when the bracket is within the tolerance, not below the
     noise of ``g``'s round-off (measured in a pile: SciPy's ``brentq`` took 19.7 evaluations
     per impact root, with its ends evaluated again and a bisection after its estimate to
-    reach the fired side; this takes 9.9).
+    reach the fired side; this takes 9.9).  A value of exactly 0 is a root; with
+    ``plateaus``, where one is met, a point 2 tol toward the unfired end tells an isolated
+    root from the inside of a plateau of zeros (a particle on a coplanar face's plane reads
+    a gap of exactly 0 from where it met it on), which is bisected to its start.
     """
     eps = float(np.finfo(float).eps)
     a, g_a = float(hi), float(g_hi)  # the newest point
@@ -414,8 +419,22 @@ def first_fired(g: Callable[[float], float], lo: float, hi: float, g_lo: float, 
     t = 0.5
     while True:
         width, tol = abs(b - a), xtol + 4 * eps * max(abs(a), abs(b))
-        if width <= 2 * tol or g_a == 0.0 or g_b == 0.0:
+        if width <= 2 * tol or (not plateaus and (g_a == 0.0 or g_b == 0.0)):
             break
+        if g_a == 0.0 and g_b > 0.0:
+            # Exactly 0 is fired, and may be a plateau's inside (a particle on a coplanar
+            # face's plane reads 0 from where it met it on; the root taken at the step's end,
+            # whose value was 0 too, held it 1e-4 m past the face it met): one point 2 tol
+            # toward the unfired end tells an isolated root (fired within the tolerance)
+            # from a plateau, which is then bisected.
+            x = a + 2.0 * tol / width * (b - a)
+            g_x = g(x)
+            if g_x > 0.0:
+                return a
+            a, g_a, t = x, g_x, 0.5
+            width = abs(b - a)
+            if width <= 2 * tol:
+                break
         limit = tol / width  # at least tol from either end
         x = a + min(1.0 - limit, max(limit, t)) * (b - a)
         if x == a or x == b:  # the bracket holds no float between its ends (a tolerance of 0)
@@ -427,7 +446,11 @@ def first_fired(g: Callable[[float], float], lo: float, hi: float, g_lo: float, 
             c, g_c = b, g_b
             b, g_b = a, g_a
         a, g_a = x, g_x
-        # inverse quadratic interpolation through a, b, c where it stays monotone
+        # inverse quadratic interpolation through a, b, c where it stays monotone (not off a
+        # plateau of zeros: bisection)
+        if 0.0 in (g_a, g_b, g_c) or g_c == g_b:
+            t = 0.5
+            continue
         xi, phi = (a - b) / (c - b), (g_a - g_b) / (g_c - g_b)
         if phi * phi < xi and (1.0 - phi) ** 2 < 1.0 - xi:
             t = g_a / (g_b - g_a) * g_c / (g_b - g_c) + (c - a) / (b - a) * g_a / (g_c - g_a) * g_b / (g_c - g_b)
