@@ -11,8 +11,10 @@ way round.  The slots come after the ground contacts, so the phase machine
   phase :class:`flexbody.broadphase.CandidateList`), continuous as the closest point moves
   from one segment or triangle to the next, so onset is an exact event on the dense output.
 * **At an instant** a touching slot is constrained on one surface *element*: the one its
-  closest point lies on, or, at a vertex or edge, the neighbouring element whose normal is
-  closest to the feature's normal (ties: the lowest-numbered).  Its gap is that element's
+  closest point lies on, or, at a vertex or edge (or a face's rim), the neighbouring element
+  whose normal is closest to the feature's normal (ties: the lowest-numbered), of those
+  whose plane has the particle's own body on its outer side where one has (met at a vertex
+  to round-off, the direction to it is noise).  Its gap is that element's
   line (2D) or plane (3D) gap, with the generated kernels' Jacobian ``[n, -w_1 n, ...]``
   (w: the projection's weights) and velocity term ``d(J v)/dq . v``
   (:mod:`derivation.elements`).  Impacts and held forces couple through the bodies'
@@ -1069,6 +1071,22 @@ class BodyContactModel(Model):
         self.margin_floor[out] = np.where(margin < gap_tolerance, margin - gap_tolerance, 0.0)
         rate = terms.rate
         approach, tangential = rate < -speed_tolerance, np.abs(rate) <= speed_tolerance
+        # At rest on the other body, handed over a convex edge onto a face whose plane has
+        # the particle's own body on its inner side though the face it came from had it
+        # outside: no contact of its there (two boxes side by side, corners coincident: a
+        # corner held on the other box's side face at its corner was handed to that box's
+        # back face, opposite the other corner's row on this box's back face).  It is set
+        # free, as one leaving.  (Moving along the new face, it slides over the edge onto it.)
+        unfit = np.zeros(len(out), bool)
+        particle = self.slot_particle[out]
+        relative = v[particle] - np.einsum("kj,kjd->kd", terms.weights, v[self.elements[self.element_of[out]]])
+        met = np.flatnonzero(tangential & (np.linalg.norm(relative, axis=1) <= speed_tolerance))
+        if len(met):
+            normals = (segment_normals if self.dim == 2 else triangle_normals)
+            unfit[met] = (~self._beside(particle[met], normals(x, self.elements[self.element_of[out[met]]]), x)
+                          & self._beside(particle[met], normals(x, self.elements[came_from[met]]), x))
+        tangential &= ~unfit
+        self.element_of[out[unfit]], self.margin_floor[out[unfit]] = -1, 0.0  # held again, it picks anew
         # At a concave vertex (edge) the particle is in a corner, on both elements, whether it
         # hits the new one or meets it tangentially (it rests there): a free twin keeps the old
         # one, held as the slot was (the next instant's LCP decides whether it stays).  Met
@@ -1084,7 +1102,8 @@ class BodyContactModel(Model):
         self.element_of[twins] = came_from[cornered]
         self.margin_floor[twins] = 0.0
         self._slip[ng + twins] = self._slip[ng + out[cornered]]
-        return HandOvers(ng + out[tangential], ng + out[approach], ng + np.concatenate([out[rate > speed_tolerance], ended]),
+        return HandOvers(ng + out[tangential], ng + out[approach],
+                         ng + np.concatenate([out[(rate > speed_tolerance) | unfit], ended]),
                          ng + twins, ng + out[cornered], ng + np.column_stack([relabel % self.n_primary, relabel]))
 
     def _swap(self, first: IntArray, second: IntArray) -> None:
@@ -1829,7 +1848,9 @@ class HandOvers(NamedTuple):
         The moved slots that meet their new element tangentially (normal speed within the
         speed tolerance: still held), approach it (an impact) and leave it; ``leave`` also
         holds the edge contacts set free where their closest points reached an edge's end,
-        and the self-contact slots whose new element is in their particle's neighbourhood.
+        the self-contact slots whose new element is in their particle's neighbourhood, and
+        those met tangentially on a face over a convex edge whose plane has their own body
+        on its inner side (the face they left had it outside).
     corners, sources : ndarray of int
         The free corner twins now on the elements that ``sources`` (those of the moved that
         passed a concave vertex or edge: all of ``approach``, and those of ``stay`` there)

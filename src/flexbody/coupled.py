@@ -403,8 +403,8 @@ def _sliding_rates(J: np.ndarray, u: np.ndarray, rows: np.ndarray, codes: np.nda
     its direction there is round-off), which the LCP then treats as sticking."""
     slip = _slip_rates(J, u, len(rows))
     speed = _speeds(slip)
-    sliding = ((codes[rows] == SLIDING) & ~(speed <= speed_tolerance if np.isfinite(speed_tolerance) else False)) \
-        | (speed > speed_tolerance)
+    at_stop = np.isfinite(speed_tolerance) & (speed <= speed_tolerance)
+    sliding = ((codes[rows] == SLIDING) & ~at_stop) | (speed > speed_tolerance)
     return np.where(sliding[:, None] if slip.ndim == 2 else sliding, slip, 0.0)
 
 

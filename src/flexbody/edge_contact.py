@@ -51,7 +51,8 @@ PARALLEL = 1e-6
 CONE_SLACK = float(np.cos(np.radians(5.0)))
 #: A crossed pair read deeper than this many times its inside test's slack (1e-3 of the
 #: search's reach) with a closest point nearer an end of its edge than that depth is not
-#: taken on that test (:meth:`EdgeSlots._crossing_inside`).
+#: taken on that test (:meth:`EdgeSlots._crossing_inside`); an instant's fall-back search
+#: for an edge row that fired takes a pair within this many slacks of touching.
 DEEP_CROSSING = 1e3
 #: An edge whose two triangles' unit normals differ by less than this (about the angle of
 #: its crease, rad) lies in a flat face (a box face's diagonal): no edge of the body's shape,
