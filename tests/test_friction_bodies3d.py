@@ -435,3 +435,28 @@ def test_a_slide_whose_rate_vanishes_while_its_direction_is_aligned_ends_the_ali
     assert r.status == "success", r.message
     assert r.stats["max_penetration_m"] < 1e-9  # measured 1.0e-11 m
     assert r.stats["energy_drift_relative"] < 1e-6  # measured 1.7e-7
+
+
+def test_sample_0_after_an_impact_at_the_start_has_the_forces_right_after_it():
+    """Two rigid cubes side by side on a rough ground, faces touching, one pushed into the
+    other at 0.428 m/s (e = 1, mu = 0.3 everywhere; a fuzz's scene): the instant at t = 0 is
+    an impact, and sample 0, the state as given, carries the contact set it left.  Its
+    forces were read at the given velocities under the slip laws set for the new ones: held
+    normal forces of -1.0 and -0.83 N, and the run warned of a missed lift-off.  They are
+    the forces right after that instant: none pulls, and the run warns of nothing."""
+    box = {"shape": "box", "count": [2, 2, 2], "rigid": True}
+    table = {"name": "pushed_cube", "gravity": [0.0, 0.0, -9.81],
+             "grounds": [{"point": [0.0, 0.0, 0.0], "normal": [0.0, 0.0, 1.0], "friction": 0.3, "restitution": 0.3}],
+             "bodies": [{**box, "name": "a", "size": [0.161, 0.1456, 0.1456], "position": [0.0, 0.0, 0.0728],
+                         "mass_total": 0.775, "velocity": [0.428, 0.0, 0.0]},
+                        {**box, "name": "b", "size": [0.1419, 0.1456, 0.1456], "position": [0.15145, 0.0, 0.0728],
+                         "mass_total": 0.915}],
+             "contacts": [{"bodies": ["a", "b"], "friction": 0.3, "restitution": 1.0}],
+             "simulation": {"t_end": 0.01, "output_dt": 0.0005}}
+    r = flexbody.simulate(flexbody.load_scene(table))
+    assert r.contact_force[0].min() > -1e-9  # -1.03 N before
+    assert r.stats["min_held_contact_force_N"] > -1e-9 and r.stats["warnings"] == []
+    assert r.status == "success", r.message
+    assert r.events_kind[0] == "impact" and r.events_time[0] == 0.0
+    weight = (0.775 + 0.915) * 9.81
+    assert r.contact_force[0].sum() == pytest.approx(weight, rel=0.05)  # nothing else pushes vertically

@@ -437,6 +437,7 @@ class _Run:
         self.segment_log: list | None = None  # set to [] to log (RHS evaluations, y0, held, push) per segment
         self.min_gap = np.inf  # lowest gap of a free contact (an impact missed between event checks)
         self.min_held_gap = np.inf  # ... and of a held one (its constraint drifted)
+        self.y_started: np.ndarray | None = None  # the state right after the instant at t = 0 (see result)
         # the lowest gaps before the last step's end was tracked, and that step's start: a
         # surface found folded there has no inside, its gaps measure nothing (refuse_fold)
         self.gaps_before, self.step_start = (np.inf, np.inf), 0.0
@@ -921,6 +922,7 @@ class _Run:
         try:
             self.resolve_at(0.0, none, none)
             self.keep_samples(0, 1)  # its contact set is the instant's outcome (a slide starting at once)
+            self.y_started = self.y.copy()
             while t < s.t_end:
                 t_bound = min(s.t_end, float(phases.push_until.min()))  # a thesis-mode window ends a segment
                 stop = self.segment(t, t_bound)
@@ -1136,6 +1138,15 @@ class _Run:
             X, V, E, lam = model.trajectory(Y, p, held, push, elements=self.sample_elements[:k])
         else:
             X, V, E, lam = model.trajectory(Y, p, held, push)
+        # Sample 0 is the state as given, its contact set the instant at t = 0's outcome; where
+        # that instant was an impact (the velocities jumped), its forces are those right after
+        # it: read at the given velocities, under the laws set for the new ones, two rigid
+        # boxes side by side, one pushed into the other, showed held forces of -1 N there
+        forces_at = list(Y)
+        if k and self.y_started is not None and not np.array_equal(self.y_started, Y[0]):
+            forces_at[0] = self.y_started
+            with self.as_sampled(0):
+                lam[0] = model.held_forces(forces_at[0], p, held[0], push[0])
         friction_force = np.zeros_like(V)
         if self.friction:
             for j in np.flatnonzero(held.any(axis=1)):
@@ -1145,8 +1156,8 @@ class _Run:
                         # a sliding contact whose step kept its direction (a coupled 2D slip, a
                         # slow 3D one) pushed along that: measured, a rigid base's corner read
                         # 0.11 N from the law at the sample's own slip where the step pushed 0.41 N
-                        lam[j] = model.held_forces(Y[j], p, held[j], push[j])
-                    ft = model.friction(Y[j], p, held[j], push[j])[1]
+                        lam[j] = model.held_forces(forces_at[j], p, held[j], push[j])
+                    ft = model.friction(forces_at[j], p, held[j], push[j])[1]
                 friction_force[j] = model.particle_forces(ft.T).T
             if self.sample_tangential is not None:  # the windows' tangential forces
                 friction_force += self.sample_tangential[:k].reshape(len(T), n, model.n_contacts // n, -1).sum(axis=2)
