@@ -1078,13 +1078,14 @@ class BodyContactModel(Model):
         # back face, opposite the other corner's row on this box's back face).  It is set
         # free, as one leaving.  (Moving along the new face, it slides over the edge onto it.)
         unfit = np.zeros(len(out), bool)
-        particle = self.slot_particle[out]
-        relative = v[particle] - np.einsum("kj,kjd->kd", terms.weights, v[self.elements[self.element_of[out]]])
-        met = np.flatnonzero(tangential & (np.linalg.norm(relative, axis=1) <= speed_tolerance))
+        met = np.flatnonzero(tangential)
         if len(met):
+            particle, onto = self.slot_particle[out[met]], self.elements[self.element_of[out[met]]]
+            relative = v[particle] - np.einsum("kj,kjd->kd", terms.weights[met], v[onto])
             normals = (segment_normals if self.dim == 2 else triangle_normals)
-            unfit[met] = (~self._beside(particle[met], normals(x, self.elements[self.element_of[out[met]]]), x)
-                          & self._beside(particle[met], normals(x, self.elements[came_from[met]]), x))
+            unfit[met] = ((np.linalg.norm(relative, axis=1) <= speed_tolerance)
+                          & ~self._beside(particle, normals(x, onto), x)
+                          & self._beside(particle, normals(x, self.elements[came_from[met]]), x))
         tangential &= ~unfit
         self.element_of[out[unfit]], self.margin_floor[out[unfit]] = -1, 0.0  # held again, it picks anew
         # At a concave vertex (edge) the particle is in a corner, on both elements, whether it
