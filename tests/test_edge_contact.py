@@ -381,3 +381,39 @@ def test_an_edge_crossed_past_an_acute_rim_is_seen_crossed():
     wedge_above = wedge + np.array([0.0, 0.0, 2.0 * h])
     gap_above = slots.closest(np.vstack([prism, wedge_above]), np.array([rim]), np.full(len(slots), -1), reach=0.05)[0]
     assert gap_above[0] == pytest.approx(h, rel=1e-9)
+
+
+def test_a_crossing_counts_how_deep_the_edges_points_are_inside_the_other_body():
+    """What the penetration counts of an edge row read crossed (EdgeSlots.crossing_depths):
+    the lesser distance of its lines' closest points to the other body's surface.  Two
+    cubes crossed edge through edge by h (their edges at right angles, the common normal
+    along the upper cube's 45 deg bisector): the lower edge's middle is h / sqrt 2 inside
+    the turned cube, the upper edge's middle on the lower cube's front face; apart by h,
+    both points are h outside.  Two cubes side by side, the second turned 1e-3 rad about x
+    and pushed d = 1e-6 m into the first (coincident rim edges nearly parallel, as in a
+    struck row of boxes): their top rims' lines read d crossed along x, yet their closest
+    points lie on the other cube's top face (a vertex's depth, 0, not d's)."""
+    from flexbody.edge_contact import EdgeSlots
+
+    def crossing(x, n_first, own_edge):
+        elements = np.vstack([hull(x[:n_first]), hull(x[n_first:]) + n_first])
+        element_body = np.repeat([0, 1], [len(hull(x[:n_first])), len(hull(x[n_first:]))])
+        slots = EdgeSlots(elements, element_body, [(0, 1)], x)
+        row = next(r for r in range(slots.n_primary) if own_edge(x[slots.edges[slots.own[r]]]))
+        gap, edge, side = slots.closest(x, np.array([row]), np.full(len(slots), -1), reach=0.05)
+        assert edge[0] >= 0
+        return gap[0], slots.crossing_depths(x, np.array([row]), slots.encode(edge, side))[0]
+
+    for h in (0.01, -0.01):
+        x, *_ = crossed_cubes(h)
+        turned = x[8:]
+        x = np.vstack([turned, CUBE])  # the turned cube first: its edge is the row's
+        line_gap, depth = crossing(x, 8, lambda e: np.allclose(e[:, 0], 0.5) and np.allclose(e[:, 2], 1.0 + h))
+        assert line_gap == pytest.approx(h, rel=1e-12)
+        assert depth == pytest.approx(h if h > 0 else h / np.sqrt(2.0), rel=1e-9)
+    d, angle = 1e-6, 1e-3
+    second = (CUBE - [0.0, 0.5, 1.0]) @ rotation_matrix([angle, 0.0, 0.0]).T + [1.0 - d, 0.5, 1.0]
+    x = np.vstack([CUBE, second])
+    line_gap, depth = crossing(x, 8, lambda e: np.allclose(e[:, 0], 1.0) and np.allclose(e[:, 2], 1.0))
+    assert line_gap == pytest.approx(-d, rel=1e-6)
+    assert abs(depth) < 1e-15 and depth > line_gap

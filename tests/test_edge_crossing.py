@@ -247,6 +247,22 @@ def test_boxes_side_by_side_with_coincident_corners_rest_and_collide_cleanly():
     np.testing.assert_allclose(momentum, 0.2 * 0.65, rtol=1e-9)
 
 
+def test_a_struck_row_of_three_flexible_boxes_keeps_every_point_outside_the_others():
+    """Three flexible boxes side by side, corners coincident, the first struck at 0.65 m/s
+    (e = 0.5).  As the boxes squeeze, one's top rim edge and the next one's, nearly
+    parallel, read their lines 6.7e-6 m crossed along the face between them, while their
+    closest points lay on the other box's top face: the penetration counted the lines'
+    distance.  It counts how far the points of a crossing are inside the other body now
+    (measured 3.0e-12 m), and the momentum along the row is kept (frictionless ground)."""
+    table = _row_of_boxes(3, 0.65, 0.5)
+    r = flexbody.simulate(flexbody.load_scene(table))
+    assert r.status == "success", r.message
+    assert r.stats["max_penetration_m"] < 1e-9  # 6.7e-6 m counted from the lines before
+    momentum = np.einsum("i,tid->td", r.masses, r.velocities)[:, 0]
+    np.testing.assert_allclose(momentum, 0.2 * 0.65, rtol=1e-9)
+    assert (np.diff(r.positions[-1, :, 0].reshape(3, 8).mean(axis=1)) > SIDE - 1e-3).all()  # in order, apart
+
+
 def test_a_box_pushed_into_a_box_level_with_it_is_stopped_where_it_meets_it():
     """Two equal flexible cubes on the ground, 1e-6 m apart and 2 cm askew, the first pushed
     at 1 m/s (e = 0; a fuzz's scene): their tops and bottoms are coplanar, so the first

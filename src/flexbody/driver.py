@@ -713,7 +713,8 @@ class _Run:
         """Lower the lowest gaps of free and held contacts to those at state ``y`` (``held``:
         bool (nc,), the contacts held there, default the present ones); return the lowest
         free contact's between bodies there (inf if none)."""
-        gaps = self.model.gaps(y[: self.model.nq], self.p)
+        q = y[: self.model.nq]
+        gaps = self.model.point_gaps(q, self.p, self.model.gaps(q, self.p))
         held = self.phases.on_ground if held is None else held
         self.min_gap = min(self.min_gap, float(gaps[~held].min(initial=np.inf)))
         self.min_held_gap = min(self.min_held_gap, float(gaps[held].min(initial=np.inf)))

@@ -506,23 +506,13 @@ class EdgeSlots:
         A crossing shallower than half the slack needs no test: each closest point is
         within |gap| of the other, which is on its body's surface (a held contact's
         rounding, most of a pile's)."""
-        from .surface_contact import closest_features
-
         out = found.gap >= -0.5 * slack
         crossed = np.flatnonzero(~out)
         if not len(crossed):
             return out
         s, t = found.parameters[crossed].T
         first, second = self.edges[found.pair[crossed, 0]], self.edges[found.pair[crossed, 1]]
-        points = [x[first[:, 0]] + s[:, None] * (x[first[:, 1]] - x[first[:, 0]]),
-                  x[second[:, 0]] + t[:, None] * (x[second[:, 1]] - x[second[:, 0]])]
-        inside = np.ones(len(crossed), bool)
-        for point, other_edge in zip(points, (found.pair[crossed, 1], found.pair[crossed, 0])):
-            # each point against the whole surface of the other edge's body, in one search
-            surfaces = [self._body_elements[int(b)] for b in self.edge_body[other_edge]]
-            pairs = np.column_stack([np.repeat(np.arange(len(crossed)), [len(e) for e in surfaces]),
-                                     np.concatenate(surfaces)])
-            inside &= closest_features(point, x, self._elements, pairs).gap <= slack
+        inside = (self._point_gaps(x, found.pair[crossed], s, t) <= slack).all(axis=1)
         # ... a deep one (beyond DEEP_CROSSING slacks) only with both closest points that far
         # inside their edges: nearer an edge's end the crossing is the end vertex's (a box's
         # vertex held on a face, its edge standing off it: with the other body's edge lying
@@ -541,6 +531,38 @@ class EdgeSlots:
         inside[rest] = through
         out[crossed] = inside
         return out
+
+    def _point_gaps(self, x: FloatArray, pair: IntArray, s: FloatArray, t: FloatArray) -> FloatArray:
+        """The signed distances of the closest points (parameters ``s`` on the first edge and
+        ``t`` on the second, (k,) each) of edge ``pair`` (k, 2) to the other edge's body's
+        surface (< 0: inside it), shape (k, 2): the first edge's point's, then the second's."""
+        from .surface_contact import closest_features
+
+        first, second = self.edges[pair[:, 0]], self.edges[pair[:, 1]]
+        points = [x[first[:, 0]] + s[:, None] * (x[first[:, 1]] - x[first[:, 0]]),
+                  x[second[:, 0]] + t[:, None] * (x[second[:, 1]] - x[second[:, 0]])]
+        out = np.empty((len(pair), 2))
+        for j, (point, other_edge) in enumerate(zip(points, (pair[:, 1], pair[:, 0]))):
+            # each point against the whole surface of the other edge's body, in one search
+            surfaces = [self._body_elements[int(b)] for b in self.edge_body[other_edge]]
+            pairs = np.column_stack([np.repeat(np.arange(len(pair)), [len(e) for e in surfaces]),
+                                     np.concatenate(surfaces)])
+            out[:, j] = closest_features(point, x, self._elements, pairs).gap
+        return out
+
+    def crossing_depths(self, x: FloatArray, rows: IntArray, codes: IntArray) -> FloatArray:
+        """How far the edges of ``rows`` (k,) cross those of their ``codes`` (k,) as points of
+        one body inside the other, m, shape (k,): the lesser signed distance of their lines'
+        closest points to the other body's surface (< 0: inside it).  Never below the lines'
+        distance along their common normal (each point is within it of the other, which is
+        on its body's surface), and above it where the edges are nearly parallel: two boxes'
+        coincident rim edges, one's corner 1e-9 m below the other's top face, read their
+        lines 2.6e-7 m crossed along the face between them."""
+        points = self.points(rows, codes)
+        gap, parameters, _, _ = self.kernels.edge_3d(*self._ends(x, points, codes))
+        edge, _ = self.decode(codes)
+        pair = np.column_stack([self.own[np.asarray(rows, np.intp)], edge])
+        return self._point_gaps(x, pair, *parameters).min(axis=1)
 
     def gaps(self, x: FloatArray, rows: IntArray, codes: IntArray) -> FloatArray:
         """The gaps of ``rows`` (k,) against the edges and sides of their ``codes`` (k,), m:

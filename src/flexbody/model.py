@@ -128,6 +128,12 @@ class Model:
         """Gaps of ``contacts (k,)`` alone, equal to ``gaps(q, p)[contacts]``, shape (k,)."""
         return self.gaps(q, p)[contacts]
 
+    def point_gaps(self, q, p, gaps: FloatArray) -> FloatArray:
+        """``gaps`` (nc,) at ``q`` as the signed distances of points of one body to the other
+        (what the penetration counts), shape (nc,): the gaps themselves but for 3D edge
+        contacts between bodies (:meth:`flexbody.body_contact.BodyContactModel.point_gaps`)."""
+        return gaps
+
     def rhs(self, y, p, held, push) -> tuple[FloatArray, FloatArray]:  # pragma: no cover - abstract
         """Contact-constrained right-hand side.
 
