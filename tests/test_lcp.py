@@ -881,3 +881,34 @@ def test_a_shifted_answer_is_checked_with_the_shift_s_compliance(monkeypatch):
     assert np.abs(sol.w * sol.z).max() <= shift * sol.z.max() ** 2 + 1e-12
     monkeypatch.setattr(flexbody.lcp, "SHIFTS", ())
     assert solve_lcp(M, q).status == "ray"
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_small_and_large_problems_find_the_same_blocks(seed):
+    """independent_blocks' closure (dense problems of at most DENSE_BLOCKS rows) and its
+    connected components (larger or sparse ones) split a problem alike: random chains and
+    scattered couplings, rows in any order, one-sided nonzeros linking as two-sided ones;
+    each block is a set of rows with no nonzero to any other block, and no block splits."""
+    from scipy.sparse import csr_matrix
+
+    from flexbody.contact_problems import DENSE_BLOCKS, independent_blocks
+
+    rng = np.random.default_rng(seed)
+    for n in (2, 7, DENSE_BLOCKS, DENSE_BLOCKS + 5):
+        A = np.zeros((n, n))
+        chain = rng.permutation(n)[: rng.integers(1, n + 1)]  # a long path: many doublings
+        A[chain[:-1], chain[1:]] = 1.0
+        pairs = rng.integers(0, n, size=(n // 3, 2))
+        A[pairs[:, 0], pairs[:, 1]] = rng.standard_normal(len(pairs))
+        A[np.diag_indices(n)] = 1.0
+        dense, sparse = independent_blocks(A), independent_blocks(csr_matrix(A))
+        assert [b.tolist() for b in dense] == [b.tolist() for b in sparse]
+        assert sorted(np.concatenate(dense).tolist()) == list(range(n))
+        for i, block in enumerate(dense):
+            rest = np.concatenate([b for j, b in enumerate(dense) if j != i] + [np.zeros(0, int)])
+            assert not A[np.ix_(block, rest)].any() and not A[np.ix_(rest, block)].any()
+            # connected within: the closure from its first row reaches all of it
+            reach = {int(block[0])}
+            for _ in range(len(block)):
+                reach |= {int(j) for i2 in reach for j in np.flatnonzero((A[i2] != 0) | (A[:, i2] != 0))}
+            assert reach == set(block.tolist())
