@@ -1245,6 +1245,8 @@ class BodyContactModel(Model):
         which its row forbids.  ``held`` (nc,): the held codes; ``x`` (n, dim) the positions.
         """
         touching = contact.gap <= AT_VERTEX * self.margin  # the others' rates decide nothing
+        if not touching.any():
+            return np.zeros(0, np.intp)
         rows, at, mirror = self._mirrors(contact, np.where(touching, slot_of, -1))
         if not len(rows):
             return np.zeros(0, np.intp)
