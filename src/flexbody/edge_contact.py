@@ -559,7 +559,7 @@ class EdgeSlots:
         coincident rim edges, one's corner 1e-9 m below the other's top face, read their
         lines 2.6e-7 m crossed along the face between them."""
         points = self.points(rows, codes)
-        gap, parameters, _, _ = self.kernels.edge_3d(*self._ends(x, points, codes))
+        parameters = self.kernels.edge_3d(*self._ends(x, points, codes))[1]
         edge, _ = self.decode(codes)
         pair = np.column_stack([self.own[np.asarray(rows, np.intp)], edge])
         return self._point_gaps(x, pair, *parameters).min(axis=1)
