@@ -19,8 +19,8 @@ of the arc, for edges lying nearly on a face).  That fixes the side
 leaves out pairs of edges whose lines pass close by without being the bodies' closest
 features (tested against inside tests of a convex body).
 
-Outside [0, 1] the closest points of the edges are an end: that is a vertex's contact
-with the other surface, not an edge's.  Parallel edges have no common normal (a face
+Outside [0, 1] (beyond :data:`AT_END`) the closest points of the edges are an end: that is
+a vertex's contact with the other surface, not an edge's.  Parallel edges have no common normal (a face
 lying on a face is held by its vertices) and are left out, as are the edges inside a flat
 face (a triangulated box face's diagonal): an edge pressed onto such a face crosses its
 rim's edges, which are the contacts.
@@ -54,6 +54,13 @@ CONE_SLACK = float(np.cos(np.radians(5.0)))
 #: taken on that test (:meth:`EdgeSlots._crossing_inside`); an instant's fall-back search
 #: for an edge row that fired takes a pair within this many slacks of touching.
 DEEP_CROSSING = 1e3
+#: A closest point within this fraction of its edge's length beyond an end is on the edge:
+#: a box's corner lying on the next box's bottom plane (both on the ground) reads a gap of
+#: 0 there, and the edge contact of its vertical edge with that box's bottom edge, at the
+#: corner, is what keeps it out of the box; its closest point's parameter is the end's to
+#: rounding (+1e-19), and as the corner moved in it fell to -4e-10, off the edge, and the
+#: edges crossed 7e-7 m unseen (a struck row of four flexible boxes).
+AT_END = 1e-9
 #: An edge whose two triangles' unit normals differ by less than this (about the angle of
 #: its crease, rad) lies in a flat face (a box face's diagonal): no edge of the body's shape,
 #: and no edge contact.  Linear in the angle, and small: an edge pressed across a face whose
@@ -78,7 +85,7 @@ class EdgeContact:
     gap : ndarray, shape (k,)
         Signed distance of the lines (m, < 0: crossed), ``n . (a - c)``.
     parameters : ndarray, shape (k, 2)
-        The closest points' s on the first edge and t on the second, in [0, 1].
+        The closest points' s on the first edge and t on the second, in [0, 1] (to :data:`AT_END`).
     normal : ndarray, shape (k, 3)
         n, out of the second edge's body.
     index : ndarray of int, shape (k,)
@@ -176,7 +183,7 @@ def edge_contacts(x: FloatArray, first: IntArray, first_faces: FloatArray, secon
                   kernels: EdgeKernels | None = None) -> EdgeContact:
     """The candidate ``pairs`` whose edges touch or cross within ``reach``: not parallel,
     neither inside a flat face (see :data:`FLAT`), the common normal in both edges' cones
-    (see the module docstring), their lines' closest points on both edges (s, t in [0, 1])
+    (see the module docstring), their lines' closest points on both edges (s, t in [0, 1], to :data:`AT_END`)
     and ``|gap| <= reach``.
 
     Parameters
@@ -216,7 +223,7 @@ def edge_contacts(x: FloatArray, first: IntArray, first_faces: FloatArray, secon
     kernels = EdgeKernels() if kernels is None else kernels
     gap, parameters, normal, _ = kernels.edge_3d(a[keep].T, b[keep].T, c[keep].T, d[keep].T, side[keep][None, :])
     gap, parameters, normal = gap[0], parameters.T, normal.T
-    on_both = (parameters >= 0.0).all(axis=1) & (parameters <= 1.0).all(axis=1) & (np.abs(gap) <= reach)
+    on_both = (parameters >= -AT_END).all(axis=1) & (parameters <= 1.0 + AT_END).all(axis=1) & (np.abs(gap) <= reach)
     keep = keep[on_both]
     return EdgeContact(pairs[keep], side[keep], gap[on_both], parameters[on_both], normal[on_both], keep)
 
@@ -460,7 +467,7 @@ class EdgeSlots:
                 g, st, _, _ = kernels.edge_3d(a[usable].T, b[usable].T, c[usable].T, d[usable].T,
                                               np.ones((1, int(usable.sum()))))
                 gap[usable], parameters[:, usable] = g[0], st
-            inside = ((parameters >= 0.0) & (parameters <= 1.0)).all(axis=0)
+            inside = ((parameters >= -AT_END) & (parameters <= 1.0 + AT_END)).all(axis=0)
             score = np.abs(gap) + np.where(inside, 0.0, np.inf)
             best = int(np.argmin(score)) if np.isfinite(score).any() else int(np.argmin(np.abs(gap)))
             edge[k], side[k] = others[best], 1.0 if gap[best] >= 0.0 else -1.0
