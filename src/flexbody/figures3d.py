@@ -191,8 +191,8 @@ def figure_snapshots(result: SimulationResult, grounds: Sequence | None = None) 
     path = np.einsum("tnd,n->td", result.positions, result.masses / result.masses.sum())
     ax.plot(*path.T, ":", color="0.5", lw=1.0, label="centre of mass")
     ax.legend(loc="upper right", fontsize=7)
-    fig.suptitle(f"{result.stats.get('scene', 'run')}: the body at {len(frames)} times; red particles are held "
-                 "by the ground", fontsize=10)
+    fig.suptitle(f"{result.stats.get('scene', 'run')}: the body at {len(frames)} time{'s' * (len(frames) != 1)}; "
+                 "red particles are held by the ground", fontsize=10)
     return fig
 
 
