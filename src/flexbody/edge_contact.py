@@ -19,11 +19,11 @@ of the arc, for edges lying nearly on a face).  That fixes the side
 leaves out pairs of edges whose lines pass close by without being the bodies' closest
 features (tested against inside tests of a convex body).
 
-Outside [0, 1] (beyond :data:`AT_END`) the closest points of the edges are an end: that is
-a vertex's contact with the other surface, not an edge's.  Parallel edges have no common normal (a face
-lying on a face is held by its vertices) and are left out, as are the edges inside a flat
-face (a triangulated box face's diagonal): an edge pressed onto such a face crosses its
-rim's edges, which are the contacts.
+Outside [0, 1] (beyond :data:`AT_END`) the closest points of the edges are an end: that
+is a vertex's contact with the other surface, not an edge's.  Parallel edges have no
+common normal (a face lying on a face is held by its vertices) and are left out, as are
+the edges inside a flat face (a triangulated box face's diagonal): an edge pressed onto
+such a face crosses its rim's edges, which are the contacts.
 """
 
 from __future__ import annotations
@@ -183,8 +183,8 @@ def edge_contacts(x: FloatArray, first: IntArray, first_faces: FloatArray, secon
                   kernels: EdgeKernels | None = None) -> EdgeContact:
     """The candidate ``pairs`` whose edges touch or cross within ``reach``: not parallel,
     neither inside a flat face (see :data:`FLAT`), the common normal in both edges' cones
-    (see the module docstring), their lines' closest points on both edges (s, t in [0, 1], to :data:`AT_END`)
-    and ``|gap| <= reach``.
+    (see the module docstring), their lines' closest points on both edges (s, t in [0, 1],
+    to :data:`AT_END`) and ``|gap| <= reach``.
 
     Parameters
     ----------
