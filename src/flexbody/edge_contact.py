@@ -235,7 +235,7 @@ class EdgeTerms(NamedTuple):
     d]``, ``[1 - s, s, -(1 - t), -t]`` (times ``normal`` (k, 3)); ``rate`` (k,) m/s;
     ``bias`` (k,) m/s^2, the gap acceleration's velocity term; ``margin`` (k,) m: how far
     the closest points are inside both edges (``min(s, 1 - s) |b - a|`` and ``min(t, 1 - t)
-    |d - c|``, the lesser, each ends' range widened by :data:`AT_END`), 0 where one reaches
+    |d - c|``, the lesser, each edge widened by :data:`AT_END` at both ends), 0 where one reaches
     AT_END beyond an end."""
 
     gap: FloatArray
