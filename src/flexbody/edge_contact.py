@@ -223,7 +223,7 @@ def edge_contacts(x: FloatArray, first: IntArray, first_faces: FloatArray, secon
     kernels = EdgeKernels() if kernels is None else kernels
     gap, parameters, normal, _ = kernels.edge_3d(a[keep].T, b[keep].T, c[keep].T, d[keep].T, side[keep][None, :])
     gap, parameters, normal = gap[0], parameters.T, normal.T
-    on_both = (parameters >= -AT_END).all(axis=1) & (parameters <= 1.0 + AT_END).all(axis=1) & (np.abs(gap) <= reach)
+    on_both = (_from_ends(parameters) >= 0.0).all(axis=1) & (np.abs(gap) <= reach)
     keep = keep[on_both]
     return EdgeContact(pairs[keep], side[keep], gap[on_both], parameters[on_both], normal[on_both], keep)
 
@@ -468,7 +468,7 @@ class EdgeSlots:
                 g, st, _, _ = kernels.edge_3d(a[usable].T, b[usable].T, c[usable].T, d[usable].T,
                                               np.ones((1, int(usable.sum()))))
                 gap[usable], parameters[:, usable] = g[0], st
-            inside = ((parameters >= -AT_END) & (parameters <= 1.0 + AT_END)).all(axis=0)
+            inside = (_from_ends(parameters) >= 0.0).all(axis=0)
             score = np.abs(gap) + np.where(inside, 0.0, np.inf)
             best = int(np.argmin(score)) if np.isfinite(score).any() else int(np.argmin(np.abs(gap)))
             edge[k], side[k] = others[best], 1.0 if gap[best] >= 0.0 else -1.0
@@ -612,8 +612,16 @@ def _inside_edges(x: FloatArray, first: IntArray, second: IntArray, s: FloatArra
     row released at the end itself, its point then within AT_END, was found and hit again
     at once, armed a tolerance lower each time: ten impacts in 1.5 us in a struck row)."""
     lengths = [np.linalg.norm(x[e[:, 1]] - x[e[:, 0]], axis=1) for e in (first, second)]
-    return np.minimum(np.minimum(s + AT_END, 1.0 + AT_END - s) * lengths[0],
-                      np.minimum(t + AT_END, 1.0 + AT_END - t) * lengths[1])
+    return np.minimum(_from_ends(s) * lengths[0], _from_ends(t) * lengths[1])
+
+
+def _from_ends(parameters: FloatArray) -> FloatArray:
+    """How far closest points' parameters (s or t, any shape) lie inside their edges, each
+    widened by :data:`AT_END` at both ends, as fractions of the edges (< 0: beyond), the same
+    shape: the one rule of where a pair is an edge contact (:func:`edge_contacts`,
+    :meth:`EdgeSlots.nearest`) and of a held one's margin (:func:`_inside_edges`)."""
+    parameters = np.asarray(parameters)
+    return np.minimum(parameters + AT_END, 1.0 + AT_END - parameters)
 
 
 def _common_normals(a: FloatArray, b: FloatArray, c: FloatArray, d: FloatArray) -> tuple[FloatArray, np.ndarray]:
