@@ -735,3 +735,31 @@ def test_cascades_of_rebounds_that_end_held_are_no_chattering():
         with pytest.raises(SimulationFailed, match=says) as failure:
             run_of(helds)
         assert failure.value.status == "chattering"
+
+
+@pytest.mark.parametrize("fall", [0.5, 0.923, 0.985])
+def test_a_cascade_of_rebounds_each_slower_than_the_last_is_no_chattering(fall):
+    """A rebound under a steady pull comes back at e times its last speed, and the Zeno
+    threshold ends that cascade: 60 such impacts within 1 ms, none held, run on while each
+    comes in at most ``CASCADE_FALL`` of the one before; a row that slows less is counted
+    whole, and one that stops slowing is counted from there."""
+    from flexbody.choices import CASCADE_FALL, CHATTER_IMPACTS
+    from flexbody.contact import Event
+    from flexbody.driver import SimulationFailed, _Run, _settings
+
+    scene = particle_scene([0.0, 0.0], [1.0, 0.0], restitution=0.5)
+
+    def run_of(speeds):
+        run = _Run(scene, assembled_model(scene, "numpy"), _settings(scene, {"backend": "numpy"}), None, 10**6)
+        for k, speed in enumerate(speeds):
+            t = k * 1e-5  # all within the window
+            run.check_guards(t, [Event(t, 0, "impact", -speed, False)])
+
+    assert fall < CASCADE_FALL
+    run_of(fall ** np.arange(60))
+    bound = CHATTER_IMPACTS + 1
+    with pytest.raises(SimulationFailed, match=f"{bound} in a row, none held, {bound} of them") as failure:
+        run_of((1.001 * CASCADE_FALL) ** np.arange(60))  # slowing, but less than a cascade
+    assert failure.value.status == "chattering"
+    with pytest.raises(SimulationFailed, match=f"{19 + bound} in a row, none held, {bound} of them"):
+        run_of(np.concatenate([fall ** np.arange(20), np.full(40, fall**19)]))  # 20 falling, then at one speed

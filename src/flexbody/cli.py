@@ -19,7 +19,7 @@ import sys
 import traceback
 import warnings
 
-from .choices import BACKENDS, CHATTER_IMPACTS, CHATTER_WINDOW, DEFAULT_MAX_WALL_TIME, FORMULATIONS, IMPACT_MODES, METHODS
+from .choices import BACKENDS, CASCADE_FALL, CHATTER_IMPACTS, CHATTER_WINDOW, DEFAULT_MAX_WALL_TIME, FORMULATIONS, IMPACT_MODES, METHODS
 from .errors import InputError
 
 EXIT_FAILED, EXIT_USAGE, EXIT_INTERRUPTED = 1, 2, 130
@@ -68,7 +68,10 @@ def _parser() -> argparse.ArgumentParser:
                           "no limit) with status too_slow and exit 1")
     run.add_argument("--chatter-impacts", type=int, metavar="N",
                      help=f"stop with status chattering where one particle impacts more than N (an integer >= 1) "
-                          f"times within {CHATTER_WINDOW * 1e3:g} ms (default: the scene's simulation.chatter_impacts, "
+                          f"times within {CHATTER_WINDOW * 1e3:g} ms, in a row or each held and released (a rebound "
+                          f"slower than {CASCADE_FALL:g} of the last is a Zeno cascade's, not counted; default: the "
+                          "scene's "
+                          "simulation.chatter_impacts, "
                           f"else {CHATTER_IMPACTS}); raise it where a burst of impacts ends (a pile settling)")
     run.add_argument("--quiet", action="store_true", help="no progress bar")
     run.add_argument("--vtk", action="store_true",

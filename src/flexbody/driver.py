@@ -25,7 +25,7 @@ from .compiled import CompiledPath
 from .constants import (EVENT, IMPACT, LIFTOFF, NON_FINITE, SINGULAR, SLIDING, SLIP, STEP_COLLAPSE, STICK,
                         TOO_SLOW, VELOCITY_ROUNDOFF, ZENO_RISE)
 from .assembly import AssembledModel
-from .choices import CHATTER_WINDOW
+from .choices import CASCADE_FALL, CHATTER_WINDOW
 from .contact import FREE, HELD, PUSHED, Event, Phases, UnsettledInstant, resolve
 from .contact_problems import UNALIGNED
 from .coupled import POISSON, CoupledImpactError, project_held
@@ -92,6 +92,14 @@ class SimulationFailed(Exception):
     def __init__(self, status: str, message: str) -> None:
         super().__init__(message)
         self.status, self.message = status, message
+
+
+def _unending(recent: deque[tuple[float, float, bool]], in_a_row: int) -> int:
+    """Of the last ``in_a_row`` impacts of ``recent`` (time, normal velocity, held), the
+    first and those that came in no slower than :data:`CASCADE_FALL` of the one before:
+    the rebounds a converging cascade does not explain."""
+    speeds = [abs(v) for _, v, _ in list(recent)[len(recent) - in_a_row :]]
+    return min(len(speeds), 1) + sum(b > CASCADE_FALL * a for a, b in zip(speeds, speeds[1:]))
 
 
 def _non_finite(t: float) -> tuple[str, str]:
@@ -977,10 +985,12 @@ class _Run:
             held = [h for _, _, h in recent]
             in_a_row = held[::-1].index(True) if True in held else len(held)  # since the last hold
             bound = self.settings.chatter_impacts
-            if max(in_a_row, sum(held)) > bound:
+            unending = _unending(recent, in_a_row)
+            if max(unending, sum(held)) > bound:
                 particle = int(self.model.contacts[e.contact][0])
                 speed = max(abs(v) for _, v, _ in list(recent)[-5:])
-                how = (f"{in_a_row} in a row, none held" if in_a_row > bound else
+                how = (f"{in_a_row} in a row, none held, {unending} of them no slower than {CASCADE_FALL:g} of the "
+                       "one before" if unending > bound else
                        f"held and released again {sum(held)} times")
                 raise SimulationFailed(
                     "chattering",
