@@ -174,8 +174,8 @@ def test_candidates_hold_every_pair_within_reach(rng):
 
 def test_an_edge_across_two_rims_is_held_by_two_of_its_rows():
     """A bar's bottom edges (along x) lie across a cube's two top rims (along y, at x = 0
-    and 1), 1 cm above: each bottom edge has three rows, the first takes one rim, the
-    second the other, both 1 cm apart, the third none; a row whose rules find no edge (its
+    and 1), 1 cm above: each bottom edge has ``PER_EDGE`` rows, the first takes one rim,
+    the second the other, both 1 cm apart, the others none; a row whose rules find no edge (its
     siblings holding the only ones in reach) is held against the nearest line, on the side
     that keeps it apart."""
     from flexbody.edge_contact import EdgeSlots
@@ -186,7 +186,7 @@ def test_an_edge_across_two_rims_is_held_by_two_of_its_rows():
     elements = np.vstack([hull(bar), hull(CUBE) + 8])
     element_body = np.repeat([0, 1], [len(hull(bar)), len(hull(CUBE))])
     slots = EdgeSlots(elements, element_body, [(0, 1)], x)
-    assert slots.n_primary == 12 and len(slots) == 36  # the bar's 12 edges, three times
+    assert slots.n_primary == 12 and len(slots) == 12 * EdgeSlots.PER_EDGE  # the bar's 12 edges, PER_EDGE times
     bottom = [r for r in range(12) if np.allclose(x[slots.edges[slots.own[r]], 2], 1.0 + h)
               and np.ptp(x[slots.edges[slots.own[r]], 0]) == 3.0]
     assert len(bottom) == 2
@@ -194,13 +194,14 @@ def test_an_edge_across_two_rims_is_held_by_two_of_its_rows():
     for row in bottom:
         rows = slots.siblings(np.array([row]))[0]
         gap, edge, side = slots.closest(x, rows, free, reach=0.05)
-        np.testing.assert_allclose(gap, [h, h, 0.05], rtol=1e-12)  # the third: none within reach
-        assert edge[2] == -1
+        np.testing.assert_allclose(gap, [h, h] + [0.05] * (EdgeSlots.PER_EDGE - 2), rtol=1e-12)  # the others: none
+        assert (edge[2:] == -1).all()
         rims = x[slots.edges[edge[:2]]]
         assert sorted(rims[:, 0, 0].tolist()) == [0.0, 1.0] and np.allclose(rims[:, :, 2], 1.0)
         held = free.copy()
-        held[row] = edge[0]  # the row holds the first rim: the second finds the other, the third none
-        np.testing.assert_array_equal(slots.closest(x, rows[1:], held, reach=0.05)[1], [edge[1], -1])
+        held[row] = edge[0]  # the row holds the first rim: the second finds the other, the others none
+        np.testing.assert_array_equal(slots.closest(x, rows[1:], held, reach=0.05)[1],
+                                      [edge[1]] + [-1] * (EdgeSlots.PER_EDGE - 2))
         held[rows[1]] = edge[1]
         assert slots.closest(x, rows[2:], held, reach=0.05)[1][0] == -1
         # the second's rim taken: the row with no strict answer is held on the nearest line, apart
@@ -233,11 +234,46 @@ def test_an_edge_across_a_strip_of_two_triangles_is_held_by_its_three_rows():
     assert sorted(ridge.tolist()) == [8, 9]  # (0, 0, 0) to (1, 1, 0)
     assert gap[0] == pytest.approx(h, rel=1e-12)
     assert gap[1] == pytest.approx(gap[2], rel=1e-12) and gap[1] == pytest.approx(h + 0.8 * drop, rel=1e-3)
-    assert len(set(edge.tolist())) == 3
+    assert len(set(edge[:3].tolist())) == 3 and (edge[3:] == -1).all()  # the ridge and two rims, no more
     held = free.copy()
     held[row] = slots.encode(edge[:1], side[:1])[0]
     assert sorted(slots.closest(x, rows[1:], held, reach=0.05)[1].tolist()) == sorted(edge[1:].tolist())
 
+
+
+def test_an_edge_across_a_face_of_two_squares_has_a_row_for_each_of_its_five_lines():
+    """A bar's bottom edge lies across a flexible box's face of two squares (a box three
+    particles long), bent a hair outward along all its lines (a ridge along the middle
+    line, each square a hair twisted): the edge crosses five lines, the two rims, the
+    middle line and the two diagonals, each an edge contact.  Its rows take all five, the
+    nearest first; held on three, two rows are still free, each watching one of the other
+    two (with three rows none watched the fourth: in a fuzzed bridge of boxes the middle
+    line went 3.9e-6 m through an edge held on a rim and both diagonals)."""
+    from flexbody.edge_contact import EdgeSlots
+
+    drop, twist, h = 0.01, 0.002, 1e-3
+    face = np.array([[x, y, -drop * (x - 1.0) ** 2 + twist * x * y] for x in (0.0, 1.0, 2.0) for y in (0.0, 1.0)])
+    block = np.vstack([face, [[1.0, 0.5, -1.0]]])  # closed by an apex below
+    top = float(face[:, 2].max())
+    bar = np.array([[x, y, top + h + z] for x in (-1.0, 3.0) for y in (0.4, 0.6) for z in (0.0, 0.2)])
+    x = np.vstack([bar, block])
+    elements = np.vstack([hull(bar), hull(block) + 8])
+    slots = EdgeSlots(elements, np.repeat([0, 1], [len(hull(bar)), len(hull(block))]), [(0, 1)], x, deforming={1})
+    row = next(r for r in range(slots.n_primary) if np.allclose(x[slots.edges[slots.own[r]], 1], 0.4)
+               and np.allclose(x[slots.edges[slots.own[r]], 2], top + h))
+    rows = slots.siblings(np.array([row]))[0]
+    # the face's lines the edge crosses seen from above: every edge of the face (not the apex's)
+    lines = {tuple(e) for e in slots.edges[slots.edge_body == 1].tolist() if max(e) < 8 + 6}
+    crossed = {e for e in lines if (x[e[0], 1] - 0.4) * (x[e[1], 1] - 0.4) < 0.0}
+    assert len(crossed) == 5
+    free = np.full(len(slots), -1)
+    gap, edge, side = slots.closest(x, rows, free, reach=0.05)
+    found = [tuple(e) for e in slots.edges[edge[:5]].tolist()]
+    assert set(found) == crossed and (gap[:5] > 0.0).all() and (np.diff(gap[:5]) >= 0.0).all()
+    held = free.copy()
+    held[rows[:3]] = slots.encode(edge[:3], side[:3])
+    rest = slots.closest(x, rows[3:5], held, reach=0.05)[1]
+    assert sorted(rest.tolist()) == sorted(edge[3:5].tolist())
 
 def test_an_edge_lying_nearly_on_a_face_crosses_the_rim_as_an_edge_contact():
     """An edge laid over a cube's top front rim 2 degrees off lying flat on the top face:

@@ -358,6 +358,29 @@ def test_a_fuzzed_stack_of_boxes_with_edge_contacts_keeps_its_edges_apart():
     assert r.stats["energy_drift_relative"] < 1e-6  # measured 1.8e-8
 
 
+@pytest.mark.slow  # flexible boxes: the tower ~10 s, the bridge ~30 s
+@pytest.mark.parametrize("name", ["fuzz_rim_across_two_quads", "fuzz_bridge_middle_line"])
+def test_an_edge_across_a_flexible_face_of_two_squares_has_a_row_for_each_line(name):
+    """Two fuzzed scenes of flexible boxes (`edges = true`) whose edge lies across another
+    box's face of two squares, which has five lines (two rims, the line between the squares,
+    two diagonals), each a contact where it creases outward.  The edge had three rows, all
+    held on three of them, and none watched the next.  A tower of three: the bottom box's
+    top rim [6, 7] held on the middle box's [12, 15], [12, 16] and [13, 16] from t = 0.0676
+    s; the other diagonal [13, 17] (s = 0.977, creased 7.4e-3 rad) reached gap 0 at 0.0788 s
+    with no row to fire, 7.7e-6 m through unseen, then 8.8e-6 m of penetration and a
+    put-back as a freed row found it.  A bridge of five bodies: the rim [34, 35] held on a
+    rim and both diagonals of the top box's bottom; its middle line [37, 40] turned from a
+    valley to a ridge as the edge reached it (gap and crease pass 0 together) and went
+    3.9e-6 m through.  With five rows the fourth fires there."""
+    r = flexbody.simulate(flexbody.load_scene(reference_table(name)), max_wall_time=300.0)
+    assert r.status == "success", r.message
+    assert r.stats["events"] > 500  # measured 819 and 1 442
+    assert r.stats["max_edge_crossing_m"] == 0.0  # 7.7e-6 m and 4.4e-7 m before
+    assert r.stats["max_penetration_m"] < 1e-9  # 8.8e-6 m and 3.9e-6 m before; measured 2.3e-12 and 1.2e-11 m
+    assert r.stats["max_put_back_m"] < 1e-9  # as the penetration before
+    assert r.stats["energy_drift_relative"] < 1e-6  # measured 3.8e-9 and 5.8e-9
+
+
 @pytest.mark.slow  # a rigid box derived whole (cold cache); the run ~4 s
 def test_a_flexible_boxs_corner_handed_across_a_diagonal_still_slides_off_the_rim():
     """A fuzz's scene (tests/reference/fuzz_box_corner_over_rim.json: a flexible 3 x 2 x 2

@@ -200,8 +200,9 @@ class BodyContactModel(Model):
         self.allowed = allowed
         x0 = scene.initial_positions()
         #: Then the edge contacts of the pairs with ``edges = true`` (3D, frictionless): each
-        #: surface edge that may touch of a pair's first body against the second body's edges, three
-        #: times (``EdgeSlots``), from slot ``first_edge`` on; their particle is the edge's first end.
+        #: surface edge that may touch of a pair's first body against the second body's edges,
+        #: ``EdgeSlots.PER_EDGE`` times, from slot ``first_edge`` on; their particle is the edge's
+        #: first end.
         self.first_edge = len(self.slot_particle)
         pairs = [tuple(c.bodies) for c in scene.contacts if c.edges]  # 3D, frictionless (the scene checks)
         flexible = {k for k, body in enumerate(scene.bodies) if not body.rigid}

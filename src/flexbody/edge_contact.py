@@ -249,11 +249,17 @@ class EdgeTerms(NamedTuple):
 class EdgeSlots:
     """The edge contacts of a 3D scene: ``PER_EDGE`` rows for each convex surface edge of
     the first body of a pair that may touch against the second body's convex edges (one
-    way round: an edge pair is one contact).  Three, because one edge can lie across
+    way round: an edge pair is one contact).  Several, because one edge can lie across
     several edges of the other body at once: a bar's edge across a block's two rims, an
     edge across a strip of two triangles (their two outer edges and, a hair higher, the
     diagonal between them: in a pile of 100-particle spheres, with two rows, that diagonal
-    went 2e-9 m through the edge held on the other two).
+    went 2e-9 m through the edge held on the other two).  Five, because an edge lying across
+    a flexible face meets every line of it that creases outward: a face of two squares
+    (a box three particles long) has two rims, the line between the squares and two
+    diagonals, each of which the edge crosses.  A row held on each of them leaves none free
+    to watch the next: with three rows, in a fuzzed bridge of five boxes, an edge held on a
+    rim and both diagonals of such a face went 3.9e-6 m through the middle line as it
+    turned from a valley to a ridge (its gap and its crease pass 0 together), unwatched.
 
     Parameters
     ----------
@@ -287,7 +293,7 @@ class EdgeSlots:
         *siblings*, ranked in that order.
     """
 
-    PER_EDGE = 3
+    PER_EDGE = 5
 
     def __init__(self, elements: IntArray, element_body: IntArray, pairs: list[tuple[int, int]],
                  x0: FloatArray, backend: str = "numpy", deforming: Collection[int] = ()) -> None:
