@@ -763,3 +763,6 @@ def test_a_cascade_of_rebounds_each_slower_than_the_last_is_no_chattering(fall):
     assert failure.value.status == "chattering"
     with pytest.raises(SimulationFailed, match=f"{19 + bound} in a row, none held, {bound} of them"):
         run_of(np.concatenate([fall ** np.arange(20), np.full(40, fall**19)]))  # 20 falling, then at one speed
+    scene = particle_scene([0.0, 0.0], [1.0, 0.0], restitution=1.0)  # elastic: the message says why it lasts
+    with pytest.raises(SimulationFailed, match="; e = 1 at this contact takes too little"):
+        run_of(np.full(60, 1e-3))

@@ -990,8 +990,10 @@ class _Run:
                 particle = int(self.model.contacts[e.contact][0])
                 speed = max(abs(v) for _, v, _ in list(recent)[-5:])
                 how = (f"{in_a_row} in a row, none held, {unending} of them no slower than {CASCADE_FALL:g} of the "
-                       "one before" if unending > bound else
-                       f"held and released again {sum(held)} times")
+                       "one before" if unending > bound else f"held and released again {sum(held)} times")
+                e_here = float(self.restitution[e.contact])
+                if unending > bound and e_here >= CASCADE_FALL:  # an elastic rattle: no cascade ends it
+                    how += f"; e = {e_here:g} at this contact takes too little of each rebound for it to die out"
                 raise SimulationFailed(
                     "chattering",
                     f"particle {particle} impacted {len(recent)} times within {CHATTER_WINDOW * 1e3:g} ms up to "
