@@ -70,9 +70,8 @@ def _parser() -> argparse.ArgumentParser:
                      help=f"stop with status chattering where one particle impacts more than N (an integer >= 1) "
                           f"times within {CHATTER_WINDOW * 1e3:g} ms, in a row or each held and released (a rebound "
                           f"slower than {CASCADE_FALL:g} of the last is a Zeno cascade's, not counted; default: the "
-                          "scene's "
-                          "simulation.chatter_impacts, "
-                          f"else {CHATTER_IMPACTS}); raise it where a burst of impacts ends (a pile settling)")
+                          f"scene's simulation.chatter_impacts, else {CHATTER_IMPACTS}); raise it where a burst of "
+                          "impacts ends (a pile settling)")
     run.add_argument("--quiet", action="store_true", help="no progress bar")
     run.add_argument("--vtk", action="store_true",
                      help="also write DIR/vtk/: the run as a ParaView time series (as flexbody export DIR does)")
