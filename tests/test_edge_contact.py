@@ -453,3 +453,61 @@ def test_a_crossing_counts_how_deep_the_edges_points_are_inside_the_other_body()
     line_gap, depth = crossing(x, 8, lambda e: np.allclose(e[:, 0], 1.0) and np.allclose(e[:, 2], 1.0))
     assert line_gap == pytest.approx(-d, rel=1e-6)
     assert abs(depth) < 1e-15 and depth > line_gap
+
+
+def _corner_under_a_wedge(d: float, bottom_slope: float = 1e-3):
+    """Two boxes on one ground (z = 0), as a fuzzed leaning box met another: a box A (x in
+    [0, 1], y in [-1, 0]) whose vertical edge at its corner (0, 0, 0) leans 3e-4 rad toward
+    -x, and a box B whose bottom edge (along y, from y = -2 to 1, at z = 0) lies at x = d
+    (> 0: d past A's side face x = 0), its bottom face rising toward -x by ``bottom_slope``,
+    its side face at that edge leaning back 3e-3 rad past the vertical.  Returns the
+    positions, the edge slots (A's edges against B's), A's vertical corner edge's row and
+    B's bottom edge."""
+    from flexbody.edge_contact import EdgeSlots
+
+    lean, back, width, height = -3e-4, 3e-3, 0.5, 0.5
+    a = np.array([[x + lean * z, y, z] for x in (0.0, 1.0) for y in (-1.0, 0.0) for z in (0.0, 1.0)])
+    b = np.array([[d - w - back * z, y, bottom_slope * w + z] for w in (0.0, width) for y in (-2.0, 1.0)
+                  for z in (0.0, height)])
+    x = np.vstack([a, b])
+    elements = np.vstack([hull(a), hull(b) + 8])
+    slots = EdgeSlots(elements, np.repeat([0, 1], [len(hull(a)), len(hull(b))]), [(0, 1)], x)
+    corner = int(np.flatnonzero(np.all(x[:8] == [0.0, 0.0, 0.0], axis=1))[0])
+    row = next(r for r in range(slots.n_primary) if corner in slots.edges[slots.own[r]]
+               and np.ptp(x[slots.edges[slots.own[r]], 2]) == 1.0)
+    bottom = next(e for e in range(len(slots.edges)) if slots.edge_body[e] == 1
+                  and np.allclose(x[slots.edges[e]], [[d, -2.0, 0.0], [d, 1.0, 0.0]]))
+    return x, slots, row, bottom
+
+
+def test_a_corner_passing_under_a_wedge_keeps_the_edge_contact_past_its_end():
+    """A box's bottom edge pressed sideways onto another box's corner, both on one ground
+    (tests/reference/fuzz_leaning_box_corner_under_edge.json): the corner's vertical edge and
+    that bottom edge meet at the corner, and once crossed (by d) their lines' closest point
+    is below the corner by d times the vertical edge's lean, past its end (3e-9 of it for
+    d = 1e-5 m, beyond AT_END).  The corner passes beneath the wedge (its bottom face rises
+    away), outside it, while the vertical edge goes through the wedge: no vertex's contact
+    sees the crossing, and the pair reads it, gap -d.  Before, the pair was dropped past
+    the end and the edges crossed unseen (7.2e-5 m).  Apart by d, the pair reads +d (its
+    closest point on the edge); with the corner inside the wedge deeper than half the
+    crossing (its bottom face dipping 45 deg below the ground: 0.71 d), past the end the
+    crossing is the corner's, no edge contact."""
+    from flexbody.edge_contact import AT_END
+
+    for d in (1e-5, 1e-4):
+        x, slots, row, bottom = _corner_under_a_wedge(d)
+        free = np.full(len(slots), -1)
+        gap, edge, side = slots.closest(x, slots.siblings(np.array([row]))[0], free, reach=0.05)
+        assert edge[0] == bottom
+        assert gap[0] == pytest.approx(-d, rel=1e-3)
+        parameters = slots.kernels.edge_3d(*slots._ends(x, slots.points(np.array([row]), slots.encode(edge[:1], side[:1])),
+                                                        slots.encode(edge[:1], side[:1])))[1]
+        corner = int(np.flatnonzero(np.all(x[:8] == 0.0, axis=1))[0])
+        s = parameters[0, 0] if slots.edges[slots.own[row], 0] == corner else 1.0 - parameters[0, 0]
+        assert -s > AT_END  # past the corner's end of the edge
+    x, slots, row, bottom = _corner_under_a_wedge(-1e-5)
+    gap, edge, _ = slots.closest(x, np.array([row]), np.full(len(slots), -1), reach=0.05)
+    assert edge[0] == bottom and gap[0] == pytest.approx(1e-5, rel=1e-3)
+    x, slots, row, bottom = _corner_under_a_wedge(1e-5, bottom_slope=-1.0)  # the corner 0.71 d inside B
+    gap, edge, _ = slots.closest(x, slots.siblings(np.array([row]))[0], np.full(len(slots), -1), reach=0.05)
+    assert bottom not in edge.tolist()

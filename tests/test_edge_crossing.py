@@ -381,6 +381,49 @@ def test_an_edge_across_a_flexible_face_of_two_squares_has_a_row_for_each_line(n
     assert r.stats["energy_drift_relative"] < 1e-6  # measured 3.8e-9 and 5.8e-9
 
 
+@pytest.mark.slow  # two flexible boxes to 0.3 s, ~3 s
+def test_a_leaning_boxs_bottom_edge_passing_over_a_corner_on_the_ground_crosses_no_edge():
+    """A fuzz's scene (tests/reference/fuzz_leaning_box_corner_under_edge.json: a flexible
+    box b1 tilted 0.053 rad leaning on another, b0, both on the ground, `edges = true`).
+    b1's bottom edge [9, 11] slides onto b0's bottom corner 2 as b1 turns upright; the edge
+    contact of b0's vertical corner edge [2, 6] with it has its closest point at the corner,
+    and its gap passes 0 at t = 0.0282 s as that point passes the corner (s is the gap times
+    the edge's lean): one step later s = -2.7e-8, past AT_END, and the pair was no contact.
+    The corner passes beneath b1's bottom face (outside b1 by 1e-9 m) while [2, 6] goes
+    through b1's side face: no vertex contact saw it, 7.2e-5 m crossed at 0.03 s, 7.4e-4 m
+    (and 2.1e-4 m inside) at 0.3 s.  A crossed pair past one edge's end whose vertex there is
+    less than half as deep in the other body as the lines cross, its edge through one of the
+    other edge's triangles, the other's closest point inside it by the depth, is an edge
+    contact (EdgeSlots._past_an_end): the row fires at the corner."""
+    r = flexbody.simulate(flexbody.load_scene(reference_table("fuzz_leaning_box_corner_under_edge")), t_end=0.3,
+                          max_wall_time=120.0)
+    assert r.status == "success", r.message
+    assert r.stats["max_edge_crossing_m"] == 0.0  # 7.4e-4 m before
+    assert r.stats["max_penetration_m"] < 1e-9  # 2.1e-4 m before; measured 4.0e-12 m
+    assert r.stats["max_put_back_m"] < 1e-9
+    assert not r.stats["warnings"]
+    assert r.stats["energy_drift_relative"] < 1e-6  # measured 4.5e-8
+
+
+@pytest.mark.slow  # two flexible boxes, ~2 s
+def test_a_struck_boxs_corner_at_the_next_ones_rim_on_the_ground_crosses_no_edge():
+    """A tenth fuzz's struck row (tests/reference/fuzz_row_corner_under_rim.json, cut to
+    0.027 s: two flexible boxes side by side on the ground, `edges = true`): b0's bottom
+    corner stands at b1's bottom rim [40, 44]; the edge row of b0's vertical corner edge
+    [11, 23] held on that rim with its closest point at the corner was released at 0.02499
+    s, and from then on the closest point lay just past the corner (beyond AT_END): the
+    pair was no contact while the lines crossed, 5.2e-5 m by 0.02582 s, unwatched; held
+    again at 0.02668 s and put back 2.05e-4 m (drift 5.4e-4).  Past the end, a crossed pair
+    whose vertex is outside the other body is still the edges' contact (as the leaning
+    box's above)."""
+    r = flexbody.simulate(flexbody.load_scene(reference_table("fuzz_row_corner_under_rim")), max_wall_time=120.0)
+    assert r.status == "success", r.message
+    assert r.stats["max_edge_crossing_m"] == 0.0  # 7.9e-5 m before
+    assert r.stats["max_put_back_m"] < 1e-9  # 2.05e-4 m before; measured 0
+    assert r.stats["max_penetration_m"] < 1e-9  # measured 3.6e-12 m
+    assert r.stats["energy_drift_relative"] < 1e-6  # 5.4e-4 before; measured 3.5e-9
+
+
 @pytest.mark.slow  # a rigid box derived whole (cold cache); the run ~4 s
 def test_a_flexible_boxs_corner_handed_across_a_diagonal_still_slides_off_the_rim():
     """A fuzz's scene (tests/reference/fuzz_box_corner_over_rim.json: a flexible 3 x 2 x 2

@@ -20,8 +20,11 @@ leaves out pairs of edges whose lines pass close by without being the bodies' cl
 features (tested against inside tests of a convex body).
 
 Outside [0, 1] (beyond :data:`AT_END`) the closest points of the edges are an end: that
-is a vertex's contact with the other surface, not an edge's.  Parallel edges have no
-common normal (a face lying on a face is held by its vertices) and are left out, as are
+is a vertex's contact with the other surface, not an edge's; except for a crossed pair
+whose vertex at that end is less than half as deep in the other body as the lines cross
+while its edge passes through one of the other edge's triangles, the other's closest point
+inside it by the depth (:meth:`EdgeSlots._past_an_end`: no vertex contact sees that
+crossing).  Parallel edges have no common normal (a face lying on a face is held by its vertices) and are left out, as are
 the edges inside a flat face (a triangulated box face's diagonal): an edge pressed onto
 such a face crosses its rim's edges, which are the contacts.
 """
@@ -180,7 +183,7 @@ class EdgeKernels:
 
 def edge_contacts(x: FloatArray, first: IntArray, first_faces: FloatArray, second: IntArray,
                   second_faces: FloatArray, pairs: IntArray, reach: float,
-                  kernels: EdgeKernels | None = None) -> EdgeContact:
+                  kernels: EdgeKernels | None = None, past_an_end: bool = False) -> EdgeContact:
     """The candidate ``pairs`` whose edges touch or cross within ``reach``: not parallel,
     neither inside a flat face (see :data:`FLAT`), the common normal in both edges' cones
     (see the module docstring), their lines' closest points on both edges (s, t in [0, 1],
@@ -200,6 +203,11 @@ def edge_contacts(x: FloatArray, first: IntArray, first_faces: FloatArray, secon
         m: farther pairs are left out.
     kernels : EdgeKernels, optional
         The kernels to evaluate (default: NumPy's).
+    past_an_end : bool
+        Keep also the crossed pairs (gap < 0) whose closest point lies beyond an end of one
+        edge (beyond :data:`AT_END`) and within both ends of the other: candidates for
+        :meth:`EdgeSlots.closest`, which keeps those no vertex contact takes over
+        (:meth:`EdgeSlots._past_an_end`).
 
     Returns
     -------
@@ -223,7 +231,11 @@ def edge_contacts(x: FloatArray, first: IntArray, first_faces: FloatArray, secon
     kernels = EdgeKernels() if kernels is None else kernels
     gap, parameters, normal, _ = kernels.edge_3d(a[keep].T, b[keep].T, c[keep].T, d[keep].T, side[keep][None, :])
     gap, parameters, normal = gap[0], parameters.T, normal.T
-    on_both = (_from_ends(parameters) >= 0.0).all(axis=1) & (np.abs(gap) <= reach)
+    within = _from_ends(parameters) >= 0.0
+    on_both = within.all(axis=1)
+    if past_an_end:  # crossed with the closest point past one end: the caller decides
+        on_both |= within.any(axis=1) & (gap < 0.0)
+    on_both &= np.abs(gap) <= reach
     keep = keep[on_both]
     return EdgeContact(pairs[keep], side[keep], gap[on_both], parameters[on_both], normal[on_both], keep)
 
@@ -419,14 +431,19 @@ class EdgeSlots:
         creased = self._convex_now(x, normals, mine) & self._convex_now(x, normals, other)
         which, mine, other = which[creased], mine[creased], other[creased]
         found = edge_contacts(x, self.edges, normals, self.edges, normals, np.column_stack([mine, other]), reach,
-                              self.kernels)
+                              self.kernels, past_an_end=not loose)
         which = which[found.index]
         # loosely, a pair within DEEP_CROSSING slacks of touching: the row fired at gap 0, and a
         # deeper one is no contact, however its lines cross (measured: two boxes side by side,
         # corners coincident: a row given an edge 0.1 m off and put back onto it by that)
-        real = (np.abs(found.gap) <= DEEP_CROSSING * 1e-6 * reach if loose
-                else self._crossing_inside(x, found, 1e-6 * reach))
-        found = EdgeContact(*(getattr(found, f)[real] for f in ("pair", "side", "gap", "parameters", "normal", "index")))
+        if loose:
+            real = np.abs(found.gap) <= DEEP_CROSSING * 1e-6 * reach
+        else:
+            past = ~(_from_ends(found.parameters) >= 0.0).all(axis=1)
+            real = np.empty(len(past), bool)
+            real[~past] = self._crossing_inside(x, _subset(found, ~past), 1e-6 * reach)
+            real[past] = self._past_an_end(x, _subset(found, past), 1e-6 * reach)
+        found = _subset(found, real)
         which = which[real]
         # each row's entries: its edge's contacts, in the order found, less those its siblings hold
         grouped = np.argsort(which, kind="stable")
@@ -546,6 +563,51 @@ class EdgeSlots:
         out[crossed] = inside
         return out
 
+    def _past_an_end(self, x: FloatArray, found: EdgeContact, slack: float) -> np.ndarray:
+        """Which of the crossed ``found`` pairs whose closest point lies past an end of one
+        edge (beyond :data:`AT_END`) are still an edge contact, bool (k,): crossed deeper
+        than half the inside test's ``slack`` (m; round-off), the vertex at that end less
+        than half as deep inside the other edge's body as the lines cross (deeper, the
+        crossing is the vertex's), the other edge's closest point inside that edge by the
+        crossing's depth, and the edge through one of the other edge's two triangles.
+
+        Past an end the crossing is normally the vertex's, a particle's contact with the
+        other surface.  Not where the vertex is outside the other body while its edge is
+        through the other edge's faces: two boxes on one ground, one's bottom edge pressing
+        sideways onto the other's corner, the second box's wedge tilted up by 4e-4 rad.  The
+        corner's vertical edge and that bottom edge meet at the corner, both on the ground;
+        once crossed, their lines' closest point is below the corner by the gap times the
+        vertical edge's tilt (-2.7e-8 of the edge for 6e-7 m), the corner passes beneath the
+        wedge (outside it by 1e-9 m) and its edge goes through the wedge's side face: no
+        vertex's contact sees it (measured: 7.2e-5 m crossed, unseen; a pair taken only
+        within AT_END is lost one step after its gap passes 0, with no sign change to find).
+        The lines' gap is the vertex's distance to the other edge's line along the common
+        normal: the pair's contact is continuous through the end."""
+        out = np.zeros(len(found.gap), bool)
+        deep = np.flatnonzero(found.gap < -0.5 * slack)  # shallower: round-off (corners coincident)
+        if not len(deep):
+            return out
+        gap, pair = found.gap[deep], found.pair[deep]
+        s, t = found.parameters[deep].T
+        first_past = _from_ends(s) < 0.0  # else t is past an end of the second edge
+        # the vertex at that end against the other body's surface (clamped parameters): less
+        # than half as deep as the lines cross, or the crossing is the vertex's
+        ends = self._point_gaps(x, pair, np.clip(s, 0.0, 1.0), np.clip(t, 0.0, 1.0))
+        outside = np.where(first_past, ends[:, 0], ends[:, 1]) > 0.5 * gap
+        # the other edge's closest point inside it by the crossing's depth (nearer its end the
+        # crossing is a corner's on a corner: two boxes' coincident corners read their lines
+        # 9e-6 m crossed, their edges 1e-13 m), as a deep crossing's (_crossing_inside)
+        first, second = self.edges[pair[:, 0]], self.edges[pair[:, 1]]
+        lengths = [np.linalg.norm(x[e[:, 1]] - x[e[:, 0]], axis=1) for e in (first, second)]
+        other_inside = np.where(first_past, _from_ends(t) * lengths[1], _from_ends(s) * lengths[0]) >= -gap
+        # the edge through one of the other edge's two triangles
+        edge = np.where(first_past[:, None], first, second)
+        triangles = x[self._elements[self.edge_faces[np.where(first_past, pair[:, 1], pair[:, 0])]]]  # (k, 2, 3, 3)
+        through = (segments_through(x[edge[:, 0]], x[edge[:, 1]], triangles[:, 0])
+                   | segments_through(x[edge[:, 0]], x[edge[:, 1]], triangles[:, 1]))
+        out[deep] = outside & other_inside & through
+        return out
+
     def _point_gaps(self, x: FloatArray, pair: IntArray, s: FloatArray, t: FloatArray) -> FloatArray:
         """The signed distances of the closest points (parameters ``s`` on the first edge and
         ``t`` on the second, (k,) each) of edge ``pair`` (k, 2) to the other edge's body's
@@ -611,6 +673,11 @@ class EdgeSlots:
         return EdgeTerms(gap[0], coefficients, normal.T, rate[0], bias[0], margin)
 
 
+def _subset(found: EdgeContact, keep: np.ndarray) -> EdgeContact:
+    """The pairs of ``found`` that ``keep`` (bool or rows) selects."""
+    return EdgeContact(*(getattr(found, f)[keep] for f in ("pair", "side", "gap", "parameters", "normal", "index")))
+
+
 def _inside_edges(x: FloatArray, first: IntArray, second: IntArray, s: FloatArray, t: FloatArray) -> FloatArray:
     """How far the closest points at ``s`` on edges ``first`` and ``t`` on ``second`` ((k, 2)
     particle indices each) are inside both edges (m, the lesser), shape (k,): 0 at
@@ -625,7 +692,9 @@ def _from_ends(parameters: FloatArray) -> FloatArray:
     """How far closest points' parameters (s or t, any shape) lie inside their edges, each
     widened by :data:`AT_END` at both ends, as fractions of the edges (< 0: beyond), the same
     shape: the one rule of where a pair is an edge contact (:func:`edge_contacts`,
-    :meth:`EdgeSlots.nearest`) and of a held one's margin (:func:`_inside_edges`)."""
+    :meth:`EdgeSlots.nearest`) and of a held one's margin (:func:`_inside_edges`); a crossed
+    pair past an end is one only where no vertex contact takes it (:meth:`EdgeSlots._past_an_end`:
+    held, its gap is 0, and its closest point is back at the end)."""
     parameters = np.asarray(parameters)
     return np.minimum(parameters + AT_END, 1.0 + AT_END - parameters)
 
