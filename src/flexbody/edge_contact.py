@@ -24,9 +24,10 @@ is a vertex's contact with the other surface, not an edge's; except for a crosse
 whose vertex at that end is less than half as deep in the other body as the lines cross
 while its edge passes through one of the other edge's triangles, the other's closest point
 inside it by the depth (:meth:`EdgeSlots._past_an_end`: no vertex contact sees that
-crossing).  Parallel edges have no common normal (a face lying on a face is held by its vertices) and are left out, as are
-the edges inside a flat face (a triangulated box face's diagonal): an edge pressed onto
-such a face crosses its rim's edges, which are the contacts.
+crossing).  Parallel edges have no common normal (a face lying on a face is held by its
+vertices) and are left out, as are the edges inside a flat face (a triangulated box face's
+diagonal): an edge pressed onto such a face crosses its rim's edges, which are the
+contacts.
 """
 
 from __future__ import annotations
@@ -693,8 +694,9 @@ def _from_ends(parameters: FloatArray) -> FloatArray:
     widened by :data:`AT_END` at both ends, as fractions of the edges (< 0: beyond), the same
     shape: the one rule of where a pair is an edge contact (:func:`edge_contacts`,
     :meth:`EdgeSlots.nearest`) and of a held one's margin (:func:`_inside_edges`); a crossed
-    pair past an end is one only where no vertex contact takes it (:meth:`EdgeSlots._past_an_end`:
-    held, its gap is 0, and its closest point is back at the end)."""
+    pair past an end is one only where no vertex contact takes it
+    (:meth:`EdgeSlots._past_an_end`: held, its gap is 0, and its closest point is back at
+    the end)."""
     parameters = np.asarray(parameters)
     return np.minimum(parameters + AT_END, 1.0 + AT_END - parameters)
 
