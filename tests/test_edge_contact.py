@@ -240,7 +240,6 @@ def test_an_edge_across_a_strip_of_two_triangles_is_held_by_its_three_rows():
     assert sorted(slots.closest(x, rows[1:], held, reach=0.05)[1].tolist()) == sorted(edge[1:].tolist())
 
 
-
 def test_an_edge_across_a_face_of_two_squares_has_a_row_for_each_of_its_five_lines():
     """A bar's bottom edge lies across a flexible box's face of two squares (a box three
     particles long), bent a hair outward along all its lines (a ridge along the middle
