@@ -424,6 +424,24 @@ def test_a_struck_boxs_corner_at_the_next_ones_rim_on_the_ground_crosses_no_edge
     assert r.stats["energy_drift_relative"] < 1e-6  # 5.4e-4 before; measured 3.5e-9
 
 
+@pytest.mark.slow  # three flexible boxes, ~10 s
+def test_a_corner_edge_through_a_rim_within_one_step_near_its_end_is_the_edges_crossing():
+    """A tenth fuzz's struck row (tests/reference/fuzz_row_rim_crossed_in_one_step.json, cut
+    to 0.0446 s): b1's corner 24 on the ground at b0's bottom rim [5, 8].  One step (0.0441635
+    to 0.0443280 s) took the rim's edge row against b1's vertical corner edge [24, 33] from
+    +5.4e-6 to -3.73e-5 m, its closest point 1.3e-7 m up from the corner, 1.3e-7 m inside
+    b0.  Deeper than DEEP_CROSSING slacks with the closest point nearer the end than that, a
+    crossing was taken for the end vertex's, and refused: no sign change, 1.1e-4 m crossed
+    by 0.0446 s (1.4e-3 m by 0.131 s).  The vertex is not that deep: the edges' crossing,
+    as past the end (EdgeSlots._past_an_end); the row fires."""
+    r = flexbody.simulate(flexbody.load_scene(reference_table("fuzz_row_rim_crossed_in_one_step")),
+                          max_wall_time=120.0)
+    assert r.status == "success", r.message
+    assert r.stats["max_edge_crossing_m"] == 0.0  # 1.1e-4 m before
+    assert r.stats["max_penetration_m"] < 1e-9 and r.stats["max_put_back_m"] < 1e-9  # measured 3.0e-12 m
+    assert r.stats["energy_drift_relative"] < 1e-6  # measured 7.8e-8
+
+
 @pytest.mark.slow  # a rigid box derived whole (cold cache); the run ~4 s
 def test_a_flexible_boxs_corner_handed_across_a_diagonal_still_slides_off_the_rim():
     """A fuzz's scene (tests/reference/fuzz_box_corner_over_rim.json: a flexible 3 x 2 x 2
