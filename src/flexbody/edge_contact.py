@@ -574,7 +574,8 @@ class EdgeSlots:
 
     def _past_an_end(self, x: FloatArray, found: EdgeContact, slack: float) -> np.ndarray:
         """Which of the crossed ``found`` pairs whose closest point lies past an end of one
-        edge (beyond :data:`AT_END`) are still an edge contact, bool (k,): crossed deeper
+        edge (beyond :data:`AT_END`), or nearer an end than a deep crossing's depth
+        (:meth:`_crossing_inside`), are still an edge contact, bool (k,): crossed deeper
         than half the inside test's ``slack`` (m; round-off), the vertex at that end less
         than half as deep inside the other edge's body as the lines cross (deeper, the
         crossing is the vertex's), the other edge's closest point inside that edge by the
