@@ -381,8 +381,9 @@ def test_an_edge_across_a_flexible_face_of_two_squares_has_a_row_for_each_line(n
     assert r.stats["energy_drift_relative"] < 1e-6  # measured 3.8e-9 and 5.8e-9
 
 
-@pytest.mark.slow  # two flexible boxes to 0.3 s, ~3 s
-def test_a_leaning_boxs_bottom_edge_passing_over_a_corner_on_the_ground_crosses_no_edge():
+@pytest.mark.slow  # two flexible boxes to 0.3 s, ~3 s each
+@pytest.mark.parametrize("name", ["fuzz_leaning_box_corner_under_edge", "fuzz_leaning_box_back_diagonal"])
+def test_a_leaning_boxs_bottom_edge_passing_over_a_corner_on_the_ground_crosses_no_edge(name):
     """A fuzz's scene (tests/reference/fuzz_leaning_box_corner_under_edge.json: a flexible
     box b1 tilted 0.053 rad leaning on another, b0, both on the ground, `edges = true`).
     b1's bottom edge [9, 11] slides onto b0's bottom corner 2 as b1 turns upright; the edge
@@ -394,15 +395,18 @@ def test_a_leaning_boxs_bottom_edge_passing_over_a_corner_on_the_ground_crosses_
     (and 2.1e-4 m inside) at 0.3 s.  A crossed pair past one edge's end whose vertex there is
     less than half as deep in the other body as the lines cross, its edge through one of the
     other edge's triangles, the other's closest point inside it by the depth, is an edge
-    contact (EdgeSlots._past_an_end): the row fires at the corner."""
-    r = flexbody.simulate(flexbody.load_scene(reference_table("fuzz_leaning_box_corner_under_edge")), t_end=0.3,
-                          max_wall_time=120.0)
+    contact (EdgeSlots._past_an_end): the row fires at the corner.  A variant (b1 2 mm
+    farther, 2.8 cm along -y, faster: fuzz_leaning_box_back_diagonal.json) crossed 4.6e-4 m
+    by 0.03 s, then with that rule alone took a pair 7.7e-5 m crossed near an end and
+    stalled (`too_slow`); with a deep crossing near an end tested the same way it is clean
+    (measured 4.0e-12 m, no crossing, 133 events to 0.3 s)."""
+    r = flexbody.simulate(flexbody.load_scene(reference_table(name)), t_end=0.3, max_wall_time=120.0)
     assert r.status == "success", r.message
     assert r.stats["max_edge_crossing_m"] == 0.0  # 7.4e-4 m before
-    assert r.stats["max_penetration_m"] < 1e-9  # 2.1e-4 m before; measured 4.0e-12 m
+    assert r.stats["max_penetration_m"] < 1e-9  # 2.1e-4 m before; measured 4.0e-12 m (both)
     assert r.stats["max_put_back_m"] < 1e-9
     assert not r.stats["warnings"]
-    assert r.stats["energy_drift_relative"] < 1e-6  # measured 4.5e-8
+    assert r.stats["energy_drift_relative"] < 1e-6  # measured 4.5e-8 and 6.6e-8
 
 
 @pytest.mark.slow  # two flexible boxes, ~2 s
