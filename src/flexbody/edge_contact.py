@@ -555,12 +555,8 @@ class EdgeSlots:
         inside &= (depth <= DEEP_CROSSING * slack) | (_inside_edges(x, first, second, s, t) >= depth)
         # the triangles' test where the inside test did not take it
         rest = np.flatnonzero(~inside)
-        through = np.ones(len(rest), bool)
-        for edge, other_edge in ((first[rest], found.pair[crossed[rest], 1]), (second[rest], found.pair[crossed[rest], 0])):
-            triangles = x[self._elements[self.edge_faces[other_edge]]]  # (k, 2, 3, 3)
-            through &= (segments_through(x[edge[:, 0]], x[edge[:, 1]], triangles[:, 0])
-                        | segments_through(x[edge[:, 0]], x[edge[:, 1]], triangles[:, 1]))
-        inside[rest] = through
+        inside[rest] = (self._through_triangles(x, first[rest], found.pair[crossed[rest], 1])
+                        & self._through_triangles(x, second[rest], found.pair[crossed[rest], 0]))
         # a deep one near an end refused as the end vertex's crossing, where that vertex is not
         # so deep: the edges' crossing, as past the end (measured: a struck box's corner on the
         # ground at the next one's bottom rim, its vertical edge 3.7e-5 m through the rim's
@@ -612,12 +608,17 @@ class EdgeSlots:
         # 9e-6 m crossed, their edges 1e-13 m), as a deep crossing's (_crossing_inside)
         other_inside = np.where(first_past, _from_ends(t) * lengths[1], _from_ends(s) * lengths[0]) >= -gap
         # the edge through one of the other edge's two triangles
-        edge = np.where(first_past[:, None], first, second)
-        triangles = x[self._elements[self.edge_faces[np.where(first_past, pair[:, 1], pair[:, 0])]]]  # (k, 2, 3, 3)
-        through = (segments_through(x[edge[:, 0]], x[edge[:, 1]], triangles[:, 0])
-                   | segments_through(x[edge[:, 0]], x[edge[:, 1]], triangles[:, 1]))
+        through = self._through_triangles(x, np.where(first_past[:, None], first, second),
+                                          np.where(first_past, pair[:, 1], pair[:, 0]))
         out[deep] = outside & other_inside & through
         return out
+
+    def _through_triangles(self, x: FloatArray, edges: IntArray, others: IntArray) -> np.ndarray:
+        """Whether each of ``edges`` ((k, 2) particle indices) passes through one of the two
+        triangles of the surface edge ``others`` (k,), bool (k,)."""
+        triangles = x[self._elements[self.edge_faces[others]]]  # (k, 2, 3, 3)
+        p, q = x[edges[:, 0]], x[edges[:, 1]]
+        return segments_through(p, q, triangles[:, 0]) | segments_through(p, q, triangles[:, 1])
 
     def _point_gaps(self, x: FloatArray, pair: IntArray, s: FloatArray, t: FloatArray) -> FloatArray:
         """The signed distances of the closest points (parameters ``s`` on the first edge and
