@@ -594,3 +594,21 @@ def test_the_c_narrow_phase_boxes_kept_pairs_as_the_broad_phase_does(dim):
             np.testing.assert_array_equal(getattr(boxed, name), getattr(reference, name), err_msg=f"{name}, step {k}")
         checked += len(reference.particle)
     assert checked > 0 and boxed_out > 0 and kept.rebuilds >= 2
+
+
+def test_the_fast_cross_product_is_numpys_bit_for_bit():
+    """``flexbody.surface.cross``, which event location calls instead of ``np.cross`` (its
+    set-up costs more than the product on a few rows), gives the same bits: rows, stacks
+    and broadcasting, with values whose products round (so another order would differ)."""
+    from flexbody.surface import cross
+
+    rng = np.random.default_rng(5)
+    for a_shape, b_shape in (((1, 3), (1, 3)), ((7, 3), (7, 3)), ((4, 2, 3), (4, 2, 3)), ((5, 6, 3), (5, 1, 3))):
+        a, b = rng.normal(size=a_shape) * 1e3, rng.normal(size=b_shape) * 1e-3
+        got, expected = cross(a, b), np.cross(a, b)
+        assert got.shape == expected.shape
+        np.testing.assert_array_equal(got, expected)
+    # each component is one product less the other (not a fused or reordered sum)
+    a, b = np.array([[1.0 + 2**-52, 3.0, 1e16]]), np.array([[1e16, 1.0 - 2**-53, 7.0]])
+    np.testing.assert_array_equal(cross(a, b), [[3.0 * 7.0 - 1e16 * (1.0 - 2**-53), 1e16 * 1e16 - (1.0 + 2**-52) * 7.0,
+                                                (1.0 + 2**-52) * (1.0 - 2**-53) - 3.0 * 1e16]])

@@ -105,7 +105,7 @@ from .mixed import MixedModel
 from .model import GeneratedModel, Model
 from .own_surface import OwnSurface
 from .scene import Scene
-from .surface import STRICT, closure_problem, crossings, edges, edges_through, piercings, signed_measure
+from .surface import STRICT, closure_problem, cross, crossings, edges, edges_through, piercings, signed_measure
 from .surface_contact import (FACE, CompiledClosestFeatures, SurfaceContact, closest_features, segment_normals,
                               triangle_normals, vertex_elements)
 
@@ -974,11 +974,11 @@ class BodyContactModel(Model):
         rows, group = np.asarray(slots)[pairs], groups[pairs]
         other = np.where(on[pairs] & (group != rows[:, None]), group, -1).max(axis=1)
         faces = self.elements[self.element_of[rows]]
-        line = np.cross(triangle_normals(x, faces), triangle_normals(x, self.elements[self.element_of[other]]))
+        line = cross(triangle_normals(x, faces), triangle_normals(x, self.elements[self.element_of[other]]))
         length = np.linalg.norm(line, axis=1)
         line /= np.maximum(length, np.finfo(float).tiny)[:, None]
         offset = x[faces] - x[self.slot_particle[rows]][:, None, :]
-        distance = np.linalg.norm(np.cross(offset, line[:, None, :]), axis=2)  # of each vertex to the line
+        distance = np.linalg.norm(cross(offset, line[:, None, :]), axis=2)  # of each vertex to the line
         on_line = distance <= EDGE_LINE * self._sizes(rows, x)[:, None]
         # nearly parallel planes (a flat crease) meet nowhere definite: all three weights bound
         edge = (on_line.sum(axis=1) == 2) & (length > EDGE_LINE)

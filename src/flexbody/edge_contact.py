@@ -38,7 +38,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .surface import segments_through
+from .surface import cross, segments_through
 
 FloatArray = np.ndarray
 IntArray = np.ndarray
@@ -377,7 +377,7 @@ class EdgeSlots:
         rows needs its candidates' only)."""
         faces = self.edge_faces if edges is None else self.edge_faces[edges]
         a, b, c = (x[self._elements[faces, k]] for k in range(3))
-        normal = np.cross(b - a, c - a)
+        normal = cross(b - a, c - a)
         normal /= np.linalg.norm(normal, axis=2, keepdims=True)
         if edges is None:
             return normal
@@ -599,18 +599,22 @@ class EdgeSlots:
         lengths = [np.linalg.norm(x[e[:, 1]] - x[e[:, 0]], axis=1) for e in (first, second)]
         # the edge whose closest point is past an end, or nearer one (m; :meth:`_crossing_inside`)
         first_past = _from_ends(s) * lengths[0] <= _from_ends(t) * lengths[1]
-        # the vertex at that end against the other body's surface (clamped parameters): less
-        # than half as deep as the lines cross, or the crossing is the vertex's
-        ends = self._point_gaps(x, pair, np.clip(s, 0.0, 1.0), np.clip(t, 0.0, 1.0))
-        outside = np.where(first_past, ends[:, 0], ends[:, 1]) > 0.5 * gap
         # the other edge's closest point inside it by the crossing's depth (nearer its end the
         # crossing is a corner's on a corner: two boxes' coincident corners read their lines
         # 9e-6 m crossed, their edges 1e-13 m), as a deep crossing's (_crossing_inside)
-        other_inside = np.where(first_past, _from_ends(t) * lengths[1], _from_ends(s) * lengths[0]) >= -gap
+        kept = np.where(first_past, _from_ends(t) * lengths[1], _from_ends(s) * lengths[0]) >= -gap
         # the edge through one of the other edge's two triangles
-        through = self._through_triangles(x, np.where(first_past[:, None], first, second),
-                                          np.where(first_past, pair[:, 1], pair[:, 0]))
-        out[deep] = outside & other_inside & through
+        rest = np.flatnonzero(kept)
+        kept[rest] = self._through_triangles(x, np.where(first_past[rest, None], first[rest], second[rest]),
+                                             np.where(first_past[rest], pair[rest, 1], pair[rest, 0]))
+        # the vertex at that end against the other body's surface (clamped parameters): less
+        # than half as deep as the lines cross, or the crossing is the vertex's; tested last,
+        # on the few left (a search of the other body's whole surface)
+        rest = np.flatnonzero(kept)
+        if len(rest):
+            ends = self._point_gaps(x, pair[rest], np.clip(s[rest], 0.0, 1.0), np.clip(t[rest], 0.0, 1.0))
+            kept[rest] = np.where(first_past[rest], ends[:, 0], ends[:, 1]) > 0.5 * gap[rest]
+        out[deep] = kept
         return out
 
     def _through_triangles(self, x: FloatArray, edges: IntArray, others: IntArray) -> np.ndarray:
@@ -715,7 +719,7 @@ def _from_ends(parameters: FloatArray) -> FloatArray:
 def _common_normals(a: FloatArray, b: FloatArray, c: FloatArray, d: FloatArray) -> tuple[FloatArray, np.ndarray]:
     """``(b - a) x (d - c)`` of edges a -> b and c -> d (k, 3) each, and whether they are
     not parallel (:data:`PARALLEL`), shape (k, 3) and (k,)."""
-    common = np.cross(b - a, d - c)
+    common = cross(b - a, d - c)
     size = np.linalg.norm(b - a, axis=1) * np.linalg.norm(d - c, axis=1)
     return common, np.linalg.norm(common, axis=1) > PARALLEL * size
 
@@ -755,9 +759,9 @@ def convex_edges(x: FloatArray, triangles: IntArray, edges: IntArray, faces: Int
     triangle's third vertex below the first's plane, bool (e,)."""
     triangles = np.asarray(triangles, np.intp)
     first, second = triangles[faces[:, 0]], triangles[faces[:, 1]]
-    normals = np.cross(x[first[:, 1]] - x[first[:, 0]], x[first[:, 2]] - x[first[:, 0]])
+    normals = cross(x[first[:, 1]] - x[first[:, 0]], x[first[:, 2]] - x[first[:, 0]])
     normals /= np.linalg.norm(normals, axis=1, keepdims=True)
-    other = np.cross(x[second[:, 1]] - x[second[:, 0]], x[second[:, 2]] - x[second[:, 0]])
+    other = cross(x[second[:, 1]] - x[second[:, 0]], x[second[:, 2]] - x[second[:, 0]])
     other /= np.linalg.norm(other, axis=1, keepdims=True)
     third = np.array([row[~np.isin(row, edge)][0] for row, edge in zip(second, edges)], np.intp)
     below = np.einsum("kd,kd->k", normals, x[third] - x[first[:, 0]]) < 0.0

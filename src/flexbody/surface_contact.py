@@ -34,6 +34,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .constants import EDGE, FACE, VERTEX  # the feature kinds, shared with the C twin
+from .surface import cross
 
 FloatArray = np.ndarray
 IntArray = np.ndarray
@@ -128,7 +129,7 @@ def segment_normals(vertices: FloatArray, segments: IntArray) -> FloatArray:
 def triangle_normals(vertices: FloatArray, triangles: IntArray) -> FloatArray:
     """Outward unit normals of a closed surface's triangles (counter-clockwise from outside), (m, 3)."""
     a, b, c = (vertices[triangles[:, k]] for k in range(3))
-    normal = np.cross(b - a, c - a)
+    normal = cross(b - a, c - a)
     return normal / np.linalg.norm(normal, axis=1, keepdims=True)
 
 
