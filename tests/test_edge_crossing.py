@@ -446,6 +446,28 @@ def test_a_corner_edge_through_a_rim_within_one_step_near_its_end_is_the_edges_c
     assert r.stats["energy_drift_relative"] < 1e-6  # measured 7.8e-8
 
 
+@pytest.mark.slow  # three flexible boxes, ~20 s
+def test_a_face_diagonal_under_an_acute_corner_edge_is_crossed_with_each_edge_in_the_other_body():
+    """A tenth fuzz's struck row (tests/reference/fuzz_row_diagonal_under_acute_corner_edge.json,
+    cut to 0.0078 s): b1's vertical corner edge [36, 40], its wedge squeezed to 87.8 deg,
+    lies on b0's bulging face.  One step took the edge row of b0's face diagonal [14, 29]
+    against it from +1.09e-6 to -1.6e-6 m (closest point s = 0.046): [36, 40]'s point
+    inside b0 by the whole depth, the diagonal's 5.8e-8 m outside b1 (h cos 87.8 deg) while
+    the diagonal goes through both of [36, 40]'s triangles; [36, 40] passes beneath both
+    the diagonal's triangles, in and out of b0 through the next ones.  A crossing taken with
+    both points inside or both edges through triangles was refused: no sign change, 1.6e-6
+    m inside and put back.  Each edge in the other body by either test is the crossing
+    (EdgeSlots._crossing_inside); the row fires."""
+    r = flexbody.simulate(flexbody.load_scene(reference_table("fuzz_row_diagonal_under_acute_corner_edge")),
+                          max_wall_time=120.0)
+    assert r.status == "success", r.message
+    assert r.stats["max_edge_crossing_m"] == 0.0
+    assert r.stats["max_penetration_m"] < 1e-9  # 1.6e-6 m before; measured 6.3e-12 m
+    assert r.stats["max_put_back_m"] < 1e-9  # as the penetration before
+    assert not r.stats["warnings"]
+    assert r.stats["energy_drift_relative"] < 1e-6  # 1.2e-5 before; measured 2.4e-8
+
+
 @pytest.mark.slow  # a rigid box derived whole (cold cache); the run ~4 s
 def test_a_flexible_boxs_corner_handed_across_a_diagonal_still_slides_off_the_rim():
     """A fuzz's scene (tests/reference/fuzz_box_corner_over_rim.json: a flexible 3 x 2 x 2

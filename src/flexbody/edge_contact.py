@@ -525,16 +525,21 @@ class EdgeSlots:
         return which, other[np.repeat(start[primary], counts) + offset]
 
     def _crossing_inside(self, x: FloatArray, found: EdgeContact, slack: float) -> np.ndarray:
-        """Which of the ``found`` pairs are apart (gap >= 0) or crossed: where neither closest
-        point is outside the other edge's body by more than ``slack`` (m; round-off of a
-        crossing just begun), or where each edge passes through one of the other's two
-        triangles, bool (k,).  A negative distance of two lines is a crossing only there:
-        with their common normal in both edges' cones, two edges of bodies far apart along
-        it (a block's rim under a small tetrahedron's far side) also read one, as deep as
-        the bodies are across.  The second test is for acute edges: crossed by h, the
-        closest point can lie outside the other body by up to h times the cosine of its
-        edge's dihedral angle (measured: a flexible box's rim bent to 89.5 deg, crossed
+        """Which of the ``found`` pairs are apart (gap >= 0) or crossed: where each edge is in
+        the other edge's body there, its closest point not outside that body by more than
+        ``slack`` (m; round-off of a crossing just begun) or the edge through one of the
+        other's two triangles, bool (k,).  A negative distance of two lines is a crossing
+        only there: with their common normal in both edges' cones, two edges of bodies far
+        apart along it (a block's rim under a small tetrahedron's far side) also read one,
+        as deep as the bodies are across.  The triangles are for an acute other edge:
+        crossed by h, the closest point can lie outside its body by up to h times the cosine
+        of its dihedral angle (measured: a flexible box's rim bent to 89.5 deg, crossed
         2.6e-4 m at a step's end, had it 1.8e-6 m outside, and the crossing went unseen).
+        Each edge by either test: the edge under an acute one can pass beneath both its own
+        triangles, in and out of its body through the next ones, its closest point inside
+        by the whole depth (measured: a flexible box's face diagonal under the next box's
+        corner edge of 87.8 deg, crossed 1.6e-6 m in one step, the diagonal's point 5.8e-8 m
+        outside: refused, no root, and put back from 1.6e-6 m inside).
         A crossing shallower than half the slack needs no test: each closest point is
         within |gap| of the other, which is on its body's surface (a held contact's
         rounding, most of a pile's)."""
@@ -544,7 +549,7 @@ class EdgeSlots:
             return out
         s, t = found.parameters[crossed].T
         first, second = self.edges[found.pair[crossed, 0]], self.edges[found.pair[crossed, 1]]
-        inside = (self._point_gaps(x, found.pair[crossed], s, t) <= slack).all(axis=1)
+        inside = self._point_gaps(x, found.pair[crossed], s, t) <= slack  # each edge's, (k, 2)
         # ... a deep one (beyond DEEP_CROSSING slacks) only with both closest points that far
         # inside their edges: nearer an edge's end the crossing is the end vertex's (a box's
         # vertex held on a face, its edge standing off it: with the other body's edge lying
@@ -552,11 +557,12 @@ class EdgeSlots:
         # point on the other body; measured: two rigid boxes face on face, -0.032 m, and an
         # impact on it).  A crossing just begun is shallow wherever it is.
         depth = -found.gap[crossed]
-        inside &= (depth <= DEEP_CROSSING * slack) | (_inside_edges(x, first, second, s, t) >= depth)
-        # the triangles' test where the inside test did not take it
-        rest = np.flatnonzero(~inside)
-        inside[rest] = (self._through_triangles(x, first[rest], found.pair[crossed[rest], 1])
-                        & self._through_triangles(x, second[rest], found.pair[crossed[rest], 0]))
+        inside &= ((depth <= DEEP_CROSSING * slack) | (_inside_edges(x, first, second, s, t) >= depth))[:, None]
+        # the triangles' test for each edge whose point the inside test did not take
+        for j, (edges, others) in enumerate(((first, found.pair[crossed, 1]), (second, found.pair[crossed, 0]))):
+            rest = np.flatnonzero(~inside[:, j])
+            inside[rest, j] = self._through_triangles(x, edges[rest], others[rest])
+        inside = inside.all(axis=1)
         # a deep one near an end refused as the end vertex's crossing, where that vertex is not
         # so deep: the edges' crossing, as past the end (measured: a struck box's corner on the
         # ground at the next one's bottom rim, its vertical edge 3.7e-5 m through the rim's
