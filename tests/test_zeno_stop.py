@@ -6,8 +6,10 @@ stop takes more than ``STOP_ENERGY`` times the kinetic energy of the stopped row
 speeds: then the rows are nearly parallel (a crease bent by 1e-4 rad), and the slow leavers
 leave.  Two rows at an angle ``a`` take ``1 / sin(a)^2`` times it, so the bound is an
 angle: these tests put rows on both sides of it, and at the 15 degrees of two spheres of a
-3D pile pressed face to face.  The piles of 3D spheres where this mattered are in
-``tests/test_piles3d.py``.
+3D pile pressed face to face.  A stop within the energy of the rows' Zeno speeds is taken
+whatever that ratio (rows at round-off speeds), and beyond both only the slow leaver whose
+stop takes the most leaves, one at a time (two flexible boxes pushed face to face on the
+ground).  The piles of 3D spheres where this mattered are in ``tests/test_piles3d.py``.
 """
 
 from __future__ import annotations
@@ -17,6 +19,8 @@ import pytest
 
 import flexbody
 from flexbody.coupled import STOP_ENERGY, coupled_impact
+
+from .conftest import reference_table
 
 SLOWEST = 1e-4  # m/s: the Zeno speed of both contacts
 
@@ -81,6 +85,73 @@ def test_a_slow_leaver_on_a_nearly_parallel_row_leaves():
     rates = model.J @ u_after
     assert leaving.tolist() == [False, True]
     assert rates[1] == pytest.approx(5e-5 * np.cos(1e-3), rel=1e-12)
+
+
+def test_a_leaver_at_round_off_on_a_nearly_parallel_row_is_stopped_within_its_zeno_energy():
+    """Rows 1e-3 rad apart, row 0 hit at 1e-9 m/s: stopping both takes 1e6 times the slow
+    leaver's energy but 1e-10 of the two rows' at their Zeno speed, a change of the motion
+    the threshold neglects: both stop (it left before, and two flexible boxes pushed face
+    to face lifted their corners off the ground and hit again 0.1 us later)."""
+    model, u_after, leaving = hit_beside_a_held_row(1e-3, 1e-9)
+    assert not leaving.any()
+    assert np.abs(model.J @ u_after).max() < 1e-18  # from 1e-6 m/s along the rows: at rest to rounding
+    assert np.abs(u_after).max() < 1e-15
+
+
+class TwoParticles(TwoSurfaces):
+    """:class:`TwoSurfaces` for a first unit point mass, and a second one on a surface of
+    its own (row 2), apart from both: its row shares no coordinate with theirs."""
+
+    def __init__(self, angle: float) -> None:
+        super().__init__(angle)
+        self.n_contacts, self.nq, self.nu = 3, 4, 4
+        self.J = np.zeros((3, 4))
+        self.J[:2, :2] = TwoSurfaces(angle).J
+        self.J[2, 3] = 1.0
+
+
+def test_only_the_slow_leaver_whose_stop_takes_the_energy_leaves():
+    """Row 0 hit at 5e-5 m/s beside row 1 at 1e-3 rad (a crease: row 1 leaves, as above),
+    while another particle rests on its own surface, moving off it at round-off (1e-15
+    m/s).  Its stop takes nothing: it stays held and is stopped; before, every slow leaver
+    left with the turned one (a corner held on the ground beside three nearly equal edge
+    rows lifted off, and hit again 8e-8 s later)."""
+    model = TwoParticles(1e-3)
+    u = np.concatenate([np.linalg.solve(model.J[:2, :2], [-5e-5, 0.0]), [0.0, 1e-15]])
+    y = np.concatenate([np.zeros(4), u, [0.0]])
+    out = coupled_impact(model, y, np.zeros(0), np.ones(3, bool), np.zeros(3), np.full(3, SLOWEST))
+    rates = model.J @ out.y[4:8]
+    assert out.leaving.tolist() == [False, True, False]
+    assert abs(rates[0]) < 1e-18 and rates[2] == 0.0
+    assert rates[1] == pytest.approx(5e-5 * np.cos(1e-3), rel=1e-12)
+
+
+def test_a_box_pushing_a_box_on_the_ground_keeps_its_corner_on_the_ground():
+    """A fuzz's scene (tests/reference/fuzz_box_pushes_box_on_ground.json, cut to 6 ms: a
+    flexible box sliding at 0.508 m/s on a frictionless ground into a second one resting
+    1e-6 m beside it, e = 0 between them, `edges = true`).  Pressed face to face, corners
+    and mid-edge vertices coincident, many rows hold one point: three edge rows of b1's
+    vertex 27 against b0's edge [7, 11] differ by 1e-5 of their entries, and a plastic
+    impact of one at 8.6e-7 m/s left the other two leaving that fast; stopping them took
+    1.7 N s each way, so every slow leaver was let go, b0's corner 1 off the ground at
+    1e-18 m/s among them, to hit again 8e-8 s later: `chattering` at 4.65 ms (1 972
+    events).  Now it pushes b1 and they part (e = 0, the springs' rebound): momentum along
+    x kept (the ground pushes along z only), the corner held on the ground throughout."""
+    table = reference_table("fuzz_box_pushes_box_on_ground")
+    r = flexbody.simulate(flexbody.load_scene(table), max_wall_time=120.0)
+    assert r.status == "success", r.message
+    assert r.stats["max_penetration_m"] < 1e-9 and r.stats["max_edge_crossing_m"] == 0.0  # measured 3.5e-12 m
+    assert r.stats["energy_drift_relative"] < 1e-6  # measured 1.2e-8
+    assert r.stats["warnings"] == []
+    momentum = np.einsum("i,ti->t", r.masses, r.velocities[:, :, 0])
+    np.testing.assert_allclose(momentum, 0.288 * 0.508, rtol=1e-11)  # measured 3e-13
+    surface, particle = np.asarray(r.events_surface), np.asarray(r.events_particle)
+    assert not ((surface == -1) & (particle == 1)).any()  # 166 lift-offs and impacts there before
+    assert np.abs(r.positions[:, :4, 2]).max() < 1e-12  # b0's bottom stays on the ground
+    speed = [np.einsum("i,i->", r.masses[k], r.velocities[-1, k, 0]) / r.masses[k].sum()
+             for k in (slice(0, 12), slice(12, None))]
+    assert 0.0 < speed[0] < speed[1] < 0.508  # measured 0.040 and 0.207 m/s: pushed, then parted
+    assert r.kinetic[-1] < r.kinetic[0]
 
 
 def test_a_ring_bouncing_on_a_rigid_block_at_e_0_9_ends_its_cascade_held():
