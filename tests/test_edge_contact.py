@@ -454,17 +454,17 @@ def test_a_crossing_counts_how_deep_the_edges_points_are_inside_the_other_body()
     assert abs(depth) < 1e-15 and depth > line_gap
 
 
-def _corner_under_a_wedge(d: float, bottom_slope: float = 1e-3):
+def _corner_under_a_wedge(d: float, bottom_slope: float = 1e-3, back: float = 3e-3, height: float = 0.5):
     """Two boxes on one ground (z = 0), as a fuzzed leaning box met another: a box A (x in
     [0, 1], y in [-1, 0]) whose vertical edge at its corner (0, 0, 0) leans 3e-4 rad toward
-    -x, and a box B whose bottom edge (along y, from y = -2 to 1, at z = 0) lies at x = d
-    (> 0: d past A's side face x = 0), its bottom face rising toward -x by ``bottom_slope``,
-    its side face at that edge leaning back 3e-3 rad past the vertical.  Returns the
-    positions, the edge slots (A's edges against B's), A's vertical corner edge's row and
-    B's bottom edge."""
+    -x, and a box B (``height`` tall) whose bottom edge (along y, from y = -2 to 1, at z =
+    0) lies at x = d (> 0: d past A's side face x = 0), its bottom face rising toward -x by
+    ``bottom_slope``, its side face at that edge leaning ``back`` (rad) past the vertical.
+    Returns the positions, the edge slots (A's edges against B's), A's vertical corner
+    edge's row and B's bottom edge."""
     from flexbody.edge_contact import EdgeSlots
 
-    lean, back, width, height = -3e-4, 3e-3, 0.5, 0.5
+    lean, width = -3e-4, 0.5
     a = np.array([[x + lean * z, y, z] for x in (0.0, 1.0) for y in (-1.0, 0.0) for z in (0.0, 1.0)])
     b = np.array([[d - w - back * z, y, bottom_slope * w + z] for w in (0.0, width) for y in (-2.0, 1.0)
                   for z in (0.0, height)])
@@ -510,3 +510,18 @@ def test_a_corner_passing_under_a_wedge_keeps_the_edge_contact_past_its_end():
     x, slots, row, bottom = _corner_under_a_wedge(1e-5, bottom_slope=-1.0)  # the corner 0.71 d inside B
     gap, edge, _ = slots.closest(x, slots.siblings(np.array([row]))[0], np.full(len(slots), -1), reach=0.05)
     assert bottom not in edge.tolist()
+
+
+def test_a_corner_edge_from_a_wedges_bottom_face_to_its_side_face_keeps_the_edge_contact():
+    """The corner under a wedge as above, but on the plane of its bottom face (flat, on the
+    ground) and with A's top corner on its side face, as vertex contacts hold them (B taller
+    than A, its side face leaning back d + 3e-4 rad: tests/reference/
+    fuzz_row_corner_edge_on_both_rim_faces.json).  Crossed by d, the vertical edge cuts the
+    wedge from one face to the other with both ends on their planes: strictly through
+    neither triangle, and the pair was refused past the end.  From a triangle into the body
+    counts as through it: the pair reads the crossing, gap -d."""
+    for d in (1e-5, 1e-4):
+        x, slots, row, bottom = _corner_under_a_wedge(d, bottom_slope=0.0, back=d + 3e-4, height=1.5)
+        gap, edge, _ = slots.closest(x, slots.siblings(np.array([row]))[0], np.full(len(slots), -1), reach=0.05)
+        assert edge[0] == bottom
+        assert gap[0] == pytest.approx(-d, rel=1e-3)

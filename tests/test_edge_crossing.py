@@ -468,6 +468,28 @@ def test_a_face_diagonal_under_an_acute_corner_edge_is_crossed_with_each_edge_in
     assert r.stats["energy_drift_relative"] < 1e-6  # 1.2e-5 before; measured 2.4e-8
 
 
+@pytest.mark.slow  # three flexible boxes, ~18 s
+def test_a_corner_edge_with_its_ends_on_both_faces_of_a_rim_crosses_it_as_an_edge():
+    """A tenth fuzz's struck row (tests/reference/fuzz_row_corner_edge_on_both_rim_faces.json,
+    cut to 0.103 s): b1's bottom corner 29 on the ground, on the plane of b2's bottom face,
+    its vertical corner edge [29, 41] leaning toward b2 and b2's side face leaning away: the
+    top corner 41 is held on that side face.  The corner slid under b2's bottom rim [45, 48]
+    (the pair's closest point 5.5e-7 of the edge below the corner, past its end): the edge
+    then cuts the rim's wedge from its bottom face to its side face, both ends on their
+    planes, and passes strictly through neither triangle, and the pair was refused (1.6e-4
+    m crossed, then 2.1e-4 m with the closest point back on the edge, still as the
+    vertex's); a point went 4.3e-6 m inside b2.  From a triangle into the body counts as
+    through it (EdgeSlots._past_an_end): the row fires as the corner passes the rim."""
+    r = flexbody.simulate(flexbody.load_scene(reference_table("fuzz_row_corner_edge_on_both_rim_faces")),
+                          max_wall_time=120.0)
+    assert r.status == "success", r.message
+    assert r.stats["max_edge_crossing_m"] == 0.0  # 1.8e-8 m before
+    assert r.stats["max_penetration_m"] < 1e-9  # 4.3e-6 m before; measured 4.0e-12 m
+    assert r.stats["max_put_back_m"] < 1e-9
+    assert not r.stats["warnings"]
+    assert r.stats["energy_drift_relative"] < 1e-6  # measured 1.7e-8
+
+
 @pytest.mark.slow  # a rigid box derived whole (cold cache); the run ~4 s
 def test_a_flexible_boxs_corner_handed_across_a_diagonal_still_slides_off_the_rim():
     """A fuzz's scene (tests/reference/fuzz_box_corner_over_rim.json: a flexible 3 x 2 x 2

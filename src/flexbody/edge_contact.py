@@ -22,12 +22,12 @@ features (tested against inside tests of a convex body).
 Outside [0, 1] (beyond :data:`AT_END`) the closest points of the edges are an end: that
 is a vertex's contact with the other surface, not an edge's; except for a crossed pair
 whose vertex at that end is less than half as deep in the other body as the lines cross
-while its edge passes through one of the other edge's triangles, the other's closest point
-inside it by the depth (:meth:`EdgeSlots._past_an_end`: no vertex contact sees that
-crossing).  Parallel edges have no common normal (a face lying on a face is held by its
-vertices) and are left out, as are the edges inside a flat face (a triangulated box face's
-diagonal): an edge pressed onto such a face crosses its rim's edges, which are the
-contacts.
+while its edge passes through (or from on it into) one of the other edge's triangles, the
+other's closest point inside it by the depth (:meth:`EdgeSlots._past_an_end`: no vertex
+contact sees that crossing).  Parallel edges have no common normal (a face lying on a
+face is held by its vertices) and are left out, as are the edges inside a flat face (a
+triangulated box face's diagonal): an edge pressed onto such a face crosses its rim's
+edges, which are the contacts.
 """
 
 from __future__ import annotations
@@ -581,7 +581,8 @@ class EdgeSlots:
         than half the inside test's ``slack`` (m; round-off), the vertex at that end less
         than half as deep inside the other edge's body as the lines cross (deeper, the
         crossing is the vertex's), the other edge's closest point inside that edge by the
-        crossing's depth, and the edge through one of the other edge's two triangles.
+        crossing's depth, and the edge through one of the other edge's two triangles, or
+        from one of them into the other body.
 
         Past an end the crossing is normally the vertex's, a particle's contact with the
         other surface.  Not where the vertex is outside the other body while its edge is
@@ -594,7 +595,15 @@ class EdgeSlots:
         vertex's contact sees it (measured: 7.2e-5 m crossed, unseen; a pair taken only
         within AT_END is lost one step after its gap passes 0, with no sign change to find).
         The lines' gap is the vertex's distance to the other edge's line along the common
-        normal: the pair's contact is continuous through the end."""
+        normal: the pair's contact is continuous through the end.
+
+        From a triangle into the body counts as through it: where vertex contacts hold the
+        edge's ends, each on one of the two triangles' planes, the edge cuts the wedge
+        between them and passes strictly through neither (measured: a struck box's corner
+        on the ground, on the plane of the next box's bottom face, its vertical edge's top
+        corner held on that box's side face; the corner slid under the bottom rim, the pair
+        was refused once crossed, 1.6e-4 m by the time its closest point was back on the
+        edge, and a point went 4.3e-6 m inside)."""
         out = np.zeros(len(found.gap), bool)
         deep = np.flatnonzero(found.gap < -0.5 * slack)  # shallower: round-off (corners coincident)
         if not len(deep):
@@ -609,10 +618,10 @@ class EdgeSlots:
         # crossing is a corner's on a corner: two boxes' coincident corners read their lines
         # 9e-6 m crossed, their edges 1e-13 m), as a deep crossing's (_crossing_inside)
         kept = np.where(first_past, _from_ends(t) * lengths[1], _from_ends(s) * lengths[0]) >= -gap
-        # the edge through one of the other edge's two triangles
+        # the edge through one of the other edge's two triangles, or from one into the body
         rest = np.flatnonzero(kept)
         kept[rest] = self._through_triangles(x, np.where(first_past[rest, None], first[rest], second[rest]),
-                                             np.where(first_past[rest], pair[rest, 1], pair[rest, 0]))
+                                             np.where(first_past[rest], pair[rest, 1], pair[rest, 0]), into=True)
         # the vertex at that end against the other body's surface (clamped parameters): less
         # than half as deep as the lines cross, or the crossing is the vertex's; tested last,
         # on the few left (a search of the other body's whole surface)
@@ -623,12 +632,13 @@ class EdgeSlots:
         out[deep] = kept
         return out
 
-    def _through_triangles(self, x: FloatArray, edges: IntArray, others: IntArray) -> np.ndarray:
+    def _through_triangles(self, x: FloatArray, edges: IntArray, others: IntArray, into: bool = False) -> np.ndarray:
         """Whether each of ``edges`` ((k, 2) particle indices) passes through one of the two
-        triangles of the surface edge ``others`` (k,), bool (k,)."""
+        triangles of the surface edge ``others`` (k,), bool (k,); ``into``: or from one of
+        them into the other body (``flexbody.surface.segments_through``)."""
         triangles = x[self._elements[self.edge_faces[others]]]  # (k, 2, 3, 3)
         p, q = x[edges[:, 0]], x[edges[:, 1]]
-        return segments_through(p, q, triangles[:, 0]) | segments_through(p, q, triangles[:, 1])
+        return segments_through(p, q, triangles[:, 0], into) | segments_through(p, q, triangles[:, 1], into)
 
     def _point_gaps(self, x: FloatArray, pair: IntArray, s: FloatArray, t: FloatArray) -> FloatArray:
         """The signed distances of the closest points (parameters ``s`` on the first edge and

@@ -281,7 +281,7 @@ def piercings(points: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     return np.column_stack([tri[hit], ed[hit]])
 
 
-def segments_through(p: np.ndarray, q: np.ndarray, corners: np.ndarray) -> np.ndarray:
+def segments_through(p: np.ndarray, q: np.ndarray, corners: np.ndarray, into: bool = False) -> np.ndarray:
     """Whether each segment ``p -> q`` passes through its triangle, pair by pair: its ends
     strictly on either side of the triangle's plane (beyond :data:`STRICT` of its length: a
     segment in the plane does not count) and its line strictly inside the triangle's three
@@ -293,6 +293,11 @@ def segments_through(p: np.ndarray, q: np.ndarray, corners: np.ndarray) -> np.nd
         The segments' ends.
     corners : ndarray, shape (k, 3, 3)
         Each one's triangle.
+    into : bool
+        Count also a segment from the triangle into its body: one end on it (within
+        STRICT of its plane, the line inside its edges), the other strictly behind it
+        (opposite its normal ``(b - a) x (c - a)``, outward): an edge whose vertex a
+        contact holds on a face, going in.
 
     Returns
     -------
@@ -306,6 +311,9 @@ def segments_through(p: np.ndarray, q: np.ndarray, corners: np.ndarray) -> np.nd
     at_p, at_q = volume(a, b, c, p), volume(a, b, c, q)  # the ends' distances times |(b - a) x (c - a)|
     size = np.linalg.norm(cross(b - a, c - a), axis=1) * np.linalg.norm(q - p, axis=1)
     through_plane = (at_p * at_q < 0.0) & (np.minimum(np.abs(at_p), np.abs(at_q)) > STRICT * size)
+    if into:
+        on_plane = np.minimum(np.abs(at_p), np.abs(at_q)) <= STRICT * size
+        through_plane |= on_plane & (np.minimum(at_p, at_q) < -STRICT * size)
     sides = np.stack([volume(p, q, a, b), volume(p, q, b, c), volume(p, q, c, a)])
     inside = ((sides > 0.0).all(axis=0)) | ((sides < 0.0).all(axis=0))
     return through_plane & inside
