@@ -101,3 +101,32 @@ def test_a_stiffness_beyond_any_step_is_a_step_size_collapse():
     r = flexbody.simulate(flexbody.load_scene(table), max_wall_time=60.0)
     assert r.status == "step_size_collapse"
     assert "Radau" in r.message and "too stiff" in r.message
+
+
+def test_a_contact_released_sunk_is_a_held_ones_sink_and_below_its_floor_a_missed_impact():
+    """A free contact between its floor and the ground went there held: released at that
+    gap, it is armed a tolerance below it.  Its depth is a held contact's sink (warned of
+    beyond SINK_WARNING gap tolerances), not an impact missed between event checks (beyond
+    10); below its floor it is one.  Measured: a row released 13 tolerances inside (1.4e-11
+    m) was warned of as a missed impact.  The depth is reported either way."""
+    from flexbody.assembly import assembled_model
+    from flexbody.driver import _Run, _settings
+
+    scene = make_scene(body(position=[0.0, 0.5]))  # a dumbbell: particles 0 and 1, each a ground contact
+    run = _Run(scene, assembled_model(scene, "numpy"), _settings(scene, {"backend": "numpy"}), None, 10**6)
+    tol = run.gap_tolerance
+    y = run.y.copy()
+    y[[1, 3]] = -13.0 * tol  # both 13 tolerances below the ground, both free
+    run.phases.floor[:] = [-14.0 * tol, 0.0]  # 0 released there (armed below it), 1 armed at the ground
+    run.track_gaps(y)
+    assert run.min_gap == pytest.approx(-13.0 * tol, rel=1e-9)  # particle 1's: missed
+    run.min_gap = np.inf
+    run.phases.floor[1] = -14.0 * tol  # both released there
+    run.track_gaps(y)
+    assert run.min_gap == np.inf and run.min_held_gap == pytest.approx(-13.0 * tol, rel=1e-9)
+    penetration, sink = max(0.0, -run.min_gap), max(0.0, -run.min_held_gap)
+    assert not any("event checks" in w for w in run.untrustworthy(0.0, penetration, 0.0, sink))
+    run.phases.floor[0] = -12.0 * tol  # below its floor: an impact missed
+    run.track_gaps(y)
+    assert run.min_gap == pytest.approx(-13.0 * tol, rel=1e-9)
+    assert any("event checks" in w for w in run.untrustworthy(0.0, -run.min_gap, 0.0, sink))
