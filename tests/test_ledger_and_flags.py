@@ -73,6 +73,31 @@ def test_a_failure_at_an_event_instant_is_a_status(monkeypatch, error, status):
     assert str(error).split(":")[0] in r.message
 
 
+@pytest.mark.parametrize("spacing, status", [(3.7e-12, "no_progress"), (2e-9, "success")])
+def test_event_instants_that_keep_time_from_advancing_are_no_progress(monkeypatch, spacing, status):
+    """Instants 3.7e-12 s apart, each firing the same held contact again (a corner handed
+    between a slot and its twin lifted off so 4 000 times until the wall time ran out),
+    end the run at the 200th with ``no_progress`` and a message; 2e-9 s apart they are
+    time advancing, and the run goes on to its end."""
+    from flexbody.driver import _Run, _Stop
+
+    scene = make_scene(body(position=[0.0, 0.5]), simulation={"t_end": 1e-6, "output_dt": 1e-6})
+    leaving = np.array([True, False])
+
+    def segment(self, t0, t_bound):  # every segment ends at an event `spacing` later
+        t = min(t0 + spacing, t_bound)
+        return _Stop(t, np.zeros(2, bool), leaving, t < t_bound)
+
+    monkeypatch.setattr(_Run, "segment", segment)
+    monkeypatch.setattr(_Run, "resolve_at", lambda self, t, touching, leaving: [])
+    r = flexbody.simulate(scene, backend="numpy", max_wall_time=60.0)
+    assert r.status == status, r.message
+    if status == "no_progress":
+        assert "200 event instants in a row within 1e-09 s" in r.message
+        stopped_at = float(r.message.split("at t = ")[1].split(" s")[0])
+        assert stopped_at == pytest.approx(200 * spacing, rel=1e-6)  # time had not advanced
+
+
 @needs_cc
 def test_a_stiffness_the_integrator_cannot_step_ends_too_slow_inside_one_segment():
     """stiffness 1e20: steps of ~1e-11 s inside one C call; the integrator checks the

@@ -82,8 +82,14 @@ SINK_WARNING = 100.0
 PUT_BACK_WARNING = 1e4
 #: Names of the compiled fixed point's event kinds.
 EVENT_KINDS = {IMPACT: "impact", LIFTOFF: "liftoff", STICK: "stick", SLIP: "slip"}
-#: Event instants closer than this (s) count as no progress; this many in a row is a failure.
-STALL_TIME, STALL_COUNT = 1e-12, 200
+#: A step shorter than this (s) is not shortened again for a held contact's sink.
+STALL_TIME = 1e-12
+#: Event instants closer than this (s) count as no progress; STALL_COUNT in a row is a
+#: failure (``no_progress``).  Not the root finder's resolution (1e-15 s): a corner held by
+#: a slot and its twin in turn lifted off every 3.7e-12 s, 4 000 instants of it until the
+#: wall time ran out (``too_slow``, 90 s after the loop began).  200 instants within 2e-7 s
+#: are none a run can afford either way; a pile's come 1e-4 s apart on average.
+PROGRESS_TIME, STALL_COUNT = 1e-9, 200
 
 Progress = Callable[[float, float, int], None]
 
@@ -948,7 +954,7 @@ class _Run:
                     if stop.t >= s.t_end:
                         break
                     touching = (phases.phase == PUSHED) & (phases.push_until <= stop.t * (1 + 1e-15) + 1e-300)
-                self.stalled = self.stalled + 1 if stop.t - t < STALL_TIME else 0
+                self.stalled = self.stalled + 1 if stop.t - t < PROGRESS_TIME else 0
                 t = stop.t
                 self.check_guards(t, self.resolve_at(t, touching, leaving))
         except SimulationFailed as failure:
@@ -971,8 +977,9 @@ class _Run:
             raise SimulationFailed("max_events", f"{len(self.events)} events by t = {t:.9g} s (max_events = "
                                    f"{self.max_events}); raise max_events if the scene really has that many.")
         if self.stalled >= STALL_COUNT:
-            raise SimulationFailed("no_progress", f"{self.stalled} event instants in a row within {STALL_TIME} s "
-                                   f"of each other at t = {t:.12g} s; tighten --rtol/--atol.")
+            raise SimulationFailed("no_progress", f"{self.stalled} event instants in a row within {PROGRESS_TIME:g} s "
+                                   f"of each other at t = {t:.12g} s; tighten --rtol/--atol, or please report the "
+                                   "scene (a contact handed back and forth at one place).")
         if self.friction:
             self.check_corners(t)
         if self.model.n_slots:
