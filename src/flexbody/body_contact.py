@@ -1128,21 +1128,6 @@ class BodyContactModel(Model):
         # rigid box's rim held on the old triangle's plane, its force down to -7 N).
         cornered = approach.copy()
         cornered[tangential] = self._concave(came_from[tangential], self.element_of[out[tangential]], x, strict=True)
-        # Sliding over such a crease onto the new element while approaching it, however
-        # slowly (the slide's speed times the crease's angle: the geometry's sign, not
-        # round-off), the particle hits it: an impact.  It is in the corner for that instant
-        # only: past it the old element's plane runs under the new one, inside the body, and
-        # it comes back onto the old element only by crossing back, which the new one's
-        # boundary event sees.  No twin then.  (A twin held on the old triangle took the
-        # force LCP's load off the new one, whose row was released still approaching, and
-        # the slot was handed back 1e-12 m further past the old triangle's end every
-        # 3.7e-12 s: a fuzzed stack's corner sliding at 0.19 m/s over a top face's diagonal
-        # creased by 5e-7 rad, at 1e-7 m/s onto the new triangle.)
-        creased = np.flatnonzero(tangential & cornered & (rate < 0.0))
-        if len(creased):
-            across = self._crossing_speed(came_from[creased], out[creased], terms.weights[creased], x, v)
-            hit = creased[across > speed_tolerance]
-            cornered[hit], approach[hit], tangential[hit] = False, True, False
         rows = self._group_rows(out[cornered])
         free = np.asarray(held)[ng + rows] == 0  # a moving row's group always has one (it is bounded)
         twins = rows[np.arange(len(rows)), free.argmax(axis=1)]
@@ -1172,22 +1157,6 @@ class BodyContactModel(Model):
         normals = (segment_normals if self.dim == 2 else triangle_normals)(x, a)
         reach = x[off] - x[a[:, 0]]
         return np.einsum("ij,ij->i", normals, reach) > (STRICT * np.linalg.norm(reach, axis=1) if strict else 0.0)
-
-    def _crossing_speed(self, first: IntArray, slots: IntArray, weights: FloatArray, x: FloatArray,
-                        v: FloatArray) -> FloatArray:
-        """How fast each of ``slots``' particles moves onto its element from its neighbour
-        ``first`` (m/s, (k,)): its velocity relative to the element's point under it
-        (``weights`` (k, dim) on the element) along the element's plane, away from the
-        vertex or edge the two share and towards the element's other vertex."""
-        a, b = self.elements[first], self.elements[self.element_of[slots]]
-        off = np.array([row_b[~np.isin(row_b, row_a)][0] for row_a, row_b in zip(a, b)], np.intp)
-        shared = np.array([row_b[np.isin(row_b, row_a)] for row_a, row_b in zip(a, b)], np.intp).reshape(len(b), -1)
-        inward = x[off] - x[shared[:, 0]]
-        if self.dim == 3:  # away from the shared edge, square to it
-            edge = _unit_rows(x[shared[:, 1]] - x[shared[:, 0]])
-            inward -= np.einsum("kd,kd->k", inward, edge)[:, None] * edge
-        relative = v[self.slot_particle[slots]] - np.einsum("kj,kjd->kd", weights, v[b])
-        return np.einsum("kd,kd->k", relative, _unit_rows(inward))
 
     def concave_hand_backs(self, twins: IntArray, y, p) -> np.ndarray:
         """Of the held corner twins ``twins`` (contact indices) about to hand their elements
