@@ -285,6 +285,22 @@ def test_a_held_contact_that_a_renewed_slip_direction_pulls_is_an_instant():
     assert r.stats["max_penetration_m"] < 1e-9 and r.stats["energy_drift_relative"] < 1e-6
 
 
+
+@pytest.mark.slow  # three flexible boxes to 0.0071 s: ~12 s
+def test_a_slip_between_bodies_that_its_slowing_stops_within_the_step_is_held_and_sticks():
+    """A fuzz's scene (tests/reference/fuzz_friction_whirling_slip_between_boxes.json: three
+    flexible boxes, rough).  A corner sliding on another box at ~2e-6 m/s was slowed at
+    ~76 m/s^2 (the other box's element moves too), but its hold was judged on its own
+    particle's mass (friction alone, 17 m/s^2: it would not stop within the step), so its
+    friction followed it while the bodies' vibration whirled it past its step's direction:
+    its event fired every 1.6e-8 s, each instant sliding on, until the run was too slow.
+    Held along its direction now, its event is its stop, and it sticks."""
+    table = reference_table("fuzz_friction_whirling_slip_between_boxes")
+    r = flexbody.simulate(flexbody.load_scene(table), max_wall_time=90.0)
+    assert r.status == "success", r.message
+    assert r.stats["segments"] <= r.stats["events"] + 10  # no instants without events
+    assert r.stats["max_penetration_m"] < 1e-9 and r.stats["energy_drift_relative"] < 1e-6
+
 def _icosahedra(friction: float) -> flexbody.SimulationResult:
     """Two flexible icosahedra (12 particles, axial dampers: central forces) meeting
     obliquely and off-centre in free space (the ground 10 m away), e = 0.5."""
