@@ -285,7 +285,6 @@ def test_a_held_contact_that_a_renewed_slip_direction_pulls_is_an_instant():
     assert r.stats["max_penetration_m"] < 1e-9 and r.stats["energy_drift_relative"] < 1e-6
 
 
-
 @pytest.mark.slow  # three flexible boxes to 0.0071 s: ~12 s
 def test_a_slip_between_bodies_that_its_slowing_stops_within_the_step_is_held_and_sticks():
     """A fuzz's scene (tests/reference/fuzz_friction_whirling_slip_between_boxes.json: three
@@ -300,6 +299,7 @@ def test_a_slip_between_bodies_that_its_slowing_stops_within_the_step_is_held_an
     assert r.status == "success", r.message
     assert r.stats["segments"] <= r.stats["events"] + 10  # no instants without events
     assert r.stats["max_penetration_m"] < 1e-9 and r.stats["energy_drift_relative"] < 1e-6
+
 
 def _icosahedra(friction: float) -> flexbody.SimulationResult:
     """Two flexible icosahedra (12 particles, axial dampers: central forces) meeting
