@@ -611,13 +611,13 @@ class EdgeSlots:
         gap, pair = found.gap[deep], found.pair[deep]
         s, t = found.parameters[deep].T
         first, second = self.edges[pair[:, 0]], self.edges[pair[:, 1]]
-        lengths = [np.linalg.norm(x[e[:, 1]] - x[e[:, 0]], axis=1) for e in (first, second)]
+        inside = _inside_each_edge(x, first, second, s, t)
         # the edge whose closest point is past an end, or nearer one (m; :meth:`_crossing_inside`)
-        first_past = _from_ends(s) * lengths[0] <= _from_ends(t) * lengths[1]
+        first_past = inside[:, 0] <= inside[:, 1]
         # the other edge's closest point inside it by the crossing's depth (nearer its end the
         # crossing is a corner's on a corner: two boxes' coincident corners read their lines
         # 9e-6 m crossed, their edges 1e-13 m), as a deep crossing's (_crossing_inside)
-        kept = np.where(first_past, _from_ends(t) * lengths[1], _from_ends(s) * lengths[0]) >= -gap
+        kept = inside.max(axis=1) >= -gap
         # the edge through one of the other edge's two triangles, or from one into the body
         rest = np.flatnonzero(kept)
         kept[rest] = self._through_triangles(x, np.where(first_past[rest, None], first[rest], second[rest]),
@@ -716,8 +716,15 @@ def _inside_edges(x: FloatArray, first: IntArray, second: IntArray, s: FloatArra
     :data:`AT_END` beyond an end, where the contact search stops taking the pair (a held
     row released at the end itself, its point then within AT_END, was found and hit again
     at once, armed a tolerance lower each time: ten impacts in 1.5 us in a struck row)."""
+    return _inside_each_edge(x, first, second, s, t).min(axis=1)
+
+
+def _inside_each_edge(x: FloatArray, first: IntArray, second: IntArray, s: FloatArray, t: FloatArray) -> FloatArray:
+    """How far the closest point at ``s`` is inside edge ``first``, and the one at ``t``
+    inside ``second`` ((k, 2) particle indices each; m, :func:`_from_ends` times each
+    edge's length), shape (k, 2)."""
     lengths = [np.linalg.norm(x[e[:, 1]] - x[e[:, 0]], axis=1) for e in (first, second)]
-    return np.minimum(_from_ends(s) * lengths[0], _from_ends(t) * lengths[1])
+    return np.column_stack([_from_ends(s) * lengths[0], _from_ends(t) * lengths[1]])
 
 
 def _from_ends(parameters: FloatArray) -> FloatArray:

@@ -310,10 +310,10 @@ def segments_through(p: np.ndarray, q: np.ndarray, corners: np.ndarray, into: bo
 
     at_p, at_q = volume(a, b, c, p), volume(a, b, c, q)  # the ends' distances times |(b - a) x (c - a)|
     size = np.linalg.norm(cross(b - a, c - a), axis=1) * np.linalg.norm(q - p, axis=1)
-    through_plane = (at_p * at_q < 0.0) & (np.minimum(np.abs(at_p), np.abs(at_q)) > STRICT * size)
+    nearer = np.minimum(np.abs(at_p), np.abs(at_q))  # the end nearer the plane
+    through_plane = (at_p * at_q < 0.0) & (nearer > STRICT * size)
     if into:
-        on_plane = np.minimum(np.abs(at_p), np.abs(at_q)) <= STRICT * size
-        through_plane |= on_plane & (np.minimum(at_p, at_q) < -STRICT * size)
+        through_plane |= (nearer <= STRICT * size) & (np.minimum(at_p, at_q) < -STRICT * size)
     sides = np.stack([volume(p, q, a, b), volume(p, q, b, c), volume(p, q, c, a)])
     inside = ((sides > 0.0).all(axis=0)) | ((sides < 0.0).all(axis=0))
     return through_plane & inside
