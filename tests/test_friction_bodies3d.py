@@ -301,6 +301,20 @@ def test_a_slip_between_bodies_that_its_slowing_stops_within_the_step_is_held_an
     assert r.stats["max_penetration_m"] < 1e-9 and r.stats["energy_drift_relative"] < 1e-6
 
 
+def test_a_row_of_boxes_whose_frictional_force_lcp_tied_across_large_divisors_runs_to_its_end():
+    """A fuzz's row (tests/reference/fuzz_friction_row_near_tie.json: three flexible boxes on
+    a frictionless ground, rough between them, b0 pushed at 0.776 m/s) stopped `unsupported`
+    at t = 0.000745 s, when b1 reaches b2: the frictional force LCP of 17 held rows (two
+    pairs of nearly redundant vertex rows) tied rows whose keys b / a were 5.7e-9 and
+    1e-13 apart, and its answer left a normal row 1.06e-4 off complementarity
+    (tests/test_lcp.py has that LCP).  With ties judged in the tableau's own units it runs
+    to its end (66 events)."""
+    table = reference_table("fuzz_friction_row_near_tie")
+    r = flexbody.simulate(flexbody.load_scene(table), max_wall_time=60.0)
+    assert r.status == "success", r.message
+    assert r.stats["max_penetration_m"] < 1e-9 and r.stats["energy_drift_relative"] < 1e-6
+
+
 def _icosahedra(friction: float) -> flexbody.SimulationResult:
     """Two flexible icosahedra (12 particles, axial dampers: central forces) meeting
     obliquely and off-centre in free space (the ground 10 m away), e = 0.5."""

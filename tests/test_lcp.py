@@ -221,6 +221,71 @@ def test_lexicographic_rule_ends_where_a_naive_tie_break_cycles(seed, monkeypatc
     assert solve_lcp(M, q, max_pivots=500).status == "iterations"  # the same path without the rule cycles
 
 
+def _key_tolerance_tie_break(T, rows, a, n, rhs, prefer=None):
+    """The lexicographic rule with the tie test on the keys themselves (this module's rule
+    until the friction row's LCP below): rows tie where their keys are within 1e-12 of the
+    largest key (at least 1), whatever their divisors ``a``."""
+    keys = np.column_stack([T[rows, rhs], T[rows, :n]]) / a[:, None]
+    alive = np.arange(rows.size)
+    for k in range(keys.shape[1]):
+        values = keys[alive, k]
+        alive = alive[values <= values.min() + 1e-12 * max(1.0, np.abs(values).max())]
+        if k == 0 and prefer is not None and prefer.size:
+            hit = np.flatnonzero(np.isin(rows[alive], prefer))
+            if hit.size:
+                return int(rows[alive[hit[0]]])
+        if alive.size == 1:
+            break
+    return int(rows[alive[0]])
+
+
+def test_rows_tie_only_where_pivoting_on_either_leaves_the_other_at_most_rounding_below_zero():
+    """Two rows of a large entering column (a = 3e3 and 3e6) whose keys b / a are 1e-13
+    apart: pivoting on the second leaves the first's basic value at 3e3 * -1e-13 = -3e-10,
+    not a rounding-level tie, however close the keys.  The first is the minimum; the second
+    (holding z0, preferred in a tie) won when the keys were compared to 1e-12.  Scaling the
+    column (the entering variable) does not change the choice; a row with a tiny divisor
+    and a tiny entry (a key far above the minimum) does not tie either."""
+    n, rhs = 3, 3
+    a = np.array([3e3, 3e6, 1e-9])
+    keys = np.array([1e-10, 1e-10 + 1e-13, 1e-4])
+    T = np.zeros((n, n + 1))
+    T[:, :n] = np.eye(n)[::-1]  # the basis inverse's rows favour the last rows in a tie
+    T[:, rhs] = keys * a
+    rows, prefer = np.arange(n), np.array([1])
+    for scale in (1.0, 1e-6, 1e6):
+        assert flexbody.lcp._lex_min_row(T, rows, scale * a, n, rhs, prefer=prefer) == 0
+    assert _key_tolerance_tie_break(T, rows, a, n, rhs, prefer=prefer) == 1
+    T[:, rhs] = [3e-7, 3e-7 * (1.0 + 1e-14), 1e-13]  # within 1e-12 of 3e-7 below 0 either way: a tie
+    assert flexbody.lcp._lex_min_row(T, rows, np.array([3e3, 3e3 * (1 + 1e-14), 1e-9]), n, rhs,
+                                     prefer=prefer) == 1
+
+
+def test_a_frictional_lcp_whose_keys_tied_across_large_divisors_ends_at_rounding_level(monkeypatch):
+    """The frictional force LCP of 17 held rows of three flexible boxes in a row
+    (tests/reference/fuzz_friction_row_near_tie.json at t = 0.000745 s; 77 rows with the
+    polygonal cone's; W_nn's smallest eigenvalue 1.6e-8 of its largest, two pairs of nearly
+    redundant vertex rows).  Lemke's path in exact rational arithmetic ends on a solution
+    after 54 pivots.  With keys compared to 1e-12, rows 12 and 16 (a = 78, keys 5.7e-9
+    apart relative) tied at pivot 5, and at pivot 28 46 rows tied at keys ~8e-11 with
+    divisors up to 2.9e6, z0 among them: it left with basic values 1.4e-6 below 0, which
+    set to 0 left a normal row 1.06e-4 off complementarity.  Now every normal row holds to
+    rounding, and no row is off by more than 1e-11 of max |q| (309): a friction row left
+    at -5.5e-10 by later ties at the tie tolerance (1e-12 of max |q| per tie), beyond the
+    row-wise check ("inaccurate") but not Signorini's law, which the driver checks."""
+    data = np.load(Path(__file__).parent / "reference" / "lcp_friction_row_tie.npz")
+    M, q = data["M"], data["q"]
+    normal, scale = np.arange(17), np.abs(q).max()
+    sol = solve_lcp(M, q)
+    assert np.all(sol.z >= 0.0)
+    assert sol.w.min() >= -1e-11 * scale and np.abs(sol.w * sol.z).max() <= 1e-11 * scale * sol.z.max()
+    assert np.abs(sol.w[normal][sol.z[normal] > 0.0]).max() <= 1e-13 * scale
+    assert sol.w[normal].min() >= -1e-13 * scale
+    monkeypatch.setattr(flexbody.lcp, "_lex_min_row", _key_tolerance_tie_break)
+    before = solve_lcp(M, q)
+    assert np.abs(before.w * before.z).max() > 1e-5 * before.z.max()  # measured 1.06e-4 * 3.95
+
+
 def test_all_zero_q_and_tied_q_rows():
     # q = 0 is solved by z = 0; q = -1 everywhere with an identity-like M ties every first ratio.
     M = np.array([[2.0, 1.0, 1.0], [1.0, 2.0, 1.0], [1.0, 1.0, 2.0]])
@@ -831,9 +896,12 @@ def test_a_basis_that_rounding_left_infeasible_is_solved_again_on_a_shifted_matr
     a z below 0 by 0.21 (w below 0 by 3.4); and 11 rows, condition 5e16, a secondary ray
     though enumerating the 2^11 bases finds a solution (to 1.2e-13).  Solved again on
     M + s I, the answer solves the original problem; an answer far larger than the pivots'
-    last point is not taken (an infeasible problem has one of size ~1/s on M + s I)."""
+    last point is not taken (an infeasible problem has one of size ~1/s on M + s I).  (Ties
+    of the ratio test in the tableau's units end both paths on a solution: the path of
+    the tie test on the keys, which ended them so, is taken here to test the shifts.)"""
     data = np.load(Path(__file__).parent / "reference" / f"{name}.npz")
     M, q = data["M"], data["q"]
+    monkeypatch.setattr(flexbody.lcp, "_lex_min_row", _key_tolerance_tie_break)
     monkeypatch.setattr(flexbody.lcp, "COVERINGS", 0)  # the shifts alone (other covering vectors solve it too)
     sol = solve_lcp(M, q)
     assert sol.status == "solved" and "on M +" in sol.message, sol.message
@@ -853,14 +921,32 @@ def test_a_frictional_lcp_whose_path_ends_on_a_ray_is_solved_from_another_coveri
     or on a basis whose z fails the check, and the run stopped `unsupported`; M is not
     copositive-plus (friction), so neither proves there is no solution, and 31 and 32 of
     50 orders of their rows solve them.  From another covering vector the path ends on a
-    solution of the original problem."""
+    solution of the original problem.  (Ties of the ratio test in the tableau's units end
+    both paths on a solution: the path of the tie test on the keys is taken here.)"""
     data = np.load(Path(__file__).parent / "reference" / f"{name}.npz")
     M, q = data["M"], data["q"]
+    monkeypatch.setattr(flexbody.lcp, "_lex_min_row", _key_tolerance_tie_break)
     sol = solve_lcp(M, q)
     assert "covering vector" in sol.message, sol.message
     assert_solves(sol, M, q)
     monkeypatch.setattr(flexbody.lcp, "COVERINGS", 0)
     assert solve_lcp(M, q).status == without
+
+
+@pytest.mark.parametrize("name", ["lcp_redundant_friction", "lcp_redundant_friction_ray",
+                                  "lcp_fuzz_frictional_impact_ray", "lcp_fuzz_frictional_impact_2d"])
+def test_frictional_lcps_that_key_ties_left_unsolved_are_solved_by_the_first_path(monkeypatch, name):
+    """The four LCPs above whose path from the covering vector of ones ended on a basis
+    failing the check or on a ray while ties were judged on the keys b / a: with ties
+    judged in the tableau's own units (:func:`flexbody.lcp._lex_min_row`) that path ends on
+    a solution, with no shift and no other covering vector."""
+    data = np.load(Path(__file__).parent / "reference" / f"{name}.npz")
+    M, q = data["M"], data["q"]
+    monkeypatch.setattr(flexbody.lcp, "COVERINGS", 0)
+    monkeypatch.setattr(flexbody.lcp, "SHIFTS", ())
+    sol = solve_lcp(M, q)
+    assert "on M +" not in sol.message and "covering vector" not in sol.message
+    assert_solves(sol, M, q)
 
 
 def test_a_shifted_answer_is_checked_with_the_shift_s_compliance(monkeypatch):

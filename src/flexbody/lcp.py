@@ -64,7 +64,9 @@ STATUSES = {
 PIVOT_TOL = 1e-11
 #: Relative tolerance of the final check, scaled per row by ``|M| |z| + |q|``.
 CHECK_TOL = 1e-9
-#: Relative tolerance for ties in the lexicographic ratio test.
+#: Tolerance for ties in the lexicographic ratio test, relative to the tableau entries
+#: compared (the right side is in units of max |q|, the basis inverse starts as I): rows tie
+#: where pivoting on the lowest ratio leaves the others' entries at most this far below 0.
 TIE_TOL = 1e-12
 #: Where Lemke's method ends on a complementary basis whose answer fails the check, or on a
 #: secondary ray, it runs again on ``M + s I`` for each of these ``s`` (relative to M's
@@ -79,6 +81,8 @@ SHIFT_GROWTH = 10.0
 #: secondary ray proves nothing, and the path, which the covering vector sets, may end on a
 #: solution from another start.  A fuzz's frictional impacts: 6 of 7 problems that ended on
 #: a ray or an infeasible basis were solved by 19 to 40 of 50 orders of their contacts.
+#: (Four of the five such problems in tests/reference, two of them the shifts', are solved
+#: by the first path since the ratio test's ties are judged in the tableau's units.)
 COVERINGS = 12
 
 
@@ -278,14 +282,29 @@ def _lex_min_row(T: np.ndarray, rows: np.ndarray, a: np.ndarray, n: int, rhs: in
     ``a`` (shape ``(len(rows),)``, > 0) are the divisors.  Ties in the first component (a
     degenerate step) are broken by the basis inverse's rows, except that a row in ``prefer``
     (the one holding ``z0``) wins a first-component tie at once: letting ``z0`` leave there
-    ends the path on a solution.
+    ends the path on a solution.  Rows tie in a component where pivoting on any of them
+    leaves every other row's entry in that column at most :data:`TIE_TOL` (relative to the
+    column's entries, at least 1) below 0: a test in the tableau's units, which does not
+    change when the entering variable is scaled (its column ``a`` by ``c``, the keys by
+    ``1 / c``).
     """
-    keys = np.column_stack([T[rows, rhs], T[rows, :n]]) / a[:, None]
+    entries = np.column_stack([T[rows, rhs], T[rows, :n]])
+    keys = entries / a[:, None]
     alive = np.arange(rows.size)
     for k in range(keys.shape[1]):
-        values = keys[alive, k]
-        low = values.min()
-        alive = alive[values <= low + TIE_TOL * max(1.0, np.abs(values).max())]
+        values, column = keys[alive, k], entries[alive, k]
+        tol = TIE_TOL * max(1.0, np.abs(column).max())
+        # Pivoting on row i leaves row j's entry at a_j (key_j - key_i): row i ties with the
+        # lowest where that is below 0 by rounding only for every j, the lowest row's too.  (A
+        # tolerance on the keys themselves scales with 1 / a: a frictional LCP's rows with
+        # a ~ 3e3..3e6 tied at keys ~8e-11 apart, and z0 left with basic values 1e-6 below 0;
+        # a row with a ~ 1e-9 and an entry ~1e-13 has a key far off, yet passes a test of
+        # its own entry alone.)
+        lowest = int(np.argmin(values))
+        near = np.flatnonzero(a[alive[lowest]] * (values - values[lowest]) <= tol)
+        if near.size > 1:  # each of these against every row it would push below 0 (the lowest: none)
+            near = near[((values[near, None] - values[None, :]) * a[alive]).max(axis=1) <= tol]
+        alive = alive[near]
         if k == 0 and prefer is not None and prefer.size:
             hit = np.flatnonzero(np.isin(rows[alive], prefer))
             if hit.size:
