@@ -16,7 +16,9 @@ import pytest
 
 import flexbody
 from flexbody.body_contact import BodyContactModel
+from flexbody.contact_problems import solve_forces
 from flexbody.coupled import coupled_impact
+from flexbody.dynamics import contact_solve
 from flexbody.model import load_model
 
 from .conftest import reference_table
@@ -554,6 +556,38 @@ def test_redundant_rows_are_found_block_by_block_as_by_ranks_of_the_whole():
         assert whole[[4, 17]].all() if trial % 3 == 2 else True
         found += int(whole.sum())
     assert found >= 20  # the redundant rows were asked about, not only independent ones
+
+
+def test_an_unloaded_row_within_rounding_of_another_is_not_held_pulling():
+    """A vertex's slot and the edge row at that vertex (a fuzz's box pushed into another:
+    tests/reference/fuzz_vertex_slot_and_edge_row_at_one_corner.json) constrain the same
+    two points along normals 2e-6 rad apart (W's condition 1e12).  The force LCP puts the
+    load on the edge row and leaves the slot without force, accelerating away at 1e-9
+    m/s^2, below the release floor: not lifted, and not in the edge row's span.  Held, its
+    acceleration is kept at 0 by the segment's solve, which takes that rate off through W's
+    near-null direction: -0.91 N on the slot, +0.95 N on the edge row, and the slot's
+    lift-off event starts below 0 and never fires (in the fuzz: -2.35 N, read -0.94 N at a
+    sample).  coupled._held_pulling finds the slot; with the rows at right angles the same
+    rate is held off by 3.6e-12 N, within the force tolerance, and it finds nothing."""
+    from flexbody.coupled import _held_pulling
+
+    m = 0.196 / 27  # a particle of the fuzz's box
+    n, up = np.array([1.0, 0.0, 0.0]), np.array([0.0, 0.0, 1.0])
+    tolerance = np.full(2, 1e-10 * m * 9.81)  # the driver's
+    for angle, pulls in ((2e-6, [True, False]), (np.pi / 2, [False, False])):
+        bent = np.cos(angle) * n + np.sin(angle) * up
+        J = np.array([np.concatenate([-n, n]), np.concatenate([-bent, bent])])  # two particles' rows
+        W = J @ J.T / m
+        a_free = np.array([1e-9, 0.0]) - W @ np.array([0.0, 0.0442])
+        solution = solve_forces(W, a_free)
+        assert solution.solved
+        np.testing.assert_allclose(solution.normal, [0.0, 0.0442], rtol=1e-9)
+        floor = 1e-10 * max(1.0, float(np.abs(a_free).max()))  # coupled_release's
+        assert 0.0 < solution.normal_rate[0] <= floor  # kept held: not lifted
+        held = contact_solve(W, -a_free)  # the segment's forces, both rows held
+        assert (held[0] < -0.5) == pulls[0] and held[1] > 0.0
+        assert _held_pulling(W, a_free, np.ones(2, bool), tolerance).tolist() == pulls
+        assert not _held_pulling(W, a_free, np.array([False, True]), tolerance).any()  # alone: the LCP's
 
 
 def _dart_in_notch(turn_deg: float) -> dict:

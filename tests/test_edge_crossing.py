@@ -570,3 +570,26 @@ def test_an_edge_row_that_fired_as_its_sibling_passed_an_end_is_not_held_apart()
     assert r.stats["max_penetration_m"] < 1e-9  # 7.7e-4 m before; measured 6.5e-11 m
     assert r.stats["max_edge_crossing_m"] == 0.0
     assert r.stats["energy_drift_relative"] < 1e-6  # measured 5.0e-8
+
+
+@pytest.mark.slow  # four flexible bodies, ~7 s
+def test_a_vertex_slot_beside_the_edge_row_at_its_corner_is_not_held_pulling():
+    """An eleventh fuzz's row (tests/reference/fuzz_vertex_slot_and_edge_row_at_one_corner.json:
+    a flexible box pushed into a 20-particle flexible sphere, then two flexible boxes, `edges
+    = true`, frictionless).  b2's corner 61 is held on a face of b3 by its vertex slot (contact
+    310); at 0.0028799 s the edge row of an edge at that corner (contact 1503) hits b3's edge
+    there, its row 2e-6 from the slot's (W's condition 1e12).  The force LCP loads the edge
+    row (0.044 N) and leaves the slot without force, accelerating away at 1.5e-9 m/s^2, below
+    the release floor (3.1e-9): kept held, and the segment's solve held both at 0 by -2.35 N
+    on the slot and +2.39 N on the edge row.  The slot's lift-off event, starting below 0,
+    never fired: "a held contact's force turned negative (-0.94 N)" at the sample at 3.7 ms,
+    held until 4.3 ms.  A row the LCP leaves unloaded that held would pull is set free as
+    implied (coupled._held_pulling)."""
+    r = flexbody.simulate(flexbody.load_scene(reference_table("fuzz_vertex_slot_and_edge_row_at_one_corner")),
+                          max_wall_time=120.0)
+    assert r.status == "success", r.message
+    assert not r.stats["warnings"]  # -0.94 N before
+    assert r.stats["min_held_contact_force_N"] >= 0.0  # measured 0
+    assert r.stats["max_penetration_m"] < 1e-9  # measured 1.4e-12 m
+    assert r.stats["max_edge_crossing_m"] == 0.0
+    assert r.stats["energy_drift_relative"] < 1e-6  # measured 8.4e-10

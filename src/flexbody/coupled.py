@@ -332,7 +332,9 @@ def coupled_release(model, y: np.ndarray, p: np.ndarray, held: np.ndarray, push:
         contacts than the body has freedoms (a box flat on four corners) the forces are not
         unique, and the LCP's answer carries the weight on the others.  They are set free
         without an event: their gap stays 0 because the held ones imply it, and if that
-        changes, their gap event finds them.
+        changes, their gap event finds them.  Without friction, so is one the LCP leaves
+        without force, accelerating away below the release floor, that held at 0 would pull
+        (:func:`_held_pulling`: a row within rounding of the others' span).
 
     Raises
     ------
@@ -371,7 +373,28 @@ def coupled_release(model, y: np.ndarray, p: np.ndarray, held: np.ndarray, push:
     unloaded = (solution.normal == 0.0) & ~release[rows]
     if unloaded.any():
         implied[rows] = unloaded & _redundant(J, unloaded)  # the others carry it
+        if not friction:  # the segment's solve holds the rest at 0: none of them may pull there
+            kept = ~release[rows] & ~implied[rows]
+            implied[rows] |= unloaded & _held_pulling(W, a_free, kept, force_tolerance[rows])
     return release, implied
+
+
+def _held_pulling(W: np.ndarray, a_free: np.ndarray, kept: np.ndarray, force_tolerance: np.ndarray) -> np.ndarray:
+    """Which of the ``kept`` rows (bool (k,)) would pull, bool (k,): their forces as the
+    segment's right-hand side takes them, every kept row's acceleration held at 0 (the
+    ordered Cholesky of :func:`flexbody.dynamics.contact_solve` on their block of ``W``),
+    below ``-force_tolerance`` (k,).  The LCP leaves a row without force while it
+    accelerates away slower than its release floor; holding it then takes that rate off
+    through ``W``'s near-null direction, where its row is within rounding of another's but
+    not in their span (a vertex's slot and the edge row at that vertex, 2e-6 apart: 1.5e-9
+    m/s^2 held off by -2.35 N on the slot, +2.39 N on the edge), and its lift-off event,
+    starting below 0, never fires."""
+    out = np.zeros(len(kept), bool)
+    rows = np.flatnonzero(kept)
+    if not len(rows):
+        return out
+    out[rows] = contact_solve(W[np.ix_(rows, rows)], -a_free[rows]) < -force_tolerance[rows]
+    return out
 
 
 def _redundant(J: np.ndarray, asked: np.ndarray) -> np.ndarray:
