@@ -315,6 +315,20 @@ def test_a_row_of_boxes_whose_frictional_force_lcp_tied_across_large_divisors_ru
     assert r.stats["max_penetration_m"] < 1e-9 and r.stats["energy_drift_relative"] < 1e-6
 
 
+@pytest.mark.slow
+def test_the_same_row_cut_to_two_boxes_runs_to_its_end_instead_of_crawling():
+    """The row above cut to b0 and b1 (tests/reference/fuzz_friction_pair_near_tie.json,
+    ~30 s) was `too_slow`: 120 s of wall time to reach 0.000745 s, RK45's steps shrunk to
+    5.5e-8 s.  With the same ratio test it reaches its end (51 events).  An edge of b0
+    passes through a triangle of b1 (frictional pairs have no edge contacts): a warning,
+    and the only one."""
+    table = reference_table("fuzz_friction_pair_near_tie")
+    r = flexbody.simulate(flexbody.load_scene(table), max_wall_time=150.0)
+    assert r.status == "success", r.message
+    assert r.stats["max_penetration_m"] < 1e-9 and r.stats["energy_drift_relative"] < 1e-6
+    assert [w.split(" crossed ")[1][:12] for w in r.stats["warnings"]] == ["edge on edge"]
+
+
 def _icosahedra(friction: float) -> flexbody.SimulationResult:
     """Two flexible icosahedra (12 particles, axial dampers: central forces) meeting
     obliquely and off-centre in free space (the ground 10 m away), e = 0.5."""
