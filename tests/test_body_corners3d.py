@@ -220,10 +220,11 @@ def test_a_particle_dithering_across_a_slightly_concave_crease_keeps_its_twin():
     bottom rim midpoint slides up b0's face along the face's vertical middle line, a crease
     concave by more than rounding, crossing it back and forth by ~1e-11 m at ~2e-6 m/s (the
     undamped face vibrating) with a normal approach of 2e-9 m/s.  Met tangentially, each
-    crossing keeps a corner twin on the old triangle; a rule that made a crossing faster
-    than the speed tolerance an impact without a twin (tried at this stop for a stack's
-    corner sliding across a face diagonal, which stalls: tests/reference/open) made it an
-    impact and a hold every 10-20 us, `chattering` at 2.8 ms."""
+    crossing keeps a corner twin on the old triangle; a rule that made every crossing faster
+    than the speed tolerance an impact without a twin (tried for a stack's corner sliding
+    across a face diagonal) made it an impact and a hold every 10-20 us, `chattering` at
+    2.8 ms.  The crease here, 8e-4 rad, has a line the held pair slides along; only
+    creases flatter than ``EDGE_LINE`` take the rule now (the next test)."""
     r = flexbody.simulate(flexbody.load_scene(reference_table("fuzz_row_dithering_on_a_crease")), max_wall_time=120.0)
     assert r.status == "success", r.message
     assert r.stats["max_penetration_m"] < 1e-9  # measured 2.0e-12 m
@@ -232,3 +233,96 @@ def test_a_particle_dithering_across_a_slightly_concave_crease_keeps_its_twin():
     assert r.stats["energy_drift_relative"] < 1e-6  # measured 3.5e-9
     momentum = np.einsum("i,tid->td", r.masses, r.velocities)[:, 0]  # frictionless ground: kept along x
     np.testing.assert_allclose(momentum, momentum[0], rtol=1e-9)
+
+
+def test_a_corner_sliding_over_a_diagonal_creased_by_a_hair_hits_the_next_triangle():
+    """A seventh fuzz's stack of three flexible boxes (tests/reference/fuzz_stack_corner_over_diagonal.json,
+    cut to 9.5 ms; frictionless, e = 0, edges): b0's top corner 19, held on b1's bottom
+    face, slides at 0.19 m/s across that face's diagonal, creased concave by 5e-7 rad, onto
+    the next triangle at 1e-7 m/s (below the speed tolerance, 3.1e-7).  Met tangentially, it
+    kept a corner twin on the old triangle, the force LCP put the load on the twin and
+    released the slot still approaching, and the slot was handed the old triangle back
+    1e-12 m short of passing its end again: a lift-off every 3.7e-12 s, `no_progress` at
+    t = 0.00903134 s.  Now it hits the next triangle there (an impact, no twin) and slides on."""
+    r = flexbody.simulate(flexbody.load_scene(reference_table("fuzz_stack_corner_over_diagonal")),
+                          max_wall_time=120.0)  # ~2 s
+    assert r.status == "success", r.message
+    assert r.t[-1] == pytest.approx(0.0095)  # past the stall at 0.00903134 s
+    assert r.stats["max_penetration_m"] < 1e-9  # measured 2.0e-12 m
+    assert r.stats["max_edge_crossing_m"] == 0.0
+    assert not r.stats["warnings"]
+    assert r.stats["events"] < 100  # measured 56; 200 lift-offs of that corner alone in the stall
+
+
+def _creased_block(rise: float, size: float = 0.1) -> tuple[list, list, list, list]:
+    """A cube of side ``size`` whose top face is split along its diagonal from (0, 0) to
+    (size, size), the top corner (size, 0) raised by ``rise``: the diagonal is a crease
+    concave by ``rise`` / (``size`` / sqrt 2) rad.  Its particles, links (every pair),
+    triangles (outward) and the two top triangles (the raised one first)."""
+    points = [[x, y, z] for z in (0.0, size) for y in (0.0, size) for x in (0.0, size)]
+    points[5][2] += rise  # (size, 0, size)
+    top = [[4, 5, 7], [4, 7, 6]]
+    triangles = [[0, 2, 3], [0, 3, 1], [0, 1, 5], [0, 5, 4], [1, 3, 7], [1, 7, 5],
+                 [3, 2, 6], [3, 6, 7], [2, 0, 4], [2, 4, 6]] + top
+    return points, [list(k) for k in itertools.combinations(range(8), 2)], triangles, top
+
+
+@pytest.mark.parametrize("rise, across, along, twin", [
+    (3.5e-8, 0.19, 0.01, False),  # 5e-7 rad: crossed at 0.19 m/s, 1e-7 m/s onto the next triangle: an impact
+    (3.5e-8, 1e-7, 0.0, True),    # crossed slower than the speed tolerance: the corner keeps its twin
+    (3.5e-8, 1e-3, 0.19, True),   # sliding along the crease, a hair across it
+    (3.5e-10, 1e-5, 0.0, True),   # 5e-9 rad, 5e-14 m/s onto it: round-off of the velocities, no sign
+    (7e-5, 1e-4, 0.0, True),      # 1e-3 rad, 1e-7 m/s onto it: the planes meet on a line (the held pair slides along it)
+])
+def test_a_particle_crossing_a_crease_concave_by_a_hair_hits_the_next_triangle(rise, across, along, twin):
+    """A tetrahedron's apex held on the raised triangle of a cube's top face, a hair past its
+    diagonal, moving across it onto the other triangle, down the raised one's slope (below
+    the other's plane by the crease's angle times the crossing speed).  Where the crease is
+    flatter than ``EDGE_LINE`` (its planes meet nowhere definite: a twin cannot hold the
+    particle on a line) and the particle crosses it faster than the speed tolerance, more
+    across it than along it, the hand-over is an impact without a corner twin (a fuzzed
+    stack's corner crossing a diagonal creased by 5e-7 rad at 0.19 m/s stalled with one,
+    tests/reference/fuzz_stack_corner_over_diagonal.json).  Slower, along the crease, or at
+    a crease whose planes meet on a line, the particle keeps its twin and the force LCP
+    decides (a particle sliding along such a crease, dithering across it:
+    tests/reference/fuzz_row_dithering_on_a_crease.json)."""
+    size = 0.1
+    points, links, triangles, top = _creased_block(rise, size)
+    table = {
+        "name": "crease", "gravity": [0.0, 0.0, -G],
+        "bodies": [
+            {"name": "block", "particles": points, "links": links, "surface": triangles,
+             "mass": 1.0, "stiffness": 2e4, "damping": 5.0, "position": [0.0, 0.0, 0.0]},
+            {"name": "tet", "particles": _tetrahedron(np.array([0.0, 0.0, 1.0]), length=0.02), "links": TET_LINKS,
+             "surface": TET_SURFACE, "masses": TET_MASSES, "stiffness": 500.0, "damping": 0.2,
+             "position": [0.05, 0.05, 0.2]},
+        ],
+        "contacts": [{"bodies": ["block", "tet"]}],
+        "simulation": {"t_end": 0.1, "output_dt": 1e-3},
+    }
+    scene = flexbody.load_scene(table)
+    model = load_model(scene, backend="numpy")
+    p, ng, apex = model.parameters(scene), model.n_ground_contacts, len(points)
+    raised, other = ([e for e in range(len(model.elements)) if sorted(model.elements[e]) == sorted(t)][0] for t in top)
+    slot = int(model._slots_of(np.array([apex]), np.array([0]))[0][0])
+    held = np.zeros(model.n_contacts, np.intc)
+    held[ng + slot] = 1
+    model.element_of[slot] = raised
+    q = scene.initial_positions().copy()
+    corner = np.array(points[5])
+    diagonal = np.array([1.0, 1.0, 0.0]) / np.sqrt(2.0)
+    on = 0.5 * size * diagonal + [0.0, 0.0, size]  # the diagonal's midpoint
+    downhill = on - corner
+    downhill -= (downhill @ diagonal) * diagonal
+    downhill /= np.linalg.norm(downhill)  # in the raised triangle's plane, square to the diagonal
+    q[apex] = on + 1e-9 * downhill  # a hair past the diagonal, on the raised plane
+    u = np.zeros_like(q)
+    u[apex] = across * downhill + along * diagonal
+    y = np.concatenate([q.ravel(), u.ravel(), np.zeros(model.ny - 2 * q.size)])
+    moved = model.switch_elements(y, p, held, gap_tolerance=1e-12, speed_tolerance=3e-7)
+    assert model.element_of[slot] == other
+    if twin:
+        assert moved.stay.tolist() == [ng + slot] and not len(moved.approach)
+        assert model.element_of[moved.corners - ng].tolist() == [raised]  # the twin, on the old triangle
+    else:
+        assert moved.approach.tolist() == [ng + slot] and not len(moved.stay) and not len(moved.corners)

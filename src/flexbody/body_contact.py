@@ -1128,6 +1128,28 @@ class BodyContactModel(Model):
         # rigid box's rim held on the old triangle's plane, its force down to -7 N).
         cornered = approach.copy()
         cornered[tangential] = self._concave(came_from[tangential], self.element_of[out[tangential]], x, strict=True)
+        # But a 3D crease flatter than EDGE_LINE has no line for a twin to hold the particle
+        # on (the two planes meet nowhere definite: :meth:`_along_edge`): the particle is on
+        # one face or the other, and one crossing the crease onto the new face (faster than
+        # the speed tolerance: a slide, not rounding; more across the crease than along it:
+        # not a slide along the crease that a vibration or rounding takes a hair across),
+        # approaching it beyond round-off, approaches it at its slide times the crease's
+        # angle, a sign the geometry gives, however slowly: an impact, and no twin (past the
+        # crease the old plane runs under the new face, inside the body).  A twin there took
+        # the load, its row and the slot's parallel to 3e-13, and the slot, released still
+        # approaching, was handed it back past the old face's end every 3.7e-12 s (a fuzzed
+        # stack's corner crossing a face diagonal creased by 5e-7 rad at 0.19 m/s, 1e-7 m/s
+        # onto the new triangle).  At a crease with a line the held pair slides along it: a
+        # particle sliding along one, dithering across it (1e-11 m at 2e-6 m/s, a crease of
+        # 8e-4 rad), keeps its twin, as every slower crossing does.
+        if self.dim == 3:
+            roundoff = VELOCITY_ROUNDOFF * max(1.0, float(np.abs(v).max(initial=0.0)))
+            creased = np.flatnonzero(tangential & cornered & (rate < -roundoff))
+            if len(creased):
+                across, along, sine = self._across_crease(came_from[creased], out[creased], terms.weights[creased],
+                                                          x, v)
+                hit = creased[(sine < EDGE_LINE) & (across > speed_tolerance) & (across > np.abs(along))]
+                cornered[hit], approach[hit], tangential[hit] = False, True, False
         rows = self._group_rows(out[cornered])
         free = np.asarray(held)[ng + rows] == 0  # a moving row's group always has one (it is bounded)
         twins = rows[np.arange(len(rows)), free.argmax(axis=1)]
@@ -1157,6 +1179,43 @@ class BodyContactModel(Model):
         normals = (segment_normals if self.dim == 2 else triangle_normals)(x, a)
         reach = x[off] - x[a[:, 0]]
         return np.einsum("ij,ij->i", normals, reach) > (STRICT * np.linalg.norm(reach, axis=1) if strict else 0.0)
+
+    def _across_crease(self, first: IntArray, slots: IntArray, weights: FloatArray, x: FloatArray,
+                       v: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """3D: how each of ``slots``' particles crosses the edge its triangle shares with the
+        neighbouring triangle ``first`` (k,).
+
+        Parameters
+        ----------
+        first, slots : ndarray of int, shape (k,)
+            The triangle each slot left and the slots, each now on its new triangle.
+        weights : ndarray, shape (k, 3)
+            Each particle's projection on its new triangle.
+        x, v : ndarray, shape (n, 3)
+            Particle positions and velocities.
+
+        Returns
+        -------
+        across : ndarray, shape (k,)
+            The particle's velocity relative to the triangle's point under it, in the
+            triangle's plane square to the shared edge, towards the triangle's third vertex
+            (m/s: > 0 onto the new triangle).
+        along : ndarray, shape (k,)
+            That velocity along the shared edge (m/s).
+        sine : ndarray, shape (k,)
+            The sine of the angle between the two triangles' planes.
+        """
+        left, now = self.elements[first], self.elements[self.element_of[slots]]
+        shared = np.isin(now, left)
+        ends = now[shared].reshape(len(now), 2)  # a neighbour across an edge shares two vertices
+        third = now[~shared]
+        edge = _unit_rows(x[ends[:, 1]] - x[ends[:, 0]])
+        normal = triangle_normals(x, now)
+        inward = cross(normal, edge)
+        inward *= np.sign(np.einsum("kd,kd->k", inward, x[third] - x[ends[:, 0]]))[:, None]
+        relative = v[self.slot_particle[slots]] - np.einsum("kj,kjd->kd", weights, v[now])
+        sine = np.linalg.norm(cross(triangle_normals(x, left), normal), axis=1)
+        return np.einsum("kd,kd->k", relative, inward), np.einsum("kd,kd->k", relative, edge), sine
 
     def concave_hand_backs(self, twins: IntArray, y, p) -> np.ndarray:
         """Of the held corner twins ``twins`` (contact indices) about to hand their elements

@@ -87,7 +87,8 @@ STALL_TIME = 1e-12
 #: Event instants closer than this (s) count as no progress; STALL_COUNT in a row is a
 #: failure (``no_progress``).  Not the root finder's resolution (1e-15 s): a corner handed
 #: between a slot and its corner twin lifted off every 3.7e-12 s, 4 000 instants of it until
-#: the wall time ran out (``too_slow``, 90 s after the loop began; tests/reference/open).
+#: the wall time ran out (``too_slow``, 90 s after the loop began; fixed since, see
+#: :meth:`flexbody.body_contact.BodyContactModel.switch_elements`).
 #: 200 instants within 2e-7 s are none a run can afford either way; a pile's come 1e-4 s
 #: apart on average.
 PROGRESS_TIME, STALL_COUNT = 1e-9, 200
