@@ -213,6 +213,20 @@ def test_a_particle_held_on_both_faces_of_a_concave_edge_has_the_edges_ends_for_
     assert model.element_of[rows[1]] in faces  # the twin waits for its own event
 
 
+def _row_runs_clean(name: str, max_wall_time: float) -> None:
+    """The frictionless row of boxes ``tests/reference/<name>.json`` runs to its end with
+    no penetration, edge crossing or warning, its ledger closed and its momentum along x
+    (the push) kept."""
+    r = flexbody.simulate(flexbody.load_scene(reference_table(name)), max_wall_time=max_wall_time)
+    assert r.status == "success", r.message
+    assert r.stats["max_penetration_m"] < 1e-9
+    assert r.stats["max_edge_crossing_m"] == 0.0
+    assert not r.stats["warnings"]
+    assert r.stats["energy_drift_relative"] < 1e-6
+    momentum = np.einsum("i,tid->td", r.masses, r.velocities)[:, 0]  # frictionless ground: kept along x
+    np.testing.assert_allclose(momentum, momentum[0], rtol=1e-9)
+
+
 def test_a_particle_dithering_across_a_slightly_concave_crease_keeps_its_twin():
     """An eleventh fuzz's row (tests/reference/fuzz_row_dithering_on_a_crease.json: two
     flexible 4 x 3 x 2 boxes side by side on a frictionless ground, 1e-6 m apart, b1's
@@ -225,14 +239,7 @@ def test_a_particle_dithering_across_a_slightly_concave_crease_keeps_its_twin():
     across a face diagonal) made it an impact and a hold every 10-20 us, `chattering` at
     2.8 ms.  The crease here, 8e-4 rad, has a line the held pair slides along; only
     creases flatter than ``EDGE_LINE`` take the rule now (the next test)."""
-    r = flexbody.simulate(flexbody.load_scene(reference_table("fuzz_row_dithering_on_a_crease")), max_wall_time=120.0)
-    assert r.status == "success", r.message
-    assert r.stats["max_penetration_m"] < 1e-9  # measured 2.0e-12 m
-    assert r.stats["max_edge_crossing_m"] == 0.0
-    assert not r.stats["warnings"]
-    assert r.stats["energy_drift_relative"] < 1e-6  # measured 3.5e-9
-    momentum = np.einsum("i,tid->td", r.masses, r.velocities)[:, 0]  # frictionless ground: kept along x
-    np.testing.assert_allclose(momentum, momentum[0], rtol=1e-9)
+    _row_runs_clean("fuzz_row_dithering_on_a_crease", 120.0)  # measured 2.0e-12 m, drift 3.5e-9
 
 
 def test_the_same_row_with_no_gap_runs_to_its_end():
@@ -241,14 +248,7 @@ def test_the_same_row_with_no_gap_runs_to_its_end():
     read a held force of -79 N between event checks.  Its force LCPs tied rows across
     large divisors (Lemke's ratio test now judges ties in the tableau's units): 162 events
     to its end, no warning."""
-    r = flexbody.simulate(flexbody.load_scene(reference_table("fuzz_row_on_a_crease_gap_0")), max_wall_time=60.0)
-    assert r.status == "success", r.message
-    assert r.stats["max_penetration_m"] < 1e-9  # measured 2.5e-12 m
-    assert r.stats["max_edge_crossing_m"] == 0.0
-    assert not r.stats["warnings"]
-    assert r.stats["energy_drift_relative"] < 1e-6  # measured 3.6e-9
-    momentum = np.einsum("i,tid->td", r.masses, r.velocities)[:, 0]  # frictionless ground: kept along x
-    np.testing.assert_allclose(momentum, momentum[0], rtol=1e-9)
+    _row_runs_clean("fuzz_row_on_a_crease_gap_0", 60.0)  # measured 2.5e-12 m, drift 3.6e-9
 
 
 def test_a_corner_sliding_over_a_diagonal_creased_by_a_hair_hits_the_next_triangle():
