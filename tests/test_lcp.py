@@ -221,25 +221,14 @@ def test_lexicographic_rule_ends_where_a_naive_tie_break_cycles(seed, monkeypatc
     assert solve_lcp(M, q, max_pivots=500).status == "iterations"  # the same path without the rule cycles
 
 
-def _key_tolerance_tie_break(T, rows, a, n, rhs, prefer=None):
-    """The lexicographic rule with the tie test on the keys themselves (this module's rule
-    until the friction row's LCP below): rows tie where their keys are within 1e-12 of the
-    largest key (at least 1), whatever their divisors ``a``."""
-    keys = np.column_stack([T[rows, rhs], T[rows, :n]]) / a[:, None]
-    alive = np.arange(rows.size)
-    for k in range(keys.shape[1]):
-        values = keys[alive, k]
-        alive = alive[values <= values.min() + 1e-12 * max(1.0, np.abs(values).max())]
-        if k == 0 and prefer is not None and prefer.size:
-            hit = np.flatnonzero(np.isin(rows[alive], prefer))
-            if hit.size:
-                return int(rows[alive[hit[0]]])
-        if alive.size == 1:
-            break
-    return int(rows[alive[0]])
+def _key_tolerance_ties(keys, entries, a):
+    """The ratio test's ties as judged on the keys themselves (this module's rule until the
+    friction row's LCP below): rows whose keys are within 1e-12 of the lowest (of the
+    largest key, at least 1), whatever their divisors ``a``."""
+    return np.flatnonzero(keys <= keys.min() + 1e-12 * max(1.0, np.abs(keys).max()))
 
 
-def test_rows_tie_only_where_pivoting_on_either_leaves_the_other_at_most_rounding_below_zero():
+def test_rows_tie_only_where_pivoting_on_either_leaves_the_other_at_most_rounding_below_zero(monkeypatch):
     """Two rows of a large entering column (a = 3e3 and 3e6) whose keys b / a are 1e-13
     apart: pivoting on the second leaves the first's basic value at 3e3 * -1e-13 = -3e-10,
     not a rounding-level tie, however close the keys.  The first is the minimum; the second
@@ -255,10 +244,12 @@ def test_rows_tie_only_where_pivoting_on_either_leaves_the_other_at_most_roundin
     rows, prefer = np.arange(n), np.array([1])
     for scale in (1.0, 1e-6, 1e6):
         assert flexbody.lcp._lex_min_row(T, rows, scale * a, n, rhs, prefer=prefer) == 0
-    assert _key_tolerance_tie_break(T, rows, a, n, rhs, prefer=prefer) == 1
     T[:, rhs] = [3e-7, 3e-7 * (1.0 + 1e-14), 1e-13]  # within 1e-12 of 3e-7 below 0 either way: a tie
     assert flexbody.lcp._lex_min_row(T, rows, np.array([3e3, 3e3 * (1 + 1e-14), 1e-9]), n, rhs,
                                      prefer=prefer) == 1
+    T[:, rhs] = keys * a
+    monkeypatch.setattr(flexbody.lcp, "_tied", _key_tolerance_ties)
+    assert flexbody.lcp._lex_min_row(T, rows, a, n, rhs, prefer=prefer) == 1
 
 
 def test_a_frictional_lcp_whose_keys_tied_across_large_divisors_ends_at_rounding_level(monkeypatch):
@@ -281,7 +272,7 @@ def test_a_frictional_lcp_whose_keys_tied_across_large_divisors_ends_at_rounding
     assert sol.w.min() >= -1e-11 * scale and np.abs(sol.w * sol.z).max() <= 1e-11 * scale * sol.z.max()
     assert np.abs(sol.w[normal][sol.z[normal] > 0.0]).max() <= 1e-13 * scale
     assert sol.w[normal].min() >= -1e-13 * scale
-    monkeypatch.setattr(flexbody.lcp, "_lex_min_row", _key_tolerance_tie_break)
+    monkeypatch.setattr(flexbody.lcp, "_tied", _key_tolerance_ties)
     before = solve_lcp(M, q)
     assert np.abs(before.w * before.z).max() > 1e-5 * before.z.max()  # measured 1.06e-4 * 3.95
 
@@ -901,7 +892,7 @@ def test_a_basis_that_rounding_left_infeasible_is_solved_again_on_a_shifted_matr
     the tie test on the keys, which ended them so, is taken here to test the shifts.)"""
     data = np.load(Path(__file__).parent / "reference" / f"{name}.npz")
     M, q = data["M"], data["q"]
-    monkeypatch.setattr(flexbody.lcp, "_lex_min_row", _key_tolerance_tie_break)
+    monkeypatch.setattr(flexbody.lcp, "_tied", _key_tolerance_ties)
     monkeypatch.setattr(flexbody.lcp, "COVERINGS", 0)  # the shifts alone (other covering vectors solve it too)
     sol = solve_lcp(M, q)
     assert sol.status == "solved" and "on M +" in sol.message, sol.message
@@ -925,7 +916,7 @@ def test_a_frictional_lcp_whose_path_ends_on_a_ray_is_solved_from_another_coveri
     both paths on a solution: the path of the tie test on the keys is taken here.)"""
     data = np.load(Path(__file__).parent / "reference" / f"{name}.npz")
     M, q = data["M"], data["q"]
-    monkeypatch.setattr(flexbody.lcp, "_lex_min_row", _key_tolerance_tie_break)
+    monkeypatch.setattr(flexbody.lcp, "_tied", _key_tolerance_ties)
     sol = solve_lcp(M, q)
     assert "covering vector" in sol.message, sol.message
     assert_solves(sol, M, q)

@@ -282,29 +282,15 @@ def _lex_min_row(T: np.ndarray, rows: np.ndarray, a: np.ndarray, n: int, rhs: in
     ``a`` (shape ``(len(rows),)``, > 0) are the divisors.  Ties in the first component (a
     degenerate step) are broken by the basis inverse's rows, except that a row in ``prefer``
     (the one holding ``z0``) wins a first-component tie at once: letting ``z0`` leave there
-    ends the path on a solution.  Rows tie in a component where pivoting on any of them
-    leaves every other row's entry in that column at most :data:`TIE_TOL` (relative to the
-    column's entries, at least 1) below 0: a test in the tableau's units, which does not
-    change when the entering variable is scaled (its column ``a`` by ``c``, the keys by
-    ``1 / c``).
+    ends the path on a solution.  Rows tie in a component as :func:`_tied` judges: in the
+    tableau's units, which do not change when the entering variable is scaled (its column
+    ``a`` by ``c``, the keys by ``1 / c``).
     """
     entries = np.column_stack([T[rows, rhs], T[rows, :n]])
     keys = entries / a[:, None]
     alive = np.arange(rows.size)
     for k in range(keys.shape[1]):
-        values, column = keys[alive, k], entries[alive, k]
-        tol = TIE_TOL * max(1.0, np.abs(column).max())
-        # Pivoting on row i leaves row j's entry at a_j (key_j - key_i): row i ties with the
-        # lowest where that is below 0 by rounding only for every j, the lowest row's too.  (A
-        # tolerance on the keys themselves scales with 1 / a: a frictional LCP's rows with
-        # a ~ 3e3..3e6 tied at keys ~8e-11 apart, and z0 left with basic values 1e-6 below 0;
-        # a row with a ~ 1e-9 and an entry ~1e-13 has a key far off, yet passes a test of
-        # its own entry alone.)
-        lowest = int(np.argmin(values))
-        near = np.flatnonzero(a[alive[lowest]] * (values - values[lowest]) <= tol)
-        if near.size > 1:  # each of these against every row it would push below 0 (the lowest: none)
-            near = near[((values[near, None] - values[None, :]) * a[alive]).max(axis=1) <= tol]
-        alive = alive[near]
+        alive = alive[_tied(keys[alive, k], entries[alive, k], a[alive])]
         if k == 0 and prefer is not None and prefer.size:
             hit = np.flatnonzero(np.isin(rows[alive], prefer))
             if hit.size:
@@ -312,6 +298,26 @@ def _lex_min_row(T: np.ndarray, rows: np.ndarray, a: np.ndarray, n: int, rhs: in
         if alive.size == 1:
             break
     return int(rows[alive[0]])  # several left only if B^-1 lost rank to rounding
+
+
+def _tied(keys: np.ndarray, entries: np.ndarray, a: np.ndarray) -> np.ndarray:
+    """The rows that tie with the lowest of ``keys`` (k,) in one component of the ratio
+    test, as indices into ``keys`` (the lowest among them): their ``entries`` (k,) in that
+    column over the divisors ``a`` (k,, > 0) are the keys.
+
+    Pivoting on row i leaves row j's entry at ``a_j (key_j - key_i)``: row i ties where that
+    is at most :data:`TIE_TOL` (of the largest ``|entry|``, at least 1) below 0 for every j,
+    the lowest row's too.  (A tolerance on the keys themselves scales with 1 / a: a
+    frictional LCP's rows with a ~ 3e3..3e6 tied at keys ~8e-11 apart, and z0 left with
+    basic values 1e-6 below 0; a row with a ~ 1e-9 and an entry ~1e-13 has a key far off,
+    yet passes a test of its own entry alone.)
+    """
+    tol = TIE_TOL * max(1.0, np.abs(entries).max())
+    lowest = int(np.argmin(keys))
+    near = np.flatnonzero(a[lowest] * (keys - keys[lowest]) <= tol)
+    if near.size > 1:  # each of these against every row it would push below 0 (the lowest: none)
+        near = near[((keys[near, None] - keys[None, :]) * a).max(axis=1) <= tol]
+    return near
 
 
 def _pivot(T: np.ndarray, row: int, col: int) -> None:
