@@ -15,6 +15,8 @@ import numpy as np
 import pytest
 
 import flexbody
+from flexbody.contact import FREE, HELD, Event
+from flexbody.driver import _Run, _settings
 from flexbody.model import load_model
 
 from .conftest import reference_table
@@ -270,6 +272,28 @@ def test_a_corner_sliding_over_a_diagonal_creased_by_a_hair_hits_the_next_triang
     assert r.stats["events"] < 100  # measured 56; 200 lift-offs of that corner alone in the stall
 
 
+def test_a_rim_midpoint_crossing_a_crease_while_sliding_along_it_leaves_its_twin_behind():
+    """An eleventh fuzz's row (tests/reference/fuzz_row_twin_left_behind_on_a_crease.json:
+    three flexible 4 x 3 x 2 boxes on a rough ground, frictionless between them, no edge
+    contacts, b0 pushed at 0.427 m/s; cut to 0.03 s).  b0's top rim midpoint 19, held on
+    b1's top face, crosses a crease of 1.36e-5 rad at 3.3e-3 m/s while sliding along it at
+    1.16e-2 m/s, approaching the next triangle at 4.5e-8 m/s (tangential: the slot is handed
+    over and a corner twin kept on the old triangle).  The force LCP held the twin alone and
+    released the slot; handed the old triangle back, the slot passed its end again
+    2.56e-10 s later, 201 times in a row: `no_progress` at t = 0.0252199787 s.  Now the slot
+    keeps the new triangle (held alone there it pushes, 8.0 N) and the twin lifts off.  Its
+    warnings are the scene's own, from before the stall (edges crossing unseen without edge
+    contacts, a friction direction not converged, a particle 8.9e-11 m inside)."""
+    r = flexbody.simulate(flexbody.load_scene(reference_table("fuzz_row_twin_left_behind_on_a_crease")),
+                          max_wall_time=120.0)  # ~15 s
+    assert r.status == "success", r.message
+    assert r.t[-1] == pytest.approx(0.03)  # past the stall at 0.0252199787 s
+    assert r.stats["max_penetration_m"] < 1e-9  # measured 8.9e-11 m, before the stall
+    assert r.stats["events"] < 1500  # measured 1 052; 1 197 up to the stall, 201 of them its last lift-offs
+    assert r.stats["min_held_contact_force_N"] >= 0.0  # measured 4.0e-3 N
+    assert not any("force turned negative" in w for w in r.stats["warnings"])
+
+
 def _creased_block(rise: float, size: float = 0.1) -> tuple[list, list, list, list]:
     """A cube of side ``size`` whose top face is split along its diagonal from (0, 0) to
     (size, size), the top corner (size, 0) raised by ``rise``: the diagonal is a crease
@@ -342,3 +366,68 @@ def test_a_particle_crossing_a_crease_concave_by_a_hair_hits_the_next_triangle(r
         assert model.element_of[moved.corners - ng].tolist() == [raised]  # the twin, on the old triangle
     else:
         assert moved.approach.tolist() == [ng + slot] and not len(moved.stay) and not len(moved.corners)
+
+
+@pytest.mark.parametrize("across, squeeze, kept", [
+    (1e-3, 0.9, True),   # crossing onto the new triangle, pressed onto it: the slot keeps it, the twin lifts off
+    (1e-7, 0.9, False),  # slower than the speed tolerance (3.1e-7 m/s): in the corner, handed back
+    (1e-3, 1.1, False),  # held alone on the new triangle the slot would pull: handed back
+])
+def test_a_slot_crossing_a_crease_keeps_the_new_triangle_where_the_lcp_released_it(across, squeeze, kept):
+    """A tetrahedron's apex a hair past the diagonal of a cube's top face creased concave by
+    1e-5 rad (above ``EDGE_LINE``: a crease with a line, so a tangential crossing keeps a
+    corner twin), its slot handed to the flat triangle and its twin held on the raised
+    one; the force LCP released the slot (as in a fuzzed row whose rim midpoint crossed a
+    crease at 3.3e-3 m/s sliding along it at 1.2e-2 m/s: the LCP's one solution held the
+    twin alone, and the slot, handed the raised triangle back, passed its end again every
+    2.56e-10 s, tests/reference/fuzz_row_twin_left_behind_on_a_crease.json).  Crossing onto
+    the flat triangle faster than the speed tolerance, the slot keeps it, held, and the
+    twin lifts off; slower (the particle may rest in the corner), or where the slot alone
+    would pull there (its lift-off event would start below 0 and never fire), the slot is
+    handed the twin's triangle back.  Either way the lift-off recorded is the twin's.  The
+    tetrahedron, squeezed (``squeeze`` < 1) or stretched along its height, presses its apex
+    onto the face or pulls it off (block and tetrahedron fall alike: gravity alone would
+    leave the slot's force at 0)."""
+    size, rise = 0.1, 7.07e-7
+    points, links, triangles, top = _creased_block(rise, size)
+    table = {
+        "name": "crease", "gravity": [0.0, 0.0, -G],
+        "bodies": [
+            {"name": "block", "particles": points, "links": links, "surface": triangles,
+             "mass": 1.0, "stiffness": 2e4, "damping": 5.0, "position": [0.0, 0.0, 0.0]},
+            {"name": "tet", "particles": _tetrahedron(np.array([0.0, 0.0, 1.0]), length=0.02), "links": TET_LINKS,
+             "surface": TET_SURFACE, "masses": TET_MASSES, "stiffness": 500.0, "damping": 0.2,
+             "position": [0.05, 0.05, 0.2]},
+        ],
+        "contacts": [{"bodies": ["block", "tet"]}],
+        "simulation": {"t_end": 0.1, "output_dt": 1e-3},
+    }
+    scene = flexbody.load_scene(table)
+    model = load_model(scene, backend="numpy")
+    run = _Run(scene, model, _settings(scene, {"backend": "numpy"}), None, 10**6)
+    ng, apex = model.n_ground_contacts, len(points)
+    raised, other = ([e for e in range(len(model.elements)) if sorted(model.elements[e]) == sorted(t)][0] for t in top)
+    slot = int(model._slots_of(np.array([apex]), np.array([0]))[0][0])
+    twin = slot + model.n_primary
+    model.element_of[slot], model.element_of[twin] = other, raised
+    run.phases.phase[ng + twin] = HELD  # the slot released (free), its twin held
+    q = scene.initial_positions().copy()
+    corner = np.array(points[5])
+    diagonal = np.array([1.0, 1.0, 0.0]) / np.sqrt(2.0)
+    on = 0.5 * size * diagonal + [0.0, 0.0, size]
+    downhill = on - corner
+    downhill -= (downhill @ diagonal) * diagonal
+    downhill /= np.linalg.norm(downhill)
+    shape = (q[apex:] - q[apex]) * [1.0, 1.0, squeeze]
+    q[apex:] = on + 1e-9 * downhill + shape  # the apex a hair past the diagonal, on the raised plane
+    u = np.zeros_like(q)
+    u[apex:] = across * downhill + 1e-2 * diagonal  # across the crease while sliding along it
+    run.y = np.concatenate([q.ravel(), u.ravel(), np.zeros(model.ny - 2 * q.size)])
+    new = [Event(0.0, ng + slot, "liftoff")]
+    run.settle_corners(new)
+    assert new[0].contact == ng + twin
+    assert run.phases.phase[ng + slot] == HELD and run.phases.phase[ng + twin] == FREE
+    if kept:
+        assert model.element_of[slot] == other and model.element_of[twin] == -1
+    else:
+        assert model.element_of[slot] == raised

@@ -874,7 +874,9 @@ class _Run:
     def settle_corners(self, new: list[Event]) -> np.ndarray:
         """Keep a held corner twin's slot held: where the slot was released and its twin
         holds on, the slot takes the twin's element and phase, and the lift-off just
-        recorded is the twin's (the particle left the slot's element, not the body).
+        recorded is the twin's (the particle left the slot's element, not the body); where
+        the slot's particle is crossing onto its new element, the slot keeps that instead
+        and the twin lifts off (:meth:`lift_twins_left_behind`).
         Returns those slots (contact indices) released from an element that meets the one
         handed back at a strictly concave vertex: each is held in the dent, at or a hair
         past its element's end, which :meth:`flexbody.body_contact.BodyContactModel.
@@ -891,16 +893,56 @@ class _Run:
             return np.zeros(0, np.intp)
         # one per slot: a second held twin (3D) stays the twin of the slot it now has
         orphans = orphans[np.sort(np.unique(model.primary(orphans), return_index=True)[1])]
+        twin_of = dict(zip(model.primary(orphans).tolist(), orphans.tolist()))
+        orphans = orphans[~self.lift_twins_left_behind(orphans)]
         slots = model.primary(orphans)
         dented = model.concave_hand_backs(orphans, self.y, self.p)
         model.hand_to_slots(orphans)
         phases.phase[slots], phases.phase[orphans] = phases.phase[orphans], FREE
         phases.floor[orphans] = -self.gap_tolerance
-        twin_of = dict(zip(slots.tolist(), orphans.tolist()))
-        for e in new:
+        for e in new:  # handed back or kept, the slot's particle left an element, not the body
             if e.kind == "liftoff" and e.contact in twin_of:
                 e.contact = twin_of[e.contact]
         return slots[dented]
+
+    def lift_twins_left_behind(self, orphans: np.ndarray) -> np.ndarray:
+        """Of the held corner twins ``orphans`` (contact indices, one per slot, (k,)) whose
+        slots the force LCP released, those whose slot keeps the element it was just handed
+        and holds on it alone, bool (k,): the slot was handed across a 3D crease onto a
+        triangle its particle crosses onto faster than the speed tolerance
+        (:meth:`flexbody.body_contact.BodyContactModel.crossing_hand_backs`), and held there
+        in place of the twin it would not pull (:meth:`slots_hold_alone`).  The particle is
+        leaving the twin's triangle past its end, not resting in the corner: handed that
+        triangle back, the slot passed its end again one gap tolerance later, every time (a
+        fuzzed row's rim midpoint: a lift-off every 2.56e-10 s).  Each such slot is held
+        with its twin's phase, and the twin lifts off without an element."""
+        model, phases = self.model, self.phases
+        slots = model.primary(orphans)
+        lifted = model.crossing_hand_backs(orphans, self.y, self.p, self.speed_tolerance)
+        while lifted.any():  # forces are coupled: judge the survivors again without the ones dropped
+            holds = self.slots_hold_alone(slots[lifted], orphans[lifted])
+            if holds.all():
+                break
+            lifted[np.flatnonzero(lifted)[~holds]] = False
+        if not lifted.any():
+            return lifted
+        gone, kept = orphans[lifted], slots[lifted]
+        phases.phase[kept], phases.phase[gone] = phases.phase[gone], FREE
+        phases.floor[gone] = -self.gap_tolerance
+        model.forget_twins(gone)
+        return lifted
+
+    def slots_hold_alone(self, slots: np.ndarray, twins: np.ndarray) -> np.ndarray:
+        """Whether the released ``slots`` (contact indices, (k,)), held on the elements they
+        have in place of their corner twins ``twins`` (k,), which are set free, would push,
+        bool (k,): each one's force as the segment's right-hand side takes it (every held
+        row's acceleration at 0, :meth:`flexbody.model.Model.held_forces`) above
+        ``-force_tolerance``, so that its lift-off event starts above 0 (one starting below
+        never fires: the slot would be held pulling)."""
+        trial = self.phases.copy()
+        trial.phase[slots], trial.phase[twins] = trial.phase[twins], FREE
+        lam = self.model.held_forces(self.y, self.p, trial.held, trial.push)
+        return lam[slots] + self.force_tolerance[slots] > 0.0
 
     def track_windows(self, t: float, was_pushed: np.ndarray) -> None:
         """Record the thesis-mode windows that start or end at ``t`` (positions, constant force)."""
