@@ -593,3 +593,24 @@ def test_a_vertex_slot_beside_the_edge_row_at_its_corner_is_not_held_pulling():
     assert r.stats["max_penetration_m"] < 1e-9  # measured 1.4e-12 m
     assert r.stats["max_edge_crossing_m"] == 0.0
     assert r.stats["energy_drift_relative"] < 1e-6  # measured 8.4e-10
+
+
+@pytest.mark.slow  # three flexible boxes to 0.1226 s, ~40 s
+def test_a_ridge_crossed_as_it_turns_to_a_valley_is_an_event_before_it_turns():
+    """The seventh fuzz's stack of three flexible boxes (tests/reference/fuzz_stack_corner_over_diagonal.json,
+    here to 0.1226 s).  b0's top diagonal [19, 23], a ridge flattening (1.35e-5 rad at
+    0.12236 s, 2.3e-7 at 0.12243), lies across b1's bottom rim [29, 32], which comes down on
+    b0's top face.  Its free edge row (contact 426) read the pair's gap +3.8e-9 m at
+    0.1224234 s, crossed from 0.1224305 s, -1.24e-9 m when a corner of b1 landed at
+    0.12243226 s; from 0.1224340 s the diagonal is a valley, which an edge row does not
+    watch, and the row read the margin: the step's ends and the points checked in it saw no
+    sign change, and the crossing was found only at that landing, 1.2e-9 m deep (a warning).
+    Through a segment a pair of edges that may touch at its start is watched while crossed,
+    convex or not (EdgeSlots.start_segment): the row fires at its root, before the turn."""
+    table = reference_table("fuzz_stack_corner_over_diagonal")
+    table["simulation"]["t_end"] = 0.1226
+    r = flexbody.simulate(flexbody.load_scene(table), max_wall_time=300.0)
+    assert r.status == "success", r.message
+    assert r.stats["max_edge_crossing_m"] == 0.0  # 1.2e-9 m before
+    assert r.stats["max_penetration_m"] < 1e-9  # 1.2e-9 m before
+    assert not r.stats["warnings"]

@@ -919,11 +919,15 @@ class BodyContactModel(Model):
         return (float(depths[k]), int(edge_body[k]), int(triangle_body[k]),
                 f"its edge {edge} through the other's triangle {triangle}, {depths[k]:.2g} m deep")
 
-    def forget_free(self, free: np.ndarray) -> None:
-        """Let free slots pick their element afresh at their next instant (``free`` (nc,) bool)."""
+    def forget_free(self, free: np.ndarray, q, p) -> None:
+        """Let free slots pick their element afresh at their next instant (``free`` (nc,) bool),
+        at a segment's start ``q``: the edge contacts watch the edges that may touch there
+        through it (:meth:`flexbody.edge_contact.EdgeSlots.start_segment`)."""
         free = np.asarray(free)[self.n_ground_contacts :]
         self.element_of[free] = -1
         self.margin_floor[free] = 0.0
+        if self._edge_slots is not None:
+            self._edge_slots.start_segment(self._coordinates.particles(q, None, p)[0])
 
     def forget_twins(self, twins: IntArray) -> None:
         """The corner twins ``twins`` (contact indices, (k,)) lift off, their slots staying

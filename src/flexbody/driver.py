@@ -540,7 +540,8 @@ class _Run:
             options["first_step"] = min(self.h_next, t_bound - t0)
         import scipy.integrate
 
-        model.forget_free(phases.phase == FREE)  # a free contact between bodies picks its element at its next instant
+        # a free contact between bodies picks its element at its next instant
+        model.forget_free(phases.phase == FREE, self.y[: model.nq], self.p)
         # also at a segment's start: a pile's segments are often one step long, each ending at an event
         if not self.put_back() and model.n_slots > model.first_edge:
             # A free edge contact read its gap on the edge the instant held it to; free, it
