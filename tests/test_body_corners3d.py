@@ -10,6 +10,7 @@ inside another body), and the barycentric weights of a point on a triangle's edg
 from __future__ import annotations
 
 import itertools
+from typing import NamedTuple
 
 import numpy as np
 import pytest
@@ -307,6 +308,50 @@ def _creased_block(rise: float, size: float = 0.1) -> tuple[list, list, list, li
     return points, [list(k) for k in itertools.combinations(range(8), 2)], triangles, top
 
 
+class _ApexOnCrease(NamedTuple):
+    """A tetrahedron's apex over a creased cube's top diagonal (:func:`_apex_on_crease`)."""
+
+    scene: flexbody.Scene
+    model: object
+    apex: int  # the apex particle
+    slot: int  # its slot against the block
+    raised: int  # the raised top triangle (element index)
+    other: int  # the flat one
+    on: np.ndarray  # the diagonal's midpoint (3,)
+    downhill: np.ndarray  # unit (3,): in the raised triangle's plane, square to the diagonal
+    diagonal: np.ndarray  # unit (3,): along the diagonal
+
+
+def _apex_on_crease(rise: float, size: float = 0.1) -> _ApexOnCrease:
+    """A tetrahedron (falling from above) whose apex may touch a cube of side ``size`` whose
+    top face is creased concave along its diagonal by ``rise`` (:func:`_creased_block`), as
+    a NumPy model, with the geometry that places the apex across the crease."""
+    points, links, triangles, top = _creased_block(rise, size)
+    table = {
+        "name": "crease", "gravity": [0.0, 0.0, -G],
+        "bodies": [
+            {"name": "block", "particles": points, "links": links, "surface": triangles,
+             "mass": 1.0, "stiffness": 2e4, "damping": 5.0, "position": [0.0, 0.0, 0.0]},
+            {"name": "tet", "particles": _tetrahedron(np.array([0.0, 0.0, 1.0]), length=0.02), "links": TET_LINKS,
+             "surface": TET_SURFACE, "masses": TET_MASSES, "stiffness": 500.0, "damping": 0.2,
+             "position": [0.05, 0.05, 0.2]},
+        ],
+        "contacts": [{"bodies": ["block", "tet"]}],
+        "simulation": {"t_end": 0.1, "output_dt": 1e-3},
+    }
+    scene = flexbody.load_scene(table)
+    model = load_model(scene, backend="numpy")
+    apex = len(points)
+    raised, other = ([e for e in range(len(model.elements)) if sorted(model.elements[e]) == sorted(t)][0] for t in top)
+    slot = int(model._slots_of(np.array([apex]), np.array([0]))[0][0])
+    diagonal = np.array([1.0, 1.0, 0.0]) / np.sqrt(2.0)
+    on = 0.5 * size * diagonal + [0.0, 0.0, size]
+    downhill = on - np.array(points[5])  # from the raised corner
+    downhill -= (downhill @ diagonal) * diagonal
+    downhill /= np.linalg.norm(downhill)
+    return _ApexOnCrease(scene, model, apex, slot, raised, other, on, downhill, diagonal)
+
+
 @pytest.mark.parametrize("rise, across, along, twin", [
     (3.5e-8, 0.19, 0.01, False),  # 5e-7 rad: crossed at 0.19 m/s, 1e-7 m/s onto the next triangle: an impact
     (3.5e-8, 1e-7, 0.0, True),    # crossed slower than the speed tolerance: the corner keeps its twin
@@ -326,38 +371,16 @@ def test_a_particle_crossing_a_crease_concave_by_a_hair_hits_the_next_triangle(r
     a crease whose planes meet on a line, the particle keeps its twin and the force LCP
     decides (a particle sliding along such a crease, dithering across it:
     tests/reference/fuzz_row_dithering_on_a_crease.json)."""
-    size = 0.1
-    points, links, triangles, top = _creased_block(rise, size)
-    table = {
-        "name": "crease", "gravity": [0.0, 0.0, -G],
-        "bodies": [
-            {"name": "block", "particles": points, "links": links, "surface": triangles,
-             "mass": 1.0, "stiffness": 2e4, "damping": 5.0, "position": [0.0, 0.0, 0.0]},
-            {"name": "tet", "particles": _tetrahedron(np.array([0.0, 0.0, 1.0]), length=0.02), "links": TET_LINKS,
-             "surface": TET_SURFACE, "masses": TET_MASSES, "stiffness": 500.0, "damping": 0.2,
-             "position": [0.05, 0.05, 0.2]},
-        ],
-        "contacts": [{"bodies": ["block", "tet"]}],
-        "simulation": {"t_end": 0.1, "output_dt": 1e-3},
-    }
-    scene = flexbody.load_scene(table)
-    model = load_model(scene, backend="numpy")
-    p, ng, apex = model.parameters(scene), model.n_ground_contacts, len(points)
-    raised, other = ([e for e in range(len(model.elements)) if sorted(model.elements[e]) == sorted(t)][0] for t in top)
-    slot = int(model._slots_of(np.array([apex]), np.array([0]))[0][0])
+    c = _apex_on_crease(rise)
+    model, slot, raised, other, apex = c.model, c.slot, c.raised, c.other, c.apex
+    p, ng = model.parameters(c.scene), model.n_ground_contacts
     held = np.zeros(model.n_contacts, np.intc)
     held[ng + slot] = 1
     model.element_of[slot] = raised
-    q = scene.initial_positions().copy()
-    corner = np.array(points[5])
-    diagonal = np.array([1.0, 1.0, 0.0]) / np.sqrt(2.0)
-    on = 0.5 * size * diagonal + [0.0, 0.0, size]  # the diagonal's midpoint
-    downhill = on - corner
-    downhill -= (downhill @ diagonal) * diagonal
-    downhill /= np.linalg.norm(downhill)  # in the raised triangle's plane, square to the diagonal
-    q[apex] = on + 1e-9 * downhill  # a hair past the diagonal, on the raised plane
+    q = c.scene.initial_positions().copy()
+    q[apex] = c.on + 1e-9 * c.downhill  # a hair past the diagonal, on the raised plane
     u = np.zeros_like(q)
-    u[apex] = across * downhill + along * diagonal
+    u[apex] = across * c.downhill + along * c.diagonal
     y = np.concatenate([q.ravel(), u.ravel(), np.zeros(model.ny - 2 * q.size)])
     moved = model.switch_elements(y, p, held, gap_tolerance=1e-12, speed_tolerance=3e-7)
     assert model.element_of[slot] == other
@@ -388,40 +411,17 @@ def test_a_slot_crossing_a_crease_keeps_the_new_triangle_where_the_lcp_released_
     tetrahedron, squeezed (``squeeze`` < 1) or stretched along its height, presses its apex
     onto the face or pulls it off (block and tetrahedron fall alike: gravity alone would
     leave the slot's force at 0)."""
-    size, rise = 0.1, 7.07e-7
-    points, links, triangles, top = _creased_block(rise, size)
-    table = {
-        "name": "crease", "gravity": [0.0, 0.0, -G],
-        "bodies": [
-            {"name": "block", "particles": points, "links": links, "surface": triangles,
-             "mass": 1.0, "stiffness": 2e4, "damping": 5.0, "position": [0.0, 0.0, 0.0]},
-            {"name": "tet", "particles": _tetrahedron(np.array([0.0, 0.0, 1.0]), length=0.02), "links": TET_LINKS,
-             "surface": TET_SURFACE, "masses": TET_MASSES, "stiffness": 500.0, "damping": 0.2,
-             "position": [0.05, 0.05, 0.2]},
-        ],
-        "contacts": [{"bodies": ["block", "tet"]}],
-        "simulation": {"t_end": 0.1, "output_dt": 1e-3},
-    }
-    scene = flexbody.load_scene(table)
-    model = load_model(scene, backend="numpy")
-    run = _Run(scene, model, _settings(scene, {"backend": "numpy"}), None, 10**6)
-    ng, apex = model.n_ground_contacts, len(points)
-    raised, other = ([e for e in range(len(model.elements)) if sorted(model.elements[e]) == sorted(t)][0] for t in top)
-    slot = int(model._slots_of(np.array([apex]), np.array([0]))[0][0])
-    twin = slot + model.n_primary
+    c = _apex_on_crease(7.07e-7)
+    model, slot, raised, other, apex = c.model, c.slot, c.raised, c.other, c.apex
+    run = _Run(c.scene, model, _settings(c.scene, {"backend": "numpy"}), None, 10**6)
+    ng, twin = model.n_ground_contacts, slot + model.n_primary
     model.element_of[slot], model.element_of[twin] = other, raised
     run.phases.phase[ng + twin] = HELD  # the slot released (free), its twin held
-    q = scene.initial_positions().copy()
-    corner = np.array(points[5])
-    diagonal = np.array([1.0, 1.0, 0.0]) / np.sqrt(2.0)
-    on = 0.5 * size * diagonal + [0.0, 0.0, size]
-    downhill = on - corner
-    downhill -= (downhill @ diagonal) * diagonal
-    downhill /= np.linalg.norm(downhill)
+    q = c.scene.initial_positions().copy()
     shape = (q[apex:] - q[apex]) * [1.0, 1.0, squeeze]
-    q[apex:] = on + 1e-9 * downhill + shape  # the apex a hair past the diagonal, on the raised plane
+    q[apex:] = c.on + 1e-9 * c.downhill + shape  # the apex a hair past the diagonal, on the raised plane
     u = np.zeros_like(q)
-    u[apex:] = across * downhill + 1e-2 * diagonal  # across the crease while sliding along it
+    u[apex:] = across * c.downhill + 1e-2 * c.diagonal  # across the crease while sliding along it
     run.y = np.concatenate([q.ravel(), u.ravel(), np.zeros(model.ny - 2 * q.size)])
     new = [Event(0.0, ng + slot, "liftoff")]
     run.settle_corners(new)
