@@ -919,10 +919,10 @@ class BodyContactModel(Model):
         return (float(depths[k]), int(edge_body[k]), int(triangle_body[k]),
                 f"its edge {edge} through the other's triangle {triangle}, {depths[k]:.2g} m deep")
 
-    def forget_free(self, free: np.ndarray, q, p) -> None:
-        """Let free slots pick their element afresh at their next instant (``free`` (nc,) bool),
-        at a segment's start ``q``: the edge contacts watch the edges that may touch there
-        through it (:meth:`flexbody.edge_contact.EdgeSlots.start_segment`)."""
+    def start_segment(self, free: np.ndarray, q, p) -> None:
+        """A segment starts at ``q``: free slots (``free`` (nc,) bool) pick their element
+        afresh at their next instant, and the edge contacts watch the edges that may touch
+        there through it (:meth:`flexbody.edge_contact.EdgeSlots.start_segment`)."""
         free = np.asarray(free)[self.n_ground_contacts :]
         self.element_of[free] = -1
         self.margin_floor[free] = 0.0
@@ -930,8 +930,8 @@ class BodyContactModel(Model):
             self._edge_slots.start_segment(self._coordinates.particles(q, None, p)[0])
 
     def forget_twins(self, twins: IntArray) -> None:
-        """The corner twins ``twins`` (contact indices, (k,)) lift off, their slots staying
-        held where they are: each twin keeps no element or margin floor."""
+        """The corner twins ``twins`` (contact indices, (k,)) are left without an element or
+        margin floor (they lift off, or their slots took them over)."""
         rows = np.asarray(twins, np.intp) - self.n_ground_contacts
         self.element_of[rows], self.margin_floor[rows] = -1, 0.0
 
@@ -951,9 +951,10 @@ class BodyContactModel(Model):
         ng = self.n_ground_contacts
         twin_slots = np.asarray(twins, np.intp) - ng
         slots = twin_slots % self.n_primary
-        self.element_of[slots], self.element_of[twin_slots] = self.element_of[twin_slots], -1
-        self.margin_floor[slots], self.margin_floor[twin_slots] = self.margin_floor[twin_slots], 0.0
+        self.element_of[slots] = self.element_of[twin_slots]
+        self.margin_floor[slots] = self.margin_floor[twin_slots]
         self._slip[ng + slots] = self._slip[ng + twin_slots]
+        self.forget_twins(twins)
 
     def _bounded(self, held, slots) -> np.ndarray:
         """Which held ``slots`` have an element-boundary event: not the rows of a corner that
@@ -1275,13 +1276,10 @@ class BodyContactModel(Model):
         both = np.flatnonzero((now >= 0) & (behind >= 0) & (now != behind))
         if self.dim != 3 or not len(both):
             return out
-        x, v = self._state(np.asarray(y, float), p)
-        # neighbours across an edge (a crease), not at a vertex alone
-        shares = np.array([np.isin(self.elements[a], self.elements[b]).sum() == 2
-                           for a, b in zip(now[both], behind[both])], bool)
-        both = both[shares]
+        both = both[(self._neighbour[behind[both]] == now[both, None]).any(axis=1)]  # across an edge (a crease)
         if not len(both):
             return out
+        x, v = self._state(np.asarray(y, float), p)
         weights = self._element_terms(slots[both], x, v).weights
         across = self._across_crease(behind[both], slots[both], weights, x, v)[0]
         out[both] = across > speed_tolerance

@@ -541,7 +541,7 @@ class _Run:
         import scipy.integrate
 
         # a free contact between bodies picks its element at its next instant
-        model.forget_free(phases.phase == FREE, self.y[: model.nq], self.p)
+        model.start_segment(phases.phase == FREE, self.y[: model.nq], self.p)
         # also at a segment's start: a pile's segments are often one step long, each ending at an event
         if not self.put_back() and model.n_slots > model.first_edge:
             # A free edge contact read its gap on the edge the instant held it to; free, it
@@ -877,7 +877,7 @@ class _Run:
         holds on, the slot takes the twin's element and phase, and the lift-off just
         recorded is the twin's (the particle left the slot's element, not the body); where
         the slot's particle is crossing onto its new element, the slot keeps that instead
-        and the twin lifts off (:meth:`lift_twins_left_behind`).
+        and the twin lifts off (:meth:`twins_left_behind`).
         Returns those slots (contact indices) released from an element that meets the one
         handed back at a strictly concave vertex: each is held in the dent, at or a hair
         past its element's end, which :meth:`flexbody.body_contact.BodyContactModel.
@@ -894,19 +894,21 @@ class _Run:
             return np.zeros(0, np.intp)
         # one per slot: a second held twin (3D) stays the twin of the slot it now has
         orphans = orphans[np.sort(np.unique(model.primary(orphans), return_index=True)[1])]
-        twin_of = dict(zip(model.primary(orphans).tolist(), orphans.tolist()))
-        orphans = orphans[~self.lift_twins_left_behind(orphans)]
         slots = model.primary(orphans)
-        dented = model.concave_hand_backs(orphans, self.y, self.p)
-        model.hand_to_slots(orphans)
+        left_behind = self.twins_left_behind(orphans)
+        handed = orphans[~left_behind]
+        dented = model.concave_hand_backs(handed, self.y, self.p)
+        model.hand_to_slots(handed)
+        model.forget_twins(orphans[left_behind])
         phases.phase[slots], phases.phase[orphans] = phases.phase[orphans], FREE
         phases.floor[orphans] = -self.gap_tolerance
+        twin_of = dict(zip(slots.tolist(), orphans.tolist()))
         for e in new:  # handed back or kept, the slot's particle left an element, not the body
             if e.kind == "liftoff" and e.contact in twin_of:
                 e.contact = twin_of[e.contact]
-        return slots[dented]
+        return model.primary(handed)[dented]
 
-    def lift_twins_left_behind(self, orphans: np.ndarray) -> np.ndarray:
+    def twins_left_behind(self, orphans: np.ndarray) -> np.ndarray:
         """Of the held corner twins ``orphans`` (contact indices, one per slot, (k,)) whose
         slots the force LCP released, those whose slot keeps the element it was just handed
         and holds on it alone, bool (k,): the slot was handed across a 3D crease onto a
@@ -915,22 +917,16 @@ class _Run:
         in place of the twin it would not pull (:meth:`slots_hold_alone`).  The particle is
         leaving the twin's triangle past its end, not resting in the corner: handed that
         triangle back, the slot passed its end again one gap tolerance later, every time (a
-        fuzzed row's rim midpoint: a lift-off every 2.56e-10 s).  Each such slot is held
-        with its twin's phase, and the twin lifts off without an element."""
-        model, phases = self.model, self.phases
-        slots = model.primary(orphans)
-        lifted = model.crossing_hand_backs(orphans, self.y, self.p, self.speed_tolerance)
+        fuzzed row's rim midpoint: a lift-off every 2.56e-10 s).  Such a slot is held with
+        its twin's phase, as a slot handed its twin's element is, and the twin lifts off
+        without an element (:meth:`settle_corners`)."""
+        slots = self.model.primary(orphans)
+        lifted = self.model.crossing_hand_backs(orphans, self.y, self.p, self.speed_tolerance)
         while lifted.any():  # forces are coupled: judge the survivors again without the ones dropped
             holds = self.slots_hold_alone(slots[lifted], orphans[lifted])
             if holds.all():
                 break
             lifted[np.flatnonzero(lifted)[~holds]] = False
-        if not lifted.any():
-            return lifted
-        gone, kept = orphans[lifted], slots[lifted]
-        phases.phase[kept], phases.phase[gone] = phases.phase[gone], FREE
-        phases.floor[gone] = -self.gap_tolerance
-        model.forget_twins(gone)
         return lifted
 
     def slots_hold_alone(self, slots: np.ndarray, twins: np.ndarray) -> np.ndarray:

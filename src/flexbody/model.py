@@ -96,9 +96,9 @@ class Model:
         """Gaps of the held contacts ``rows (k,)`` to what holds them, shape (k,)."""
         return self.gaps(q, p)[rows]
 
-    def forget_free(self, free: np.ndarray, q, p) -> None:
-        """Let free contacts between bodies pick their element afresh (``free`` (nc,) bool) at
-        a segment's start ``q``; nothing to forget without them."""
+    def start_segment(self, free: np.ndarray, q, p) -> None:
+        """A segment starts at ``q``: free contacts between bodies (``free`` (nc,) bool) pick
+        their element afresh; nothing to do without them."""
 
     def coupled_with(self, q, p, seeds: np.ndarray, among: np.ndarray, jumped: np.ndarray | None = None) -> np.ndarray:
         """The contacts of ``seeds | among`` (bool (nc,) each) whose impulses and forces can
