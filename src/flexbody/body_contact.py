@@ -932,7 +932,11 @@ class BodyContactModel(Model):
     def forget_twins(self, twins: IntArray) -> None:
         """The corner twins ``twins`` (contact indices, (k,)) are left without an element or
         margin floor (they lift off, or their slots took them over)."""
-        rows = np.asarray(twins, np.intp) - self.n_ground_contacts
+        self._forget(np.asarray(twins, np.intp) - self.n_ground_contacts)
+
+    def _forget(self, rows: IntArray) -> None:
+        """The rows ``rows`` (slot numbering, (k,)) are left without an element or margin
+        floor: free, each picks its element anew."""
         self.element_of[rows], self.margin_floor[rows] = -1, 0.0
 
     def primary(self, c: IntArray) -> IntArray:
@@ -1074,7 +1078,7 @@ class BodyContactModel(Model):
             x, v = self._state(np.asarray(y, float), p)
         if len(edges):  # past an end of either edge the contact is a vertex's: the edge contact is set free
             ended = edges[self._edge_terms(edges, x, v).margin - self.margin_floor[edges] <= gap_tolerance]
-            self.element_of[ended], self.margin_floor[ended] = -1, 0.0
+            self._forget(ended)
         if not len(slots):
             return HandOvers(empty, empty, ng + ended, empty, empty, empty.reshape(0, 2))
         terms, margins, weights = self._margins(slots, x, v, held)
@@ -1102,7 +1106,7 @@ class BodyContactModel(Model):
         self.element_of[out] = self._neighbour[came_from, corner]
         if self.own is not None:  # onto its own neighbourhood, which it does not watch: it is set free
             home = self.own.left_out(self.slot_particle[out], self.element_of[out])
-            self.element_of[out[home]], self.margin_floor[out[home]] = -1, 0.0
+            self._forget(out[home])
             ended, out, came_from = np.concatenate([ended, out[home]]), out[~home], came_from[~home]
             if not len(out):
                 return HandOvers(empty, empty, ng + ended, empty, empty,
@@ -1129,7 +1133,7 @@ class BodyContactModel(Model):
                           & ~self._beside(particle, normals(x, onto), x)
                           & self._beside(particle, normals(x, self.elements[came_from[met]]), x))
         tangential &= ~unfit
-        self.element_of[out[unfit]], self.margin_floor[out[unfit]] = -1, 0.0  # held again, it picks anew
+        self._forget(out[unfit])  # held again, it picks anew
         # At a concave vertex (edge) the particle is in a corner, on both elements, whether it
         # hits the new one or meets it tangentially (it rests there): a free twin keeps the old
         # one, held as the slot was (the next instant's LCP decides whether it stays).  Met
