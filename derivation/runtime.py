@@ -1,7 +1,7 @@
 """Rendering of the model-independent C runtime: ``generated/runtime/``.
 
-The integrator (its Runge-Kutta tables read from SciPy), the phase machine's fixed point
-and the assembled particles formulation are rendered once, not per model, and compiled
+The integrator (its Runge-Kutta tables read from SciPy), the phase machine's fixed point,
+the assembled particles formulation and the pivots of Lemke's method are rendered once, not per model, and compiled
 once per install into one library with the element kernels.  Their constants come from
 :mod:`flexbody.constants`, the one source Python shares.
 """
@@ -25,6 +25,7 @@ FILES = {
     "assembly.c.jinja": "assembly.c",
     "narrowphase.c.jinja": "narrowphase.c",
     "held_rows.c.jinja": "held_rows.c",
+    "lcp.c.jinja": "lcp.c",
 }
 COMMAND = "flexbody derive --runtime"
 

@@ -25,6 +25,8 @@ from flexbody.contact_problems import (
 )
 from flexbody.lcp import solve_lcp, solve_pd_lcp
 
+from .conftest import HAS_CC
+
 
 def brute_force(M, q):
     """Every basic solution of LCP(M, q): for each index set S with M_SS invertible,
@@ -198,6 +200,55 @@ def integer_problem(seed):
     return rng.integers(-2, 3, size=(n, n)).astype(float), rng.integers(-1, 2, size=n).astype(float)
 
 
+def _numpy_pivots(monkeypatch):
+    """Lemke's path in NumPy (:func:`flexbody.lcp._path`), whose ratio test a test swaps:
+    the compiled one, the same path bit for bit, does not see the swap."""
+    monkeypatch.setattr(flexbody.lcp, "_compiled_path", lambda: None)
+
+
+def _tableau(M, q, d):
+    """The start of Lemke's path on ``LCP(M, q)`` from the covering vector ``d``, as
+    :func:`flexbody.lcp._lemke` sets it up: the tableau and the basis."""
+    n = q.size
+    return (np.hstack([np.eye(n), -M, -d[:, None], q[:, None] / np.abs(q).max()]),
+            np.arange(n, dtype=np.int64))
+
+
+def _reference_problems():
+    """The saved LCPs of fuzzed scenes (frictional, redundant, tied) and the integer problems
+    with degenerate q (the cycling seeds and 120 more): (name, M, q)."""
+    saved = sorted((Path(__file__).parent / "reference").glob("lcp_*.npz"))
+    out = [(path.stem, np.load(path)["M"], np.load(path)["q"]) for path in saved]
+    return out + [(f"integer {seed}", *integer_problem(seed)) for seed in CYCLING_SEEDS + list(range(120))]
+
+
+@pytest.mark.skipif(not HAS_CC, reason="needs a C compiler")
+def test_the_compiled_path_is_the_numpy_path_bit_for_bit():
+    """``fb_lemke`` (generated/runtime/lcp.c) against :func:`flexbody.lcp._path` from the
+    same start: the same end, the same pivot count, the same final tableau and basis, bit
+    for bit (signed zeros too), from the covering vector of ones and from three of
+    :func:`flexbody.lcp.solve_lcp`'s others, run to the end and stopped by a pivot limit of 5.
+    It fails if one operation differs in order or rounding (a ratio test's tie judged on
+    another quantity ends the saved friction row's path elsewhere, see above)."""
+    compiled = flexbody.lcp._compiled_path()
+    assert compiled is not None
+    ends, checked = set(), 0
+    for name, M, q in _reference_problems():
+        if np.all(q >= 0.0):
+            continue
+        for seed in (None, 0, 1, 2):
+            d = np.ones(q.size) if seed is None else np.random.default_rng(seed).uniform(0.5, 2.0, q.size)
+            for limit in (100 * (q.size + 1), 5):
+                T, basis = _tableau(M, q, d)
+                T_c, basis_c = _tableau(M, q, d)
+                end = flexbody.lcp._path(T, basis, d, limit, flexbody.lcp.PIVOT_TOL)
+                assert compiled(T_c, basis_c, d, limit, flexbody.lcp.PIVOT_TOL) == end, (name, seed, limit)
+                assert T_c.tobytes() == T.tobytes() and np.array_equal(basis_c, basis), (name, seed, limit)
+                ends.add(end[0])
+                checked += 1
+    assert ends == {"solved", "ray", "iterations"} and checked > 400
+
+
 def _naive_tie_break(T, rows, a, n, rhs, prefer=None):
     """Minimum ratio of the right-hand side only; ties to the last row (no lexicographic rule)."""
     ratio = T[rows, rhs] / a
@@ -216,6 +267,7 @@ def test_lexicographic_rule_ends_where_a_naive_tie_break_cycles(seed, monkeypatc
         assert_solves(sol, M, q)
     else:  # M is not copositive-plus, so a ray proves nothing; but no basic solution exists here
         assert not brute_force(M, q)
+    _numpy_pivots(monkeypatch)
     monkeypatch.setattr(flexbody.lcp, "_lex_min_row", _naive_tie_break)
     monkeypatch.setattr(flexbody.lcp, "COVERINGS", 0)  # (other covering vectors break the ties)
     assert solve_lcp(M, q, max_pivots=500).status == "iterations"  # the same path without the rule cycles
@@ -248,6 +300,7 @@ def test_rows_tie_only_where_pivoting_on_either_leaves_the_other_at_most_roundin
     assert flexbody.lcp._lex_min_row(T, rows, np.array([3e3, 3e3 * (1 + 1e-14), 1e-9]), n, rhs,
                                      prefer=prefer) == 1
     T[:, rhs] = keys * a
+    _numpy_pivots(monkeypatch)
     monkeypatch.setattr(flexbody.lcp, "_tied", _key_tolerance_ties)
     assert flexbody.lcp._lex_min_row(T, rows, a, n, rhs, prefer=prefer) == 1
 
@@ -272,6 +325,7 @@ def test_a_frictional_lcp_whose_keys_tied_across_large_divisors_ends_at_rounding
     assert sol.w.min() >= -1e-11 * scale and np.abs(sol.w * sol.z).max() <= 1e-11 * scale * sol.z.max()
     assert np.abs(sol.w[normal][sol.z[normal] > 0.0]).max() <= 1e-13 * scale
     assert sol.w[normal].min() >= -1e-13 * scale
+    _numpy_pivots(monkeypatch)
     monkeypatch.setattr(flexbody.lcp, "_tied", _key_tolerance_ties)
     before = solve_lcp(M, q)
     assert np.abs(before.w * before.z).max() > 1e-5 * before.z.max()  # measured 1.06e-4 * 3.95
@@ -892,6 +946,7 @@ def test_a_basis_that_rounding_left_infeasible_is_solved_again_on_a_shifted_matr
     the tie test on the keys, which ended them so, is taken here to test the shifts.)"""
     data = np.load(Path(__file__).parent / "reference" / f"{name}.npz")
     M, q = data["M"], data["q"]
+    _numpy_pivots(monkeypatch)
     monkeypatch.setattr(flexbody.lcp, "_tied", _key_tolerance_ties)
     monkeypatch.setattr(flexbody.lcp, "COVERINGS", 0)  # the shifts alone (other covering vectors solve it too)
     sol = solve_lcp(M, q)
@@ -916,6 +971,7 @@ def test_a_frictional_lcp_whose_path_ends_on_a_ray_is_solved_from_another_coveri
     both paths on a solution: the path of the tie test on the keys is taken here.)"""
     data = np.load(Path(__file__).parent / "reference" / f"{name}.npz")
     M, q = data["M"], data["q"]
+    _numpy_pivots(monkeypatch)
     monkeypatch.setattr(flexbody.lcp, "_tied", _key_tolerance_ties)
     sol = solve_lcp(M, q)
     assert "covering vector" in sol.message, sol.message

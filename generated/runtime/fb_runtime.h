@@ -34,6 +34,9 @@
 #define FB_FACE 0
 #define FB_EDGE 1
 #define FB_VERTEX 2
+#define FB_LEMKE_SOLVED 0
+#define FB_LEMKE_RAY 1
+#define FB_LEMKE_LIMIT 2
 
 typedef struct FbSystem FbSystem;
 

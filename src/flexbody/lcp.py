@@ -43,9 +43,14 @@ it reports the ray; the same where the pivot limit stops a path that rounding ma
 
 from __future__ import annotations
 
+import ctypes
+import functools
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
+
+from .constants import LEMKE_LIMIT, LEMKE_RAY, LEMKE_SOLVED
 
 __all__ = ["STATUSES", "LcpSolution", "solve_lcp", "solve_pd_lcp"]
 
@@ -232,9 +237,20 @@ def _lemke(M: np.ndarray, q: np.ndarray, d: np.ndarray, limit: int, pivot_tol: f
     # Tableau of  w - M z - d z0 = q:  columns w (0..n-1), z (n..2n-1), z0 (2n), right side (2n+1).
     # Its first n columns are always the basis inverse (the start basis is w, the identity).
     T = np.hstack([np.eye(n), -M, -d[:, None], q[:, None] / unit])
-    basis = np.arange(n)  # variable held in each row
-    z0, rhs = 2 * n, 2 * n + 1
+    basis = np.arange(n, dtype=np.int64)  # variable held in each row
+    status, pivots = (_compiled_path() or _path)(T, basis, d, limit, pivot_tol)
+    message = {"solved": f"solved in {pivots} pivots.",
+               "ray": f"secondary ray after {pivots} pivots: no solution found.",
+               "iterations": f"pivot limit {limit} reached before a solution."}[status]
+    return _finish(M, q, T, basis, status, pivots, check_tol, unit, message)
 
+
+def _path(T: np.ndarray, basis: np.ndarray, d: np.ndarray, limit: int, pivot_tol: float) -> tuple[str, int]:
+    """Lemke's path on the tableau ``T`` (n, 2 n + 2) from the basis ``basis`` (n,) of
+    :func:`_lemke`, covering ``d`` (n,): both changed in place to its end; how it ended
+    ("solved", "ray" or "iterations") and the pivots made."""
+    n = basis.size
+    z0, rhs = 2 * n, 2 * n + 1
     # First pivot: z0 enters at the row where q_i / d_i is (lexicographically) smallest.
     row = _lex_min_row(T, np.arange(n), d, n, rhs)
     _pivot(T, row, z0)
@@ -246,17 +262,40 @@ def _lemke(M: np.ndarray, q: np.ndarray, d: np.ndarray, limit: int, pivot_tol: f
         top = np.abs(column).max()
         rows = np.flatnonzero(column > pivot_tol * top) if top > 0.0 else np.empty(0, int)
         if rows.size == 0:
-            return _finish(M, q, T, basis, "ray", pivots, check_tol, unit,
-                           f"secondary ray after {pivots} pivots: no solution found.")
+            return "ray", pivots
         if pivots >= limit:
-            return _finish(M, q, T, basis, "iterations", pivots, check_tol, unit,
-                           f"pivot limit {limit} reached before a solution.")
+            return "iterations", pivots
         row = _lex_min_row(T, rows, column[rows], n, rhs, prefer=np.flatnonzero(basis == z0))
         _pivot(T, row, entering)
         leaving, basis[row] = basis[row], entering
         pivots += 1
         if leaving == z0:
-            return _finish(M, q, T, basis, "solved", pivots, check_tol, unit, f"solved in {pivots} pivots.")
+            return "solved", pivots
+
+
+@functools.cache
+def _compiled_path() -> Callable[[np.ndarray, np.ndarray, np.ndarray, int, float], tuple[str, int]] | None:
+    """:func:`_path` compiled (``fb_lemke`` of the runtime library: the same pivots, bit for
+    bit, a few microseconds each instead of ~90), or None where the library cannot be built
+    (no C compiler): then :func:`_path` runs."""
+    from . import cbuild, runtime  # here: the module itself is NumPy's alone
+
+    try:
+        lemke = runtime.library().fb_lemke
+    except cbuild.CompilationError:
+        return None
+    ends = {LEMKE_SOLVED: "solved", LEMKE_RAY: "ray", LEMKE_LIMIT: "iterations"}
+
+    def path(T: np.ndarray, basis: np.ndarray, d: np.ndarray, limit: int, pivot_tol: float) -> tuple[str, int]:
+        n = basis.size
+        d = np.ascontiguousarray(d, dtype=float)
+        pivots = ctypes.c_int(0)
+        work, iwork = np.empty(5 * n + 2), np.empty(3 * n, np.intc)
+        end = lemke(n, T.ctypes.data, basis.ctypes.data, d.ctypes.data, int(limit), float(pivot_tol), TIE_TOL,
+                    ctypes.byref(pivots), work.ctypes.data, iwork.ctypes.data)
+        return ends[end], pivots.value
+
+    return path
 
 
 def _checked(M, q, covering) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -286,13 +325,13 @@ def _lex_min_row(T: np.ndarray, rows: np.ndarray, a: np.ndarray, n: int, rhs: in
     tableau's units, which do not change when the entering variable is scaled (its column
     ``a`` by ``c``, the keys by ``1 / c``).
     """
-    entries = np.column_stack([T[rows, rhs], T[rows, :n]])
-    keys = entries / a[:, None]
     alive = np.arange(rows.size)
-    for k in range(keys.shape[1]):
-        alive = alive[_tied(keys[alive, k], entries[alive, k], a[alive])]
+    for k, column in enumerate((rhs, *range(n))):
+        # each component for the rows still tied only: after the first, usually one row is left
+        entries = T[rows[alive], column]
+        alive = alive[_tied(entries / a[alive], entries, a[alive])]
         if k == 0 and prefer is not None and prefer.size:
-            hit = np.flatnonzero(np.isin(rows[alive], prefer))
+            hit = np.flatnonzero((rows[alive, None] == prefer[None, :]).any(axis=1))
             if hit.size:
                 return int(rows[alive[hit[0]]])
         if alive.size == 1:
