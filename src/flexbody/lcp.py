@@ -39,6 +39,9 @@ size, or the ray stands).  For a matrix that is not copositive-plus (friction) a
 nothing: the path from another covering vector may end on a solution, and
 :func:`solve_lcp` tries :data:`COVERINGS` of them (seeded, so the run is repeatable) before
 it reports the ray; the same where the pivot limit stops a path that rounding made wander.
+Before all that, a path that ends with ``z0`` at the rounding level has its last point
+checked (it solves ``q + d z0``): a plastic frictional impact with redundant contacts has a
+solution (Anitescu & Potra), yet its path stalled so and then met a rounding-level ray.
 """
 
 from __future__ import annotations
@@ -242,7 +245,7 @@ def _lemke(M: np.ndarray, q: np.ndarray, d: np.ndarray, limit: int, pivot_tol: f
     message = {"solved": f"solved in {pivots} pivots.",
                "ray": f"secondary ray after {pivots} pivots: no solution found.",
                "iterations": f"pivot limit {limit} reached before a solution."}[status]
-    return _finish(M, q, T, basis, status, pivots, check_tol, unit, message)
+    return _finish(M, q, T, basis, status, pivots, check_tol, unit, message, d)
 
 
 def _path(T: np.ndarray, basis: np.ndarray, d: np.ndarray, limit: int, pivot_tol: float) -> tuple[str, int]:
@@ -370,18 +373,41 @@ def _pivot(T: np.ndarray, row: int, col: int) -> None:
 
 
 def _finish(M: np.ndarray, q: np.ndarray, T: np.ndarray, basis: np.ndarray, status: str, pivots: int,
-            check_tol: float, unit: float, message: str) -> LcpSolution:
+            check_tol: float, unit: float, message: str, d: np.ndarray | None = None) -> LcpSolution:
     """Read ``z`` off the final basis (its right side is in units of ``unit``), polish it,
-    check it and wrap it up."""
+    check it and wrap it up.
+
+    A path that ends on a ray or at the pivot limit (covering vector ``d``) has its last
+    point checked where ``d z0`` is at the rounding level: that point solves ``LCP(M, q +
+    d z0)``, in rounding the problem asked (a fuzz's plastic frictional impact, 72 rows of
+    redundant contacts: its path stalled at ``z0 = 2.7e-13``, the rounding level 1.1e-12,
+    then met a column with no positive entry, where in exact arithmetic it has none).
+    """
     n = q.size
     values = np.zeros(2 * n + 1)
     values[basis] = T[:, -1] * unit
     z = values[n:2 * n]
+    floor = 16 * n * np.finfo(float).eps * (np.abs(M).max() * np.abs(z).max() + np.abs(q).max())
+    if status != "solved" and d is not None and values[2 * n] * d.max() <= floor:
+        ended = "secondary ray" if status == "ray" else "pivot limit"
+        last = _complementary(M, q, z, pivots, check_tol, f"solved by the last point of the path (z0 = "
+                              f"{values[2 * n]:.2g}), which ended on a {ended} after {pivots} pivots.")
+        if last.solved:
+            return last
     if status != "solved":
         return LcpSolution(z, M @ z + q, status, pivots, message)
+    return _complementary(M, q, z, pivots, check_tol, message)
+
+
+def _complementary(M: np.ndarray, q: np.ndarray, z: np.ndarray, pivots: int, check_tol: float,
+                   message: str) -> LcpSolution:
+    """The basic values ``z`` (n,) of a complementary basis, rounding removed, checked and
+    wrapped up (status ``"solved"`` or ``"inaccurate"``)."""
+    n = q.size
     # Rounding level of the whole problem: a degenerate basic variable (exactly 0 in exact
     # arithmetic) comes out as +-1e-16, and a row with small entries cannot resolve less.
     floor = 16 * n * np.finfo(float).eps * (np.abs(M).max() * np.abs(z).max() + np.abs(q).max())
+    raw = np.maximum(z, 0.0)
     z = np.where(z > floor, z, 0.0)
     # The basic z solve M_SS z_S = -q_S exactly: re-solving this small system removes the
     # rounding the pivots accumulated (order independence to 1e-12 depends on it).
@@ -394,7 +420,14 @@ def _finish(M: np.ndarray, q: np.ndarray, T: np.ndarray, basis: np.ndarray, stat
         if polished is not None and np.all(polished >= 0.0):
             z = np.zeros(n)
             z[S] = polished
-    return _checked_solution(M, q, z, pivots, check_tol, floor, message)
+    checked = _checked_solution(M, q, z, pivots, check_tol, floor, message)
+    if checked.solved:
+        return checked
+    # The floor is a rate, z an impulse: a small impulse on a stiff row can be needed (a
+    # contact approaching at 1.7e-12 m/s with W_ii = 41 takes 4.2e-14, below the floor
+    # 1.1e-12, and without it its row fails the check).  The pivots' own values may pass.
+    unpolished = _checked_solution(M, q, raw, pivots, check_tol, floor, message)
+    return unpolished if unpolished.solved else checked
 
 
 def _checked_solution(M: np.ndarray, q: np.ndarray, z: np.ndarray, pivots: int, check_tol: float,
