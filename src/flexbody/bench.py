@@ -26,6 +26,8 @@ The studies, each printed as a table and saved as JSON and PNG in ``--out``:
   bodies passing through each other and 20 separate drops (:mod:`flexbody.bench_bodies`).
 * ``friction_wp``, ``friction_map`` — work-precision on ``ball_on_incline`` and the
   methods over Coulomb's mu x Newton's e (:mod:`flexbody.bench_friction`).
+* ``lcp`` — Lemke's method compiled against its NumPy path on the LCPs the fuzzes saved:
+  one path and the whole solve with its rescues, bit for bit the same answers.
 
 Each chart is drawn from its study's JSON alone (:data:`PLOTS`): ``python -m
 flexbody.bench [FOLDER]`` redraws the PNGs beside the JSON files without running anything.
@@ -735,9 +737,68 @@ def _friction_map(out: Path, quick: bool) -> dict:
     return friction_map(out, quick)
 
 
+def lcp_study(out: Path, repeats: int, quick: bool) -> dict | None:
+    """Lemke's method compiled against its NumPy path (:mod:`flexbody.lcp`) on the LCPs the
+    fuzzes saved (``tests/reference/lcp_*.npz``: frictional impacts and forces of piles and
+    rows, 11 to 77 rows): one path from the covering vector of ones, and the whole
+    :func:`flexbody.lcp.solve_lcp` (with its rescues where the path ends on a ray), both
+    ways in this process, medians over ``repeats``; the answers must agree bit for bit."""
+    from . import lcp
+    from .paths import PROJECT_ROOT
+
+    saved = sorted((PROJECT_ROOT / "tests" / "reference").glob("lcp_*.npz"))
+    if not saved:
+        print("lcp study skipped: the saved problems (tests/reference/lcp_*.npz) are in the checkout only")
+        return None
+    compiled = lcp._compiled_path()
+    if compiled is None:
+        print("lcp study skipped: no C compiler builds the runtime library")
+        return None
+    repeats = max(repeats, 3 if quick else 7)
+
+    def median_time(call) -> tuple[float, object]:
+        times, answer = [], None
+        for _ in range(repeats):
+            start = time.perf_counter()
+            answer = call()
+            times.append(time.perf_counter() - start)
+        return statistics.median(times), answer
+
+    rows = []
+    print(f"lcp study: Lemke's method, NumPy against C, on {len(saved)} saved LCPs, median of {repeats}")
+    print(f"  {'problem':36s} {'n':>3s} {'pivots':>6s} {'path NumPy':>11s} {'path C':>9s} {'x':>4s}"
+          f" {'solve NumPy':>12s} {'solve C':>9s} {'x':>4s}  status")
+    for file in saved:
+        M, q = (np.load(file)[k] for k in ("M", "q"))
+        ones = np.ones(q.size)
+
+        def path(walk):
+            T = np.hstack([np.eye(q.size), -M, -ones[:, None], q[:, None] / np.abs(q).max()])
+            basis = np.arange(q.size, dtype=np.int64)
+            return walk(T, basis, ones, 100 * (q.size + 1), lcp.PIVOT_TOL), T, basis
+
+        path_numpy, (end, T, basis) = median_time(lambda: path(lcp._path))
+        path_c, (end_c, T_c, basis_c) = median_time(lambda: path(compiled))
+        solve_numpy, answer = median_time(lambda: lcp.solve_lcp(M, q, compiled=False))
+        solve_c, answer_c = median_time(lambda: lcp.solve_lcp(M, q))
+        same = (end == end_c and T.tobytes() == T_c.tobytes() and np.array_equal(basis, basis_c)
+                and answer.z.tobytes() == answer_c.z.tobytes() and answer.status == answer_c.status)
+        rows.append({"problem": file.stem, "n": int(q.size), "pivots": end[1], "path_end": end[0],
+                     "path_numpy_s": path_numpy, "path_c_s": path_c, "solve_numpy_s": solve_numpy,
+                     "solve_c_s": solve_c, "status": answer.status, "solve_pivots": answer.pivots,
+                     "bit_for_bit": bool(same)})
+        print(f"  {file.stem:36s} {q.size:3d} {end[1]:6d} {path_numpy * 1e3:8.2f} ms {path_c * 1e3:6.3f} ms"
+              f" {path_numpy / path_c:4.0f} {solve_numpy * 1e3:9.2f} ms {solve_c * 1e3:6.3f} ms"
+              f" {solve_numpy / solve_c:4.0f}  {answer.status}{'' if same else '  DIFFERENT'}")
+    data = {"environment": _environment(), "repeats": repeats, "rows": rows}
+    _save(out, "lcp", data)
+    return data
+
+
 STUDIES = {"wp": work_precision, "stability": stability_map, "resolution": resolution_study,
            "mujoco": mujoco_comparison, "mujoco3d": mujoco3d_comparison, "run": run_study, "scale": _scale,
-           "sweep": sweep_benchmark, "friction_wp": _friction_wp, "friction_map": _friction_map, "bodies": _bodies}
+           "sweep": sweep_benchmark, "friction_wp": _friction_wp, "friction_map": _friction_map, "bodies": _bodies,
+           "lcp": lcp_study}
 
 
 def bench_command(args) -> int:
@@ -745,7 +806,7 @@ def bench_command(args) -> int:
     out = Path(args.out)
     for name in args.study or list(STUDIES):
         start = time.perf_counter()
-        if name in ("wp", "friction_wp"):
+        if name in ("wp", "friction_wp", "lcp"):
             STUDIES[name](out, args.repeats if not args.quick else 1, args.quick)
         elif name == "run":
             run_study(out, args.repeats if not args.quick else 3)

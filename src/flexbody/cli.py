@@ -117,9 +117,10 @@ def _parser() -> argparse.ArgumentParser:
                                        "(stability), resolution study (resolution), MuJoCo side by side in 2D (mujoco) and "
                                        "3D (mujoco3d), the whole run command (run), cost vs size (scale), Dask sweeps "
                                        "(sweep), friction: work-precision on the incline (friction_wp) and the mu x e map "
-                                       "(friction_map), bodies that touch each other (bodies); JSON and PNG in --out.")
+                                       "(friction_map), bodies that touch each other (bodies), Lemke's method in C against NumPy (lcp); "
+                                       "JSON and PNG in --out.")
     bench.add_argument("--study", choices=("wp", "stability", "resolution", "mujoco", "mujoco3d", "run", "scale", "sweep",
-                                           "friction_wp", "friction_map", "bodies"), action="append",
+                                           "friction_wp", "friction_map", "bodies", "lcp"), action="append",
                        help="which study (repeatable; default: all; mujoco and mujoco3d need flexbody[mujoco])")
     bench.add_argument("--out", default="bench", metavar="DIR", help="output folder")
     bench.add_argument("--repeats", type=int, default=5, help="timing repeats (median is reported)")
