@@ -447,7 +447,8 @@ class _Run:
         self.indeterminate: list[tuple[float, str]] = []  # instants whose contact forces may not be unique or Coulomb's
         self.projections = 0  # held contacts put back on their surfaces (coupled models, SciPy's steppers)
         self.max_put_back = 0.0  # ... the farthest one was off its surface then (m)
-        self.shortened = 0  # steps taken again shorter: a held contact sank too deep within them
+        self.shortened = 0  # steps taken again shorter: a held contact sank too deep within them, or a
+        # particle moved too far relative to another (BodyContactModel.step_reach)
         self.nfev = self.njev = self.steps = self.segments = 0
         self.h_next = 0.0  # the step an explicit stepper proposed where the last segment ended (s)
         self.segment_log: list | None = None  # set to [] to log (RHS evaluations, y0, held, push) per segment
@@ -563,11 +564,14 @@ class _Run:
         renew_slips()
         g_old = events(self.y)
         reach = model.step_reach if model.n_slots and s.method != "LSODA" else None  # LSODA fixes it at its start
+        retry = np.inf  # a step taken again after it moved particles too far: its bound
         try:
             while True:
                 t_start, y_start = solver.t, solver.y.copy()
                 if reach is not None:  # bodies may touch: no step carries a particle through a surface unseen
-                    solver.max_step = min(options.get("max_step", np.inf), reach(solver.y, self.p))
+                    solver.max_step = min(options.get("max_step", np.inf), retry,
+                                          reach(solver.y, self.p, getattr(solver, "f", None)))
+                    retry = np.inf
                 message = solver.step()
                 self.steps += 1
                 if solver.status == "failed":
@@ -579,6 +583,17 @@ class _Run:
                 if not np.all(np.isfinite(solver.y)):
                     raise SimulationFailed(*_non_finite(solver.t))
                 dense = _remembered(solver.dense_output())
+                if reach is not None:
+                    # Measured, as the event checks see it (the step's ends and midpoint): its
+                    # bound ahead was a forecast, and the accelerations change within it.
+                    moved = model.step_motion((y_start, dense(0.5 * (solver.t_old + solver.t)), solver.y), self.p)
+                    if moved > model.reach_length:  # again from its start, shorter, before anything changes
+                        self.nfev += solver.nfev
+                        self.shortened += 1
+                        retry = 0.9 * (solver.t - t_start) * model.reach_length / moved
+                        solver = stepper(rhs, t_start, y_start, t_bound, **dict(options, first_step=retry))
+                        renew_slips()
+                        continue
                 drift = self.held_drift(solver.y)
                 if model.coupled and phases.on_ground.any() and solver.t - t_start > STALL_TIME and self.sank(
                         drift, dense, t_start, solver.t):

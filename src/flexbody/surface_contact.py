@@ -157,6 +157,39 @@ def vertex_pseudonormals(vertices: FloatArray, elements: IntArray) -> FloatArray
     return pseudo
 
 
+def thinnest_width(x: FloatArray, elements: IntArray, particle_body: IntArray, element_body: IntArray,
+                   reach: float) -> float:
+    """How thin the thinnest body is across (m), looked for within ``reach`` only.
+
+    The least distance from a surface vertex to an element of its own body's surface that
+    is not one of its own and faces away from it (its outward normal against the vertex's
+    pseudo-normal): a plate's thickness, a bar's width (and a U's gap between its arms,
+    whose faces face each other).  ``reach`` where none is nearer: farther widths are not
+    looked for (the broad phase's pairs within ``reach``, self-contact included).
+
+    Parameters
+    ----------
+    x : ndarray, shape (n, d)
+        Particle positions (every body's).
+    elements : ndarray of int, shape (m, d)
+        Every body's surface segments or triangles, oriented outward.
+    particle_body, element_body : ndarray of int, shape (n,) and (m,)
+    reach : float
+        How far to look (m, > 0).
+    """
+    from .broadphase import candidate_pairs  # here: this module is the narrow phase's alone
+
+    x, elements = np.asarray(x, float), np.asarray(elements, np.intp)
+    pairs = candidate_pairs(x, elements, particle_body, reach, element_body, self_contact=True)
+    pairs = pairs[particle_body[pairs[:, 0]] == element_body[pairs[:, 1]]]
+    normals = (segment_normals if x.shape[1] == 2 else triangle_normals)(x, elements)
+    across = np.einsum("kd,kd->k", vertex_pseudonormals(x, elements)[pairs[:, 0]], normals[pairs[:, 1]]) < 0.0
+    if not across.any():  # an interior particle's pseudo-normal is 0: never across
+        return float(reach)
+    contact = closest_features(x, x, elements, pairs[across])
+    return float(min(reach, np.abs(contact.gap).min()))
+
+
 def edge_pseudonormals(vertices: FloatArray, triangles: IntArray) -> tuple[IntArray, FloatArray]:
     """Pseudo-normal of every edge of a closed 3D surface: the sum of its two triangles' normals.
 
