@@ -9,6 +9,7 @@ must have its friction against it to ``tol`` relative, a slip at the rounding le
 """
 
 import re
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -17,6 +18,7 @@ from flexbody.contact_problems import (
     ALIGN_ROUNDS,
     _polygon_lcp,
     delassus,
+    least_squares,
     solve_forces_friction,
     solve_impact_friction,
 )
@@ -432,3 +434,32 @@ def test_coupled_forces_obey_the_circular_law(seed):
 def test_bad_3d_arguments_are_named(call, match):
     with pytest.raises(ValueError, match=match):
         call()
+
+
+def test_least_squares_takes_the_qr_iteration_svd_where_divide_and_conquer_does_not_converge():
+    """A fuzz's stick/slip pattern (tests/reference/lstsq_gelsd_no_convergence.npz: 70 x 70,
+    condition 3.8, singular values clustered at 21.05) on which NumPy's ``lstsq`` (LAPACK
+    gelsd) raised "SVD did not converge" and stopped a run of three boxes with friction:
+    ``least_squares`` solves it to rounding."""
+    data = np.load(Path(__file__).parent / "reference" / "lstsq_gelsd_no_convergence.npz")
+    A, b = data["A"], data["b"]
+    x = least_squares(A, b)
+    assert np.abs(A @ x - b).max() <= 1e-12 * np.abs(b).max()
+
+
+def test_least_squares_falls_back_to_the_same_least_norm_answer(monkeypatch):
+    """Where gelsd fails (forced here), gelss answers the same least-norm least-squares
+    problem: a rank-deficient system (a repeated row, as redundant contacts give) gets
+    NumPy's answer to 1e-12."""
+    rng = np.random.default_rng(7)
+    A = rng.normal(size=(6, 5))
+    A[5] = A[4]  # a repeated row
+    A[:, 4] = A[:, 3]  # and a repeated column: rank 4, many solutions, one of least norm
+    b = rng.normal(size=6)
+    expected = np.linalg.lstsq(A, b, rcond=None)[0]
+
+    def no_convergence(*args, **kwargs):
+        raise np.linalg.LinAlgError("SVD did not converge in Linear Least Squares")
+
+    monkeypatch.setattr(np.linalg, "lstsq", no_convergence)
+    np.testing.assert_allclose(least_squares(A, b), expected, atol=1e-12)

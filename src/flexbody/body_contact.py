@@ -98,6 +98,7 @@ from .assembly import AssembledModel, _kernels_module
 from .broadphase import CandidateList, slices
 from .constants import FREE, HELD, SLIDING, VELOCITY_ROUNDOFF
 from .contact import Phases
+from .contact_problems import least_squares
 from .dynamics import contact_solve
 from .edge_contact import EdgeSlots, EdgeTerms
 from .held_rows import CompiledHeldRows
@@ -2240,7 +2241,7 @@ def _gram(A: FloatArray, B: FloatArray) -> FloatArray:
 def _least_squares(A: FloatArray, b: FloatArray) -> FloatArray:
     """The least-norm ``x`` with ``A x = b`` (k, k), rows below :data:`DEPENDENT` dropped."""
     try:
-        return np.linalg.lstsq(A, b, rcond=DEPENDENT)[0]
+        return least_squares(A, b, rcond=DEPENDENT)
     except np.linalg.LinAlgError as exc:  # the driver reports a blow-up
         raise FloatingPointError(f"the held contacts' forces: {exc}") from None
 
