@@ -1003,3 +1003,38 @@ def test_two_blocks_flying_at_each_other_meet_at_the_default_tolerances():
     assert result.status == "success", result.message
     assert result.stats["impacts"] > 10 and result.stats["max_penetration_m"] < 1e-9
     assert result.positions[-1, :12, 0].max() < result.positions[-1, 12:, 0].min()  # a still left of b
+
+
+def test_a_soft_disc_turned_inside_out_against_a_block_stops_the_run():
+    """A 7-particle disc (a hexagon round its centre particle, 500 N/m) hitting a rigid block
+    at 3 m/s in space: its centre particle, which makes no contact (only surface particles
+    do), passes out through its own hexagon and 2.4 cm into the block, and the disc turns
+    inside out, while no surface crosses itself.  Found by a fuzz: the run said success.
+    The whole fold check (at output samples) finds a particle off the disc's surface inside
+    the block (the block's surface winds around it)."""
+    scene = flexbody.load_scene({
+        "name": "soft_disc_inverts", "gravity": [0.0, 0.0], "grounds": [{"point": [0, -10.0], "normal": [0, 1.0]}],
+        "bodies": [{"name": "B", "shape": "polygon", "rigid": True, "mass": 0.2,
+                    "vertices": [[-0.12, 0.0], [0.12, 0.0], [0.12, 0.07], [-0.12, 0.07]], "position": [0.0, 0.0]},
+                   {"name": "A", "shape": "disc", "count": 7, "radius": 0.03, "mass": 0.05, "stiffness": 500.0,
+                    "damping": 0.0, "position": [0.0, 0.101], "velocity": [0.0, -3.0]}],
+        "contacts": [{"bodies": ["A", "B"]}], "simulation": {"t_end": 0.05, "output_dt": 1e-4}})
+    result = flexbody.simulate(scene)
+    assert result.status == "unsupported" and "body 'A' has folded over" in result.message
+    assert "its particle 7, off its surface, is inside body 'B'" in result.message
+    np.testing.assert_allclose(result.positions[0, 7], [0.0, 0.101])  # the disc's centre
+    assert result.positions[:, 7, 1].min() > 0.07 - 0.005  # stopped before it was deep in the block (2.4 cm before)
+
+
+def test_winding_numbers_tell_inside_from_outside():
+    """A unit square and a unit cube (outward): a point inside reads 1, outside 0."""
+    from flexbody.surface import winding_numbers
+
+    square = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0], [0.5, 0.5], [1.5, 0.5]])
+    np.testing.assert_allclose(winding_numbers(square, [[0, 1], [1, 2], [2, 3], [3, 0]], [4, 5]), [1.0, 0.0],
+                               atol=1e-12)
+    from flexbody.surface import hull
+
+    corners = np.array([[i, j, k] for i in (0.0, 1.0) for j in (0.0, 1.0) for k in (0.0, 1.0)])
+    x = np.vstack([corners, [[0.5, 0.5, 0.5], [1.5, 0.5, 0.5], [0.5, 0.5, -0.01]]])
+    np.testing.assert_allclose(winding_numbers(x, hull(corners), [8, 9, 10]), [1.0, 0.0, 0.0], atol=1e-12)

@@ -72,6 +72,40 @@ def signed_measure(points: np.ndarray, surface: np.ndarray) -> float:
     return float(np.sum(np.einsum("ij,ij->i", x[:, 0], cross(x[:, 1], x[:, 2])))) / 6.0
 
 
+def winding_numbers(points: np.ndarray, surface: np.ndarray, queries: np.ndarray) -> np.ndarray:
+    """How many times a closed surface winds around each of the points ``queries``: 1
+    inside, 0 outside (to rounding; a point on the surface reads between).
+
+    Parameters
+    ----------
+    points : ndarray, shape (n, d)
+    surface : ndarray of int, shape (m, d)
+        Closed, oriented outward (counter-clockwise segments in 2D, triangles counter-clockwise
+        from outside in 3D).
+    queries : ndarray of int, shape (k,)
+        Rows of ``points``.
+
+    Returns
+    -------
+    ndarray, shape (k,)
+        2D: the segments' signed angles at each point over 2 pi; 3D: the triangles' solid
+        angles (Van Oosterom and Strackee, IEEE Trans. Biomed. Eng. 30(2), 1983) over 4 pi.
+    """
+    x = np.asarray(points, dtype=float)
+    corners = x[np.asarray(surface, dtype=np.intp)][None] - x[np.asarray(queries, dtype=np.intp)][:, None, None]
+    if x.shape[1] == 2:
+        a, b = corners[..., 0, :], corners[..., 1, :]
+        angle = np.arctan2(a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0], np.einsum("kmd,kmd->km", a, b))
+        return angle.sum(axis=1) / (2.0 * np.pi)
+    def dot(u, v):
+        return np.einsum("kmd,kmd->km", u, v)
+
+    a, b, c = (corners[..., j, :] for j in range(3))
+    la, lb, lc = (np.linalg.norm(v, axis=2) for v in (a, b, c))
+    solid = 2.0 * np.arctan2(dot(a, cross(b, c)), la * lb * lc + dot(a, b) * lc + dot(a, c) * lb + dot(b, c) * la)
+    return solid.sum(axis=1) / (4.0 * np.pi)
+
+
 def closure_problem(surface: np.ndarray) -> str:
     """Why a surface is not closed ("" when it is), naming the first offending particle or edge.
 
