@@ -256,6 +256,9 @@ class BodyContactModel(Model):
         # each slot's element while constrained; an edge row's edge and side (EdgeSlots.encode):
         # so held_on and the driver's samples restore an edge row's side with its edge
         self.element_of = np.full(self.n_slots, -1, np.intp)
+        #: A 2D particle can pass through another body's convex corner between a step's event
+        #: checks, however short the step (:meth:`corner_cuts`).
+        self.corners = self.dim == 2 and self.n_primary > 0
         # A held slot's element-boundary event fires where its margin falls below this floor
         # (m, <= 0): below 0 where a hand-over left it already past the boundary (a particle
         # a hair inside a concave corner), so that passing back over it is still found.
@@ -1436,6 +1439,64 @@ class BodyContactModel(Model):
             if other < slot and mirror_of.get(other) == slot:  # each at the other's vertex
                 out[ng + slot] = True
         return out
+
+    def corner_cuts(self, ya, yb, p, watched: np.ndarray) -> tuple[IntArray, IntArray, IntArray]:
+        """The free contacts of ``watched`` (bool (nc,)) whose particle went round a vertex
+        ``w`` of the other body between the states ``ya`` and ``yb`` (2D), each with ``w`` and
+        the one of ``w``'s two segments (0 or 1, as :meth:`corner_lines`) whose line it
+        crossed inward, shape (k,) each.
+
+        Near a convex vertex the body is the wedge inside both of its segments' lines, whose
+        tip is as thin as one likes: a particle passing ``w`` by 1e-5 m can go into the tip
+        through one segment and out through the other within a step, its signed distance
+        positive at each of the step's checks (two flexible squares whose corners had met
+        passed each other's, the impact missed; the bodies then overlapped along a whole
+        side).  Each line's gap is smooth, as a ground's: a particle within ``margin`` at both
+        states, its closest feature holding ``w`` at both, inside the first line and outside
+        the second at ``ya`` and the other way round at ``yb``, went round ``w`` outside or
+        through the tip, as the second line's crossing comes before or after the first's
+        (:func:`flexbody.events.locate` roots them).  None in 3D.
+        """
+        none = np.zeros(0, np.intp)
+        ng = self.n_ground_contacts
+        slots = np.flatnonzero(np.asarray(watched)[ng : ng + self.n_primary]) if self.corners else none
+        if not len(slots):
+            return none, none, none
+        found = []
+        for y in (ya, yb):  # each state's closest features (the whole sweep, kept from its gaps)
+            swept = self._surface_contacts(self._state(np.asarray(y, float), p)[0])[2]
+            if swept is None:
+                return none, none, none
+            contact, slot_rows = swept
+            found.append((contact, self._rows_of(slot_rows, slot_rows >= 0)[slots]))
+        (ca, ra), (cb, rb) = found
+        near = (ra >= 0) & (rb >= 0)
+        slots, ra, rb = slots[near], ra[near], rb[near]
+        fa, fb = ca.feature[ra], cb.feature[rb]
+        moved = (fa != fb).any(axis=1)  # on one face at both: not round a vertex
+        slots, fa, fb = slots[moved], fa[moved], fb[moved]
+        # each (slot, w) with w a vertex of both features
+        row, col = np.nonzero((fa >= 0) & (fa[:, :, None] == fb[:, None, :]).any(axis=2))
+        if not len(row):
+            return none, none, none
+        contacts, w = ng + slots[row], fa[row, col]
+        ends = self._incident_start[w + 1] - self._incident_start[w]
+        contacts, w = contacts[ends == 2], w[ends == 2]  # a closed outline's vertex: two segments
+        a, b = self.corner_lines(ya, p, contacts, w), self.corner_lines(yb, p, contacts, w)
+        inward = [(a[:, j] > 0.0) & (b[:, j] <= 0.0) & (a[:, 1 - j] < 0.0) & (b[:, 1 - j] > 0.0) for j in (0, 1)]
+        cut = inward[0] | inward[1]
+        return contacts[cut], w[cut], np.where(inward[0], 0, 1)[cut]
+
+    def corner_lines(self, y, p, contacts: IntArray, w: IntArray) -> FloatArray:
+        """Each contact's particle's gap to the lines of the two segments at vertex ``w`` of
+        the other body (2D; in the order of :meth:`_elements_at`), shape (k, 2) (m, negative
+        on the body's side of the line)."""
+        x = self._state(np.asarray(y, float), p)[0]
+        w = np.asarray(w, np.intp)
+        segments = self._incident_flat[self._incident_start[w][:, None] + np.arange(2)]  # (k, 2)
+        normals = segment_normals(x, self.elements[segments.ravel()]).reshape(len(w), 2, 2)
+        particle = self.slot_particle[np.asarray(contacts, np.intp) - self.n_ground_contacts]
+        return np.einsum("kjd,kd->kj", normals, x[particle] - x[w])
 
     def _mirrors(self, contact: SurfaceContact, slot_of: IntArray) -> tuple[IntArray, IntArray, IntArray]:
         """The rows of ``contact`` whose slot (``slot_of`` (k,), -1: none) touches at a

@@ -55,6 +55,7 @@ class EventFunctions:
         self.margins = model.held_margins if phases.on_ground[model.n_ground_contacts :].any() else None
         # Contacts between bodies (past the grounds'): a just released one is checked more densely.
         self.between_bodies = np.arange(model.n_contacts) >= model.n_ground_contacts
+        self.corners = model.corners  # free contacts can pass through another body's corner (_corner_cut)
         self.friction = bool(self.held_mask.any() and model.laws[:, 0].any())
         # Each sliding contact's direction at the step's start: the model's own (FbSystem.slip), whose
         # right-hand side continues a slip past its stop along it; one from an earlier slide is stale.
@@ -251,14 +252,71 @@ def locate(
     """
     dip = _first_dip(events, dense, t_old, t_new, g_old)
     if dip is None:
-        return _unmissed(events, dense, t_old, g_old, _sign_change(events, dense, t_old, t_new, g_old, g_new))
+        crossing = _unmissed(events, dense, t_old, g_old, _sign_change(events, dense, t_old, t_new, g_old, g_new))
+        return _corner_cut(events, dense, t_old, t_new, g_old, crossing)
     # the step as if it ended at the dip: an earlier crossing of another contact wins
     crossing = _sign_change(events, dense, t_old, dip.t, g_old, events(dense(dip.t)))
     if crossing is not None and crossing.t < dip.t - GROUP_TIME:
-        return _unmissed(events, dense, t_old, g_old, crossing)
+        return _corner_cut(events, dense, t_old, t_new, g_old, _unmissed(events, dense, t_old, g_old, crossing))
     if crossing is not None:
         dip.contacts |= crossing.contacts
-    return _unmissed(events, dense, t_old, g_old, dip)
+    return _corner_cut(events, dense, t_old, t_new, g_old, _unmissed(events, dense, t_old, g_old, dip))
+
+
+def _corner_cut(events: EventFunctions, dense: Callable[[float], np.ndarray], t_old: float, t_new: float,
+                g_old: np.ndarray, crossing: Crossing | None) -> Crossing | None:
+    """``crossing``, or an earlier one of a free contact between bodies that went into
+    another body's convex corner and out again between two of the step's checks (its
+    start, midpoint and end), positive at both (2D, :meth:`flexbody.model.Model.corner_cuts`).
+
+    Each such contact's two lines are rooted on the dense output: where it crossed the
+    second's inward before the first's outward, it was inside both in between, deepest
+    (for a straight passage) where their gaps are equal.  Its event function there, below
+    minus the gap tolerance (a graze, two corners meeting to a rounding, is no dip, as in
+    :func:`_unmissed`), brackets its crossing from the check before it.
+    """
+    if not events.corners:
+        return crossing
+    model = events.model
+    t_end = crossing.t if crossing is not None else t_new
+    t_mid = 0.5 * (t_old + t_new)
+    watched = events.free & events.between_bodies
+    g_a = g_old
+    for ta, tb in ((t_old, t_mid), (t_mid, t_new)):
+        if ta >= t_end:
+            break
+        y_a, y_b = dense(ta), dense(tb)
+        g_b = events.free_gaps(y_b)
+        contacts, vertices, inward = model.corner_cuts(y_a, y_b, events.p, watched & (g_a > 0.0) & (g_b > 0.0))
+        roots = {}
+        if len(contacts):
+            lines_a = model.corner_lines(y_a, events.p, contacts, vertices)
+            lines_b = model.corner_lines(y_b, events.p, contacts, vertices)
+        for k, (c, w, j) in enumerate(zip(contacts.tolist(), vertices.tolist(), inward.tolist())):
+            def lines(t: float, c: int = c, w: int = w) -> np.ndarray:
+                return model.corner_lines(dense(t), events.p, np.array([c]), np.array([w]))[0]
+
+            if t_end < tb and lines(t_end)[j] > 0.0:  # not in before the step's event: nothing to miss
+                continue
+            t_in = first_fired(lambda t: lines(t)[j], ta, tb, lines_a[k, j], lines_b[k, j], xtol=1e-15)
+            t_out = first_fired(lambda t: -lines(t)[1 - j], ta, tb, -lines_a[k, 1 - j], -lines_b[k, 1 - j], xtol=1e-15)
+            if t_in >= t_out:  # round the vertex outside
+                continue
+            d_in, d_out = (float(g[j] - g[1 - j]) for g in (lines(t_in), lines(t_out)))
+            t_deep = (first_fired(lambda t: float(np.subtract(*lines(t)[[j, 1 - j]])), t_in, t_out, d_in, d_out,
+                                  xtol=1e-15) if d_in > 0.0 >= d_out else 0.5 * (t_in + t_out))
+            if events.one(dense(t_deep), c) < -events.gap_tolerance:
+                roots[c] = _root(events, dense, c, ta, t_deep, float(g_a[c]))
+        if roots:
+            t_cut = min(roots.values())
+            if crossing is not None and t_cut >= crossing.t - GROUP_TIME:  # the same instant
+                crossing.contacts[[c for c, t in roots.items() if t <= crossing.t + GROUP_TIME]] = True
+                return crossing
+            cut = np.zeros(len(g_old), bool)
+            cut[[c for c, t in roots.items() if t <= t_cut + GROUP_TIME]] = True
+            return _unmissed(events, dense, t_old, g_old, Crossing(t_cut, cut))
+        g_a = g_b
+    return crossing
 
 
 def _unmissed(events: EventFunctions, dense: Callable[[float], np.ndarray], t_old: float, g_old: np.ndarray,

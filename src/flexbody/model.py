@@ -57,6 +57,7 @@ class Model:
     #: Contacts between bodies, past the ground ones (flexbody.body_contact), and each one's
     #: index in ``scene.contacts``: none unless bodies may touch each other.
     n_slots = 0
+    corners = False  # whether free contacts can cut through another body's corner (corner_cuts)
     first_edge = 0  # the first edge contact's slot (n_slots: none)
     slot_pair = np.zeros(0, np.intp)
     #: Contact laws (Coulomb mu, Newton e) per ground, then per pair of bodies, shape (k, 2):
@@ -113,6 +114,13 @@ class Model:
         """Of the contacts ``hit`` (bool (nc,)), those that are another's contact seen from
         its other side, bool (nc,): none for particles against grounds."""
         return np.zeros(self.n_contacts, bool)
+
+    def corner_cuts(self, ya, yb, p, watched: np.ndarray) -> tuple[IntArray, IntArray, IntArray]:
+        """Free contacts that may have passed through another body's convex corner between
+        the states ``ya`` and ``yb`` (:meth:`flexbody.body_contact.BodyContactModel.corner_cuts`):
+        none for particles against grounds."""
+        none = np.zeros(0, np.intp)
+        return none, none, none
 
     def gap_rates(self, y, p, held) -> tuple[FloatArray, FloatArray]:
         """Gaps and normal velocities, shape (nc,) each: :meth:`contact_state` without the
