@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from flexbody.constants import GROUP_TIME
-from flexbody.events import _earliest, locate
+from flexbody.events import EventFunctions, _earliest, locate
 
 
 class _Closed:
@@ -109,6 +109,41 @@ def test_a_contact_found_inside_at_anothers_crossing_dipped_first_and_is_the_ins
     crossing = locate(events, dense, 0.0, 1.0, events(dense(0.0)), events(dense(1.0)))
     assert crossing.t == pytest.approx(0.62, abs=1e-14)
     assert np.flatnonzero(crossing.contacts).tolist() == [0]
+
+
+class _Released(_Step):
+    """:class:`_Step` whose functions are gaps, each contact armed at its floor
+    (``phases.floor``) and re-armed at the ground at a midpoint as
+    :meth:`flexbody.events.EventFunctions.rearm` does."""
+
+    def __init__(self, functions, floor):
+        super().__init__(functions)
+        self.phases.floor = np.array(floor, float)
+
+    def __call__(self, y):
+        return super().__call__(y) - self.phases.floor
+
+    def one(self, y, c):
+        return super().one(y, c) - float(self.phases.floor[c])
+
+    def rearm(self, g_mid, g_new):
+        EventFunctions.rearm(self, g_mid, g_new)
+
+
+def test_a_contact_re_armed_at_the_midpoint_and_found_inside_at_anothers_crossing_is_the_instant():
+    """Contact 1 was released a hair inside its surface (gap -8e-15, armed at -1e-12), is
+    clear of it at the midpoint (re-armed at 0), and dips in over [0.60, 0.62], between the
+    points checked; contact 0 crosses at 0.615, inside that dip.  Re-armed, contact 1 reads
+    below its floor at the step's start too: it is still the instant, at 0.60 (measured: a
+    3D box's corner particle 3.06e-9 m inside another box's edge at a ground contact's
+    instant, unseen)."""
+    events = _Released([lambda t: 0.615 - t, lambda t: min(t - 8e-15, abs(t - 0.61) - 0.01)], [0.0, -1e-12])
+    dense = lambda t: np.array([t])  # noqa: E731
+    g_old, g_new = events(dense(0.0)), events(dense(1.0))
+    crossing = locate(events, dense, 0.0, 1.0, g_old, g_new)
+    assert events.phases.floor[1] == 0.0  # re-armed at the midpoint
+    assert crossing.t == pytest.approx(0.60, abs=1e-14)
+    assert np.flatnonzero(crossing.contacts).tolist() == [1]
 
 
 class _Island(_Step):
