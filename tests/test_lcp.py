@@ -206,14 +206,6 @@ def _numpy_pivots(monkeypatch):
     monkeypatch.setattr(flexbody.lcp, "_compiled_path", lambda: None)
 
 
-def _tableau(M, q, d):
-    """The start of Lemke's path on ``LCP(M, q)`` from the covering vector ``d``, as
-    :func:`flexbody.lcp._lemke` sets it up: the tableau and the basis."""
-    n = q.size
-    return (np.hstack([np.eye(n), -M, -d[:, None], q[:, None] / np.abs(q).max()]),
-            np.arange(n, dtype=np.int64))
-
-
 def _reference_problems():
     """The saved LCPs of fuzzed scenes (frictional, redundant, tied) and the integer problems
     with degenerate q (the cycling seeds and 120 more): (name, M, q)."""
@@ -239,8 +231,8 @@ def test_the_compiled_path_is_the_numpy_path_bit_for_bit():
         for seed in (None, 0, 1, 2):
             d = np.ones(q.size) if seed is None else np.random.default_rng(seed).uniform(0.5, 2.0, q.size)
             for limit in (100 * (q.size + 1), 5):
-                T, basis = _tableau(M, q, d)
-                T_c, basis_c = _tableau(M, q, d)
+                T, basis, _ = flexbody.lcp._start(M, q, d)
+                T_c, basis_c, _ = flexbody.lcp._start(M, q, d)
                 end = flexbody.lcp._path(T, basis, d, limit, flexbody.lcp.PIVOT_TOL)
                 assert compiled(T_c, basis_c, d, limit, flexbody.lcp.PIVOT_TOL) == end, (name, seed, limit)
                 assert T_c.tobytes() == T.tobytes() and np.array_equal(basis_c, basis), (name, seed, limit)

@@ -773,8 +773,7 @@ def lcp_study(out: Path, repeats: int, quick: bool) -> dict | None:
         ones = np.ones(q.size)
 
         def path(walk):
-            T = np.hstack([np.eye(q.size), -M, -ones[:, None], q[:, None] / np.abs(q).max()])
-            basis = np.arange(q.size, dtype=np.int64)
+            T, basis, _ = lcp._start(M, q, ones)
             return walk(T, basis, ones, 100 * (q.size + 1), lcp.PIVOT_TOL), T, basis
 
         path_numpy, (end, T, basis) = median_time(lambda: path(lcp._path))

@@ -42,7 +42,7 @@ it reports the ray; the same where the pivot limit stops a path that rounding ma
 
 The pivots run in C where the runtime library is built (``fb_lemke``, generated from
 ``derivation/templates/lcp.c.jinja``): the same operations in the same order as
-:func:`_path`, its NumPy twin, so the same path bit for bit, 15 to 57 times faster on the
+:func:`_path`, its NumPy twin, so the same path bit for bit, 13 to 42 times faster on the
 fuzzes' saved problems (``flexbody bench --study lcp``).
 Before all that, a path that ends with ``z0`` at the rounding level has its last point
 checked (it solves ``q + d z0``): a plastic frictional impact with redundant contacts has a
@@ -217,7 +217,7 @@ def solve_lcp(
             # it solves M + s I exactly: on M each row is off by s z_i more, a compliance
             # (measured: a frictional impact's answer, exact to 3.5e-19 by enumeration, was
             # refused by 1.0e-11 = s z)
-            floor = 16 * n * np.finfo(float).eps * (np.abs(M).max() * np.abs(retry.z).max() + np.abs(q).max())
+            floor = _rounding_floor(M, q, retry.z)
             checked = _checked_solution(M, q, retry.z, answer.pivots + retry.pivots, check_tol,
                                         floor + shift * float(np.abs(retry.z).max()),
                                         f"{retry.message[:-1]} on M + {shift:.1e} I (without: {answer.message[:-1]}).")
@@ -246,21 +246,26 @@ def _lemke(M: np.ndarray, q: np.ndarray, d: np.ndarray, limit: int, pivot_tol: f
            check_tol: float, walk: Walk) -> LcpSolution:
     """Lemke's method on checked ``M``, ``q`` (not all >= 0), covering ``d`` (see
     :func:`solve_lcp`), its path walked by ``walk`` (:func:`_path` or its compiled twin)."""
-    n = q.size
-    # z(a q) = a z(q): pivot on q / max|q| so the ratio and tie tests, whose tolerances are
-    # absolute below 1, see every entry of q at its relative size (a contact approaching at
-    # 3e-11 m/s beside one at 1.6e-3 m/s was otherwise left out, its w below 0).
-    unit = float(np.abs(q).max())
-
-    # Tableau of  w - M z - d z0 = q:  columns w (0..n-1), z (n..2n-1), z0 (2n), right side (2n+1).
-    # Its first n columns are always the basis inverse (the start basis is w, the identity).
-    T = np.hstack([np.eye(n), -M, -d[:, None], q[:, None] / unit])
-    basis = np.arange(n, dtype=np.int64)  # variable held in each row
+    T, basis, unit = _start(M, q, d)
     status, pivots = walk(T, basis, d, limit, pivot_tol)
     message = {"solved": f"solved in {pivots} pivots.",
                "ray": f"secondary ray after {pivots} pivots: no solution found.",
                "iterations": f"pivot limit {limit} reached before a solution."}[status]
     return _finish(M, q, T, basis, status, pivots, check_tol, unit, message, d)
+
+
+def _start(M: np.ndarray, q: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+    """The start of Lemke's path on ``LCP(M, q)`` (``q`` not all >= 0) from the covering
+    vector ``d``: the tableau (n, 2 n + 2), the basis (n,) and the unit of its right side."""
+    n = q.size
+    # z(a q) = a z(q): pivot on q / max|q| so the ratio and tie tests, whose tolerances are
+    # absolute below 1, see every entry of q at its relative size (a contact approaching at
+    # 3e-11 m/s beside one at 1.6e-3 m/s was otherwise left out, its w below 0).
+    unit = float(np.abs(q).max())
+    # Tableau of  w - M z - d z0 = q:  columns w (0..n-1), z (n..2n-1), z0 (2n), right side (2n+1).
+    # Its first n columns are always the basis inverse (the start basis is w, the identity).
+    T = np.hstack([np.eye(n), -M, -d[:, None], q[:, None] / unit])
+    return T, np.arange(n, dtype=np.int64), unit  # the basis: the variable held in each row
 
 
 def _path(T: np.ndarray, basis: np.ndarray, d: np.ndarray, limit: int, pivot_tol: float) -> tuple[str, int]:
@@ -402,8 +407,7 @@ def _finish(M: np.ndarray, q: np.ndarray, T: np.ndarray, basis: np.ndarray, stat
     values = np.zeros(2 * n + 1)
     values[basis] = T[:, -1] * unit
     z = values[n:2 * n]
-    floor = 16 * n * np.finfo(float).eps * (np.abs(M).max() * np.abs(z).max() + np.abs(q).max())
-    if status != "solved" and d is not None and values[2 * n] * d.max() <= floor:
+    if status != "solved" and d is not None and values[2 * n] * d.max() <= _rounding_floor(M, q, z):
         ended = "secondary ray" if status == "ray" else "pivot limit"
         last = _complementary(M, q, z, pivots, check_tol, f"solved by the last point of the path (z0 = "
                               f"{values[2 * n]:.2g}), which ended on a {ended} after {pivots} pivots.")
@@ -419,9 +423,7 @@ def _complementary(M: np.ndarray, q: np.ndarray, z: np.ndarray, pivots: int, che
     """The basic values ``z`` (n,) of a complementary basis, rounding removed, checked and
     wrapped up (status ``"solved"`` or ``"inaccurate"``)."""
     n = q.size
-    # Rounding level of the whole problem: a degenerate basic variable (exactly 0 in exact
-    # arithmetic) comes out as +-1e-16, and a row with small entries cannot resolve less.
-    floor = 16 * n * np.finfo(float).eps * (np.abs(M).max() * np.abs(z).max() + np.abs(q).max())
+    floor = _rounding_floor(M, q, z)
     raw = np.maximum(z, 0.0)
     z = np.where(z > floor, z, 0.0)
     # The basic z solve M_SS z_S = -q_S exactly: re-solving this small system removes the
@@ -443,6 +445,13 @@ def _complementary(M: np.ndarray, q: np.ndarray, z: np.ndarray, pivots: int, che
     # 1.1e-12, and without it its row fails the check).  The pivots' own values may pass.
     unpolished = _checked_solution(M, q, raw, pivots, check_tol, floor, message)
     return unpolished if unpolished.solved else checked
+
+
+def _rounding_floor(M: np.ndarray, q: np.ndarray, z: np.ndarray) -> float:
+    """The rounding level of ``LCP(M, q)`` at ``z`` (n,): a degenerate basic variable
+    (exactly 0 in exact arithmetic) comes out as +-1e-16, and a row with small entries
+    cannot resolve less."""
+    return 16 * q.size * np.finfo(float).eps * (np.abs(M).max() * np.abs(z).max() + np.abs(q).max())
 
 
 def _checked_solution(M: np.ndarray, q: np.ndarray, z: np.ndarray, pivots: int, check_tol: float,
@@ -502,12 +511,11 @@ def solve_pd_lcp(M: np.ndarray, q: np.ndarray, *, check_tol: float = CHECK_TOL) 
     if eigenvalues[0] <= PD_CONDITION * eigenvalues[-1]:
         return None
     S = q < 0.0
-    level = 16 * n * np.finfo(float).eps
     for pivots in range(2**n):
         z = np.zeros(n)
         z[S] = np.linalg.solve(M[np.ix_(S, S)], -q[S])
         w = M @ z + q
-        floor = level * (np.abs(M).max() * np.abs(z).max() + np.abs(q).max())
+        floor = _rounding_floor(M, q, z)
         infeasible = np.flatnonzero(np.where(S, z, w) < -floor)
         if not infeasible.size:
             z = np.maximum(z, 0.0)

@@ -97,6 +97,7 @@ def winding_numbers(points: np.ndarray, surface: np.ndarray, queries: np.ndarray
         a, b = corners[..., 0, :], corners[..., 1, :]
         angle = np.arctan2(a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0], np.einsum("kmd,kmd->km", a, b))
         return angle.sum(axis=1) / (2.0 * np.pi)
+
     def dot(u, v):
         return np.einsum("kmd,kmd->km", u, v)
 
