@@ -84,7 +84,7 @@ class _Step(_Closed):
         self.between_bodies = np.ones(len(functions), bool)
         self.phases = type("Phases", (), {"floor": np.zeros(len(functions))})()
         self.gap_tolerance = 1e-12
-        self.corners = False  # no bodies' corners to pass through
+        self.model = type("Model", (), {"corners": False})()  # no bodies' corners to pass through
 
     def held_functions(self, y):
         return np.where(self.free, np.inf, self(y))

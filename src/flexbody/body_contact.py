@@ -887,13 +887,17 @@ class BodyContactModel(Model):
                 if len(pierced):
                     return int(body), (f"its edge {edges(mine)[pierced[0, 1]].tolist()} passes through its "
                                        f"triangle {mine[pierced[0, 0]].tolist()}")
-            if body not in self._closed:
-                self._closed[body] = closure_problem(mine) == ""
-            if self._closed[body] and signed_measure(x, mine) <= 0.0:
+            if self._is_closed(body) and signed_measure(x, mine) <= 0.0:
                 return int(body), f"it encloses no positive {'area' if self.dim == 2 else 'volume'} (turned inside out)"
         if contacts is None:
             return self._inside_through(x, slots)
         return None
+
+    def _is_closed(self, body: int) -> bool:
+        """Whether ``body``'s surface is closed (has an inside), found on first use."""
+        if body not in self._closed:
+            self._closed[body] = closure_problem(self.elements[self._body_elements[body]]) == ""
+        return self._closed[body]
 
     def _inside_through(self, x, slots: IntArray) -> tuple[int, str] | None:
         """A body one of whose particles off its surface (a lattice's inside) lies inside
@@ -906,7 +910,7 @@ class BodyContactModel(Model):
         near = np.unique(np.vstack([pairs, pairs[:, ::-1]]), axis=0)  # either way: a big body can engulf a small one
         for mine, other in near[near[:, 0] != near[:, 1]].tolist():
             inner, theirs = self._inner[mine], self.elements[self._body_elements[other]]
-            if not len(inner) or not self._closed.setdefault(other, closure_problem(theirs) == ""):
+            if not len(inner) or not self._is_closed(other):
                 continue
             low, high = x[theirs].min(axis=(0, 1)), x[theirs].max(axis=(0, 1))
             inner = inner[((x[inner] >= low) & (x[inner] <= high)).all(axis=1)]
@@ -2309,7 +2313,9 @@ def _read_only(answer):
 def _spread(rows: FloatArray) -> float:
     """The largest difference between two rows of ``rows`` (n, dim) at most (m or m/s): the
     length of their bounding box's diagonal (0 for none)."""
-    return float(np.linalg.norm(rows.max(axis=0) - rows.min(axis=0))) if len(rows) else 0.0
+    # column by column: NumPy reduces an (n, 2) array along its long axis ~18 times slower
+    # (170 us against 10 us for a pile's 3 980 particles, twice a step)
+    return float(np.linalg.norm([column.max() - column.min() for column in rows.T])) if len(rows) else 0.0
 
 
 def _unit_rows(a: FloatArray) -> FloatArray:

@@ -55,7 +55,6 @@ class EventFunctions:
         self.margins = model.held_margins if phases.on_ground[model.n_ground_contacts :].any() else None
         # Contacts between bodies (past the grounds'): a just released one is checked more densely.
         self.between_bodies = np.arange(model.n_contacts) >= model.n_ground_contacts
-        self.corners = model.corners  # free contacts can pass through another body's corner (_corner_cut)
         self.friction = bool(self.held_mask.any() and model.laws[:, 0].any())
         # Each sliding contact's direction at the step's start: the model's own (FbSystem.slip), whose
         # right-hand side continues a slip past its stop along it; one from an earlier slide is stale.
@@ -275,20 +274,30 @@ def _corner_cut(events: EventFunctions, dense: Callable[[float], np.ndarray], t_
     minus the gap tolerance (a graze, two corners meeting to a rounding, is no dip, as in
     :func:`_unmissed`), brackets its crossing from the check before it.
     """
-    if not events.corners:
-        return crossing
     model = events.model
+    if not model.corners:
+        return crossing
     t_end = crossing.t if crossing is not None else t_new
     t_mid = 0.5 * (t_old + t_new)
     watched = events.free & events.between_bodies
-    g_a = g_old
+    gaps = {t_old: g_old}
+
+    def free_gaps(t: float) -> np.ndarray:  # at a check, once: most steps need none
+        if t not in gaps:
+            gaps[t] = events.free_gaps(dense(t))
+        return gaps[t]
+
     for ta, tb in ((t_old, t_mid), (t_mid, t_new)):
         if ta >= t_end:
             break
         y_a, y_b = dense(ta), dense(tb)
-        g_b = events.free_gaps(y_b)
-        contacts, vertices, inward = model.corner_cuts(y_a, y_b, events.p, watched & (g_a > 0.0) & (g_b > 0.0))
+        # each contact is judged alone, so those above their floors at both checks are picked after
+        contacts, vertices, inward = model.corner_cuts(y_a, y_b, events.p, watched)
         roots = {}
+        if len(contacts):
+            g_a, g_b = free_gaps(ta), free_gaps(tb)
+            positive = (g_a[contacts] > 0.0) & (g_b[contacts] > 0.0)
+            contacts, vertices, inward = contacts[positive], vertices[positive], inward[positive]
         if len(contacts):
             lines_a = model.corner_lines(y_a, events.p, contacts, vertices)
             lines_b = model.corner_lines(y_b, events.p, contacts, vertices)
@@ -315,7 +324,6 @@ def _corner_cut(events: EventFunctions, dense: Callable[[float], np.ndarray], t_
             cut = np.zeros(len(g_old), bool)
             cut[[c for c, t in roots.items() if t <= t_cut + GROUP_TIME]] = True
             return _unmissed(events, dense, t_old, g_old, Crossing(t_cut, cut))
-        g_a = g_b
     return crossing
 
 
