@@ -239,3 +239,42 @@ def test_first_fired_returns_within_its_tolerance_wherever_a_jump_lies():
     for root in np.linspace(0.05, 0.95, 401):
         t = first_fired(lambda t: 1.0 if t < root else -1.0, 0.0, 1.0, 1.0, -1.0, xtol)
         assert root <= t <= root + 2 * (xtol + 4 * eps)  # |t| <= 1
+
+
+def test_a_slide_from_rest_keeps_its_pull_when_its_first_step_is_taken_again():
+    """A contact the last instant set sliding from rest (``Phases.started``) slides along its
+    pull in its first step, whatever round-off slip it has; a step taken again from the same
+    start, shorter (a body moved too far in it, or a held contact sank), is that first step
+    too.  Its round-off slip, across the fall line here, would turn its friction across it."""
+    from flexbody import load_scene
+    from flexbody.constants import SLIDING
+    from flexbody.contact import Phases
+    from flexbody.model import load_model
+
+    tilt = np.radians(15.0)  # tan 15 deg = 0.27 > mu = 0.1: it slides
+    normal = [np.sin(tilt), 0.0, np.cos(tilt)]
+    fall = np.array([np.cos(tilt), 0.0, -np.sin(tilt)])  # down the slope
+    scene = load_scene({
+        "name": "slope", "gravity": [0.0, 0.0, -9.81],
+        "grounds": [{"point": [0.0, 0.0, 0.0], "normal": normal, "friction": 0.1}],
+        "bodies": [{"name": "p", "particles": [[0.0, 0.0, 0.0]], "links": [], "stiffness": [], "damping": [],
+                    "mass": 0.1, "position": [0.0, 0.0, 0.0], "velocity": [0.0, 0.0, 0.0],
+                    "rotation": [0.0, 0.0, 0.0], "angular_velocity": [0.0, 0.0, 0.0]}],
+        "simulation": {"t_end": 1.0, "output_dt": 0.1}})
+    model = load_model(scene, backend="numpy")
+    p = model.parameters(scene)
+    phases = Phases.all_free(model.n_contacts)
+    phases.phase[:] = SLIDING
+    phases.started[:] = True
+    y = np.zeros(model.nq + model.nu)
+    y[model.nq + 1] = 1e-20  # a round-off slip across the fall line
+    events = EventFunctions(model, p, phases, np.full(1, 1e-12), 1e-12, 1e-9, np.full(1, 0.1))
+    for _ in range(2):  # the first step, then the same step again from its start
+        events.renew(y.copy(), 1e-4)
+        assert events.from_rest[0]
+        np.testing.assert_allclose(events.direction[0], fall, atol=1e-12)
+    later = y.copy()
+    later[: model.nq] += 1e-9 * fall  # the next step starts elsewhere: its slip is its own
+    events.renew(later, 1e-4)
+    assert not events.from_rest[0]
+    np.testing.assert_allclose(events.direction[0], [0.0, 1.0, 0.0], atol=1e-12)

@@ -63,7 +63,8 @@ class EventFunctions:
         # lift-off: in 2D it has no stop there, in 3D it is armed a speed tolerance below (see
         # friction_event in integrator.c).
         self.from_rest = np.zeros(model.n_contacts, bool)
-        self.started = np.zeros(model.n_contacts, bool)  # taken by the first renew from the phases
+        self.started = np.zeros(model.n_contacts, bool)  # taken from the phases, for the first step
+        self._first: np.ndarray | None = None  # where the first step starts (a retake starts there too)
         if len(phases.started) == model.n_contacts:
             self.started[:] = phases.started
             phases.started[:] = False
@@ -83,15 +84,22 @@ class EventFunctions:
         step: near its stop it turns faster than the step can follow (see ``friction_event``
         in integrator.c).  A contact the last instant set sliding from rest
         (``Phases.started``) slides from rest in its first step whatever round-off slip it
-        has.  Returns whether a slip is or was held: then the right-hand side at ``y``
-        changed (a stepper's first stage, kept from the last step, is stale)."""
+        has, also where that step is taken again from its start, shorter (else the round-off
+        slip's direction holds its friction there: along the pull, measured, which stopped it
+        at once, an instant at one time again and again).  Returns whether a slip is or was
+        held: then the right-hand side at ``y`` changed (a stepper's first stage, kept from
+        the last step, is stale)."""
         if not self.friction:
             return False
         vt, ft, slack = self.model.friction(y, self.p, self.held, self.phases.push)
         speed, pull = np.linalg.norm(vt, axis=1), np.linalg.norm(ft, axis=1)
         sliding = self.phases.phase == SLIDING
+        if self.started.any():
+            if self._first is None:
+                self._first = np.array(y, float)
+            elif not np.array_equal(y, self._first):
+                self.started = np.zeros_like(self.started)  # the first step's only, and its retakes'
         self.from_rest = sliding & ((speed == 0.0) | self.started)
-        self.started = np.zeros_like(self.started)  # the first step's only
         hold = ft
         if (self.from_rest & (speed > 0.0)).any():
             # Its pull is what would hold it there, reversed: the law's own force follows a
