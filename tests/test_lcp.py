@@ -262,6 +262,7 @@ def test_lexicographic_rule_ends_where_a_naive_tie_break_cycles(seed, monkeypatc
     _numpy_pivots(monkeypatch)
     monkeypatch.setattr(flexbody.lcp, "_lex_min_row", _naive_tie_break)
     monkeypatch.setattr(flexbody.lcp, "COVERINGS", 0)  # (other covering vectors break the ties)
+    monkeypatch.setattr(flexbody.lcp, "SEARCH_LARGEST", 0)  # (the mixed-integer search solves it)
     assert solve_lcp(M, q, max_pivots=500).status == "iterations"  # the same path without the rule cycles
 
 
@@ -319,6 +320,7 @@ def test_a_frictional_lcp_whose_keys_tied_across_large_divisors_ends_at_rounding
     assert sol.w[normal].min() >= -1e-13 * scale
     _numpy_pivots(monkeypatch)
     monkeypatch.setattr(flexbody.lcp, "_tied", _key_tolerance_ties)
+    monkeypatch.setattr(flexbody.lcp, "SEARCH_LARGEST", 0)  # the path's own answer (the search finds a better one)
     before = solve_lcp(M, q)
     assert np.abs(before.w * before.z).max() > 1e-5 * before.z.max()  # measured 1.06e-4 * 3.95
 
@@ -344,12 +346,13 @@ def test_permuting_the_rows_permutes_the_solution(seed):
     np.testing.assert_allclose(b.z, a.z[perm], rtol=0, atol=1e-12 * (1 + np.abs(a.z).max()))
 
 
-def test_pivot_limit_gives_iterations_status():
+def test_pivot_limit_gives_iterations_status(monkeypatch):
     rng = np.random.default_rng(7)
     M = random_p_matrix(rng, 6)
     q = -np.abs(rng.normal(size=6)) - 1.0
     full = solve_lcp(M, q)
     assert full.pivots > 2
+    monkeypatch.setattr(flexbody.lcp, "SEARCH_LARGEST", 0)  # (the mixed-integer search would solve it)
     short = solve_lcp(M, q, max_pivots=2)
     assert short.status == "iterations"
 
@@ -941,6 +944,7 @@ def test_a_basis_that_rounding_left_infeasible_is_solved_again_on_a_shifted_matr
     _numpy_pivots(monkeypatch)
     monkeypatch.setattr(flexbody.lcp, "_tied", _key_tolerance_ties)
     monkeypatch.setattr(flexbody.lcp, "COVERINGS", 0)  # the shifts alone (other covering vectors solve it too)
+    monkeypatch.setattr(flexbody.lcp, "SEARCH_LARGEST", 0)  # (and so does the mixed-integer search)
     sol = solve_lcp(M, q)
     assert sol.status == "solved" and "on M +" in sol.message, sol.message
     assert_solves(sol, M, q)
@@ -970,6 +974,7 @@ def test_a_frictional_lcp_whose_path_ends_on_a_ray_is_solved_from_another_coveri
     assert "covering vector" in sol.message, sol.message
     assert_solves(sol, M, q)
     monkeypatch.setattr(flexbody.lcp, "COVERINGS", 0)
+    monkeypatch.setattr(flexbody.lcp, "SEARCH_LARGEST", 0)
     assert solve_lcp(M, q).status == without
 
 
@@ -1016,6 +1021,7 @@ def test_a_path_stalled_at_rounding_level_z0_is_solved_by_its_last_point(monkeyp
     _numpy_pivots(monkeypatch)  # the third takes the ratio test of the keys
     monkeypatch.setattr(flexbody.lcp, "COVERINGS", 0)
     monkeypatch.setattr(flexbody.lcp, "SHIFTS", ())
+    monkeypatch.setattr(flexbody.lcp, "SEARCH_LARGEST", 0)
     finish = flexbody.lcp._finish
     for name, ties in [("lcp_fuzz_plastic_impact_stall", flexbody.lcp._tied),
                        ("lcp_fuzz_frictional_impact_shift", flexbody.lcp._tied),
@@ -1065,6 +1071,7 @@ def test_a_shifted_answer_is_checked_with_the_shift_s_compliance(monkeypatch):
     assert np.all(sol.w >= -(shift * sol.z.max() + 1e-9 * (np.abs(M) @ sol.z + np.abs(q))))
     assert np.abs(sol.w * sol.z).max() <= shift * sol.z.max() ** 2 + 1e-12
     monkeypatch.setattr(flexbody.lcp, "SHIFTS", ())
+    monkeypatch.setattr(flexbody.lcp, "SEARCH_LARGEST", 0)
     assert solve_lcp(M, q).status == "ray"
 
 
@@ -1097,3 +1104,68 @@ def test_small_and_large_problems_find_the_same_blocks(seed):
             for _ in range(len(block)):
                 reach |= {int(j) for i2 in reach for j in np.flatnonzero((A[i2] != 0) | (A[:, i2] != 0))}
             assert reach == set(block.tolist())
+
+
+def _no_rescue_but_the_search(monkeypatch):
+    """Lemke's path from the covering vector of ones alone before the search: no last point,
+    no shifts, no other covering vectors."""
+    monkeypatch.setattr(flexbody.lcp, "COVERINGS", 0)
+    monkeypatch.setattr(flexbody.lcp, "SHIFTS", ())
+    monkeypatch.setattr(flexbody.lcp, "_finish", _without_last_point(flexbody.lcp._finish))
+
+
+@pytest.mark.parametrize("name", ["lcp_fuzz_frictional_impact_shift", "lcp_fuzz_plastic_impact_stall"])
+def test_a_path_that_finds_no_solution_is_followed_by_a_mixed_integer_search_that_does(monkeypatch, name):
+    """Two fuzzes' frictional impact LCPs (18 and 72 rows) whose first path ends on a
+    secondary ray, and which have solutions (enumeration found 21 bases for the first; the
+    second's path stalls at one, Anitescu & Potra): with every other rescue off, the search
+    finds a solution, which passes the check on the original problem."""
+    data = np.load(Path(__file__).parent / "reference" / f"{name}.npz")
+    M, q = data["M"], data["q"]
+    _no_rescue_but_the_search(monkeypatch)
+    sol = solve_lcp(M, q)
+    assert sol.status == "solved" and "mixed-integer search" in sol.message, sol.message
+    _assert_solves_to_rounding(sol, M, q)
+    monkeypatch.setattr(flexbody.lcp, "SEARCH_LARGEST", 0)
+    assert solve_lcp(M, q).status == "ray"
+
+
+def test_the_search_agrees_with_enumerating_the_bases():
+    """Small LCPs of no special class (integer entries, M indefinite, q with zeros): where the
+    search returns a solution it passes the check, and where it proves there is none, no
+    basis within its bound solves the problem (every basic solution enumerated).  Both
+    verdicts occur."""
+    verdicts = set()
+    for seed in range(150):
+        rng = np.random.default_rng(5000 + seed)
+        n = int(rng.integers(2, 6))
+        M = rng.integers(-3, 4, size=(n, n)).astype(float)
+        q = rng.integers(-2, 2, size=n).astype(float)
+        if np.all(q >= 0.0):
+            continue
+        unsolved = flexbody.lcp.LcpSolution(np.zeros(n), q.copy(), "ray", 0, "a path's end.")
+        sol = flexbody.lcp._searched(M, q, unsolved, flexbody.lcp.CHECK_TOL)
+        verdicts.add(sol.status)
+        if sol.status == "solved":
+            assert_solves(sol, M, q)
+        else:
+            assert "proves that none exists" in sol.message, sol.message
+            z_unit = np.abs(q).max() / (np.abs(np.diag(M)).max() or np.abs(M).max())
+            bound = flexbody.lcp.SEARCH_BOUND
+            within = [z for z, w in brute_force(M, q)
+                      if z.max() <= bound * z_unit and w.max() <= bound * np.abs(q).max()]
+            assert not within, (seed, M, q)
+    assert verdicts == {"solved", "ray"}
+
+
+def test_painleve_s_friction_lcp_is_proven_to_have_no_solution():
+    """A fuzz's frictional force LCP (tests/reference/lcp_painleve_friction_row.npz: three
+    flexible boxes in a row, 16 held contacts, 6 sliding with mu 0.41-0.48, the polygonal
+    cone's 51 rows; W_nn + W_nt D has a negative principal minor): every path ends on a
+    secondary ray, and the mixed-integer search proves that no solution exists within its
+    bound: the run's "Painlevé: no consistent contact force" is a fact, not the method's
+    limit.  (Turning the polygons, or taking 8 or 16 sides, or dropping the sticking
+    contacts' friction, leaves it without one: checked by the same search.)"""
+    data = np.load(Path(__file__).parent / "reference" / "lcp_painleve_friction_row.npz")
+    sol = solve_lcp(data["M"], data["q"])
+    assert sol.status == "ray" and "proves that none exists" in sol.message, sol.message
