@@ -47,7 +47,7 @@ proven, not merely met).
 
 The pivots run in C where the runtime library is built (``fb_lemke``, generated from
 ``derivation/templates/lcp.c.jinja``): the same operations in the same order as
-:func:`_path`, its NumPy twin, so the same path bit for bit, 13 to 42 times faster on the
+:func:`_path`, its NumPy twin, so the same path bit for bit, 13 to 41 times faster on the
 fuzzes' saved problems (``flexbody bench --study lcp``).
 Before all that, a path that ends with ``z0`` at the rounding level has its last point
 checked (it solves ``q + d z0``): a plastic frictional impact with redundant contacts has a
