@@ -206,14 +206,16 @@ class BodyContactModel(Model):
         #: ``EdgeSlots.PER_EDGE`` times, from slot ``first_edge`` on; their particle is the edge's
         #: first end.
         self.first_edge = len(self.slot_particle)
-        pairs = [tuple(c.bodies) for c in scene.contacts if c.edges]  # 3D, frictionless (the scene checks)
+        listed = np.array([k for k, c in enumerate(scene.contacts) if c.edges], np.intp)  # 3D, frictionless pairs
+        pairs = [tuple(scene.contacts[k].bodies) for k in listed]
         flexible = {k for k, body in enumerate(scene.bodies) if not body.rigid}
         self._edge_slots = EdgeSlots(self.elements, self.element_body, pairs, x0, self.backend, flexible) if pairs else None
         if self._edge_slots is not None:
             es = self._edge_slots
             self.slot_particle = np.concatenate([self.slot_particle, es.edges[es.own, 0]])
             self.slot_body = np.concatenate([self.slot_body, es.body])
-            self.slot_pair = np.concatenate([self.slot_pair, es.pair])
+            # es.pair counts the pairs with edges; the laws are the scene's contacts'
+            self.slot_pair = np.concatenate([self.slot_pair, listed[es.pair]])
         self.n_slots = len(self.slot_particle)
         self.n_contacts = self.n_ground_contacts + self.n_slots
         self.contacts = np.vstack([inner.contacts, np.column_stack([self.slot_particle,
@@ -1814,7 +1816,12 @@ class BodyContactModel(Model):
             if tangents and d == 2:
                 slip_bias[k_g:, 0] = terms.slip_bias
             elif tangents:
-                slip_bias[k_g:], element_axes = self._element.slip_terms(x, v, self._slot_points(slots).T)
+                # an edge row is frictionless (the scene's rule): no tangent rows (zero), which the
+                # solves leave out (no friction, so neither sticking nor sliding)
+                on = np.flatnonzero(np.asarray(slots) < self.first_edge)
+                element_axes = np.zeros((len(slots), 2, d))
+                slip_bias[k_g + on], element_axes[on] = self._element.slip_terms(
+                    x, v, self._slot_points(np.asarray(slots)[on]).T)
                 axes = np.concatenate([axes, element_axes])
         if not tangents:
             directions = [normals]

@@ -302,9 +302,9 @@ def solve_impact_friction(W: np.ndarray, v_minus: np.ndarray, restitution: np.nd
         Wn, Wt = np.diag(W)[:nc], np.diag(W)[nc:]
         Pn = np.where(on, np.maximum(-qn, 0.0) / Wn, 0.0)
         if dim == 2:
-            Pt = -np.sign(vt) * np.minimum(np.abs(vt) / Wt, mu * Pn)  # stop sliding, or slide on
+            Pt = -np.sign(vt) * np.minimum(np.abs(vt) / _moving(Wt), mu * Pn)  # stop sliding, or slide on
         else:
-            Pt = _into_disc(-vt / Wt, mu * Pn)  # the same, radially
+            Pt = _into_disc(-vt / _moving(Wt), mu * Pn)  # the same, radially
         P = np.concatenate([Pn, Pt])
         return _friction_solution(nc, W, v, P, "solved", "decoupled contacts: closed form.", "decoupled", 0)
     friction = on & (mu > 0.0)
@@ -369,9 +369,9 @@ def solve_forces_friction(W: np.ndarray, a_free: np.ndarray, mu: np.ndarray | fl
         Wn, Wt = np.diag(W)[:nc], np.diag(W)[nc:]
         lam_n = np.maximum(-an, 0.0) / Wn
         if dim == 2:
-            stick = np.clip(-at / Wt, -mu * lam_n, mu * lam_n)  # held if it can be, else slip at mu lam_n
+            stick = np.clip(-at / _moving(Wt), -mu * lam_n, mu * lam_n)  # held if it can be, else slip at mu lam_n
         else:
-            stick = _into_disc(-at / Wt, mu * lam_n)  # the same, radially
+            stick = _into_disc(-at / _moving(Wt), mu * lam_n)  # the same, radially
         lam = np.concatenate([lam_n, np.where(np.tile(sliding, dim - 1), (kinetic * lam_n[:, None]).T.ravel(), stick)])
         return _friction_solution(nc, W, a, lam, "solved", "decoupled contacts: closed form.", "decoupled", 0)
     lam, status, message, pivots = _friction_lcp(W, an, at, mu, on, (mu > 0.0) & ~sliding, drag)
@@ -820,6 +820,13 @@ def _wrap(angle: np.ndarray) -> np.ndarray:
 def _wrap_pi(angle: np.ndarray) -> np.ndarray:
     """An angle in [-pi, pi)."""
     return (angle + np.pi) % (2 * np.pi) - np.pi
+
+
+def _moving(Wt: np.ndarray) -> np.ndarray:
+    """The tangential diagonal ``Wt`` of decoupled contacts with 1 for a row that moves
+    nothing (an edge contact's: frictionless, no tangent rows), whose rate is then 0 and
+    its force 0, not 0 / 0."""
+    return np.where(Wt > 0.0, Wt, 1.0)
 
 
 def _into_disc(f: np.ndarray, radius: np.ndarray) -> np.ndarray:

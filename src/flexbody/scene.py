@@ -26,7 +26,7 @@ refuses, naming the bodies)::
     bodies = ["ball", "floor"]   # two body names (the same twice: needs self_contact = true)
     friction = 0.0         # Coulomb mu >= 0, default 0
     restitution = 0.0      # Newton e in [0, 1], default 0
-    edges = false          # default; true (3D, friction 0): edges touch edges too
+    edges = false          # default; true (3D, this pair's friction 0): edges touch edges too
 
 Pairs that touch: each ``[[contacts]]`` entry (each pair once), then every pair of bodies
 with ``collide = true`` and every body with ``self_contact = true`` not listed there, with
@@ -259,8 +259,9 @@ class BodyContact:
     restitution : float
         Newton's e between the two, in [0, 1]; default 0 (plastic).
     edges : bool
-        Whether their surfaces' edges touch each other too (3D, frictionless:
-        :class:`flexbody.edge_contact.EdgeSlots`); default False: only a particle of one
+        Whether their surfaces' edges touch each other too (3D, this pair frictionless;
+        other pairs and the grounds may have friction: :class:`flexbody.edge_contact.EdgeSlots`);
+        default False: only a particle of one
         touches the other's surface, and edges that meet pass through each other (measured).
     """
 
@@ -465,8 +466,7 @@ def _build(data: dict[str, Any], source: str, default_name: str, folder: Path | 
             body = _body(TableReader(table, f"bodies[{b}]", problems, BODY_KEYS), dim, folder)
             if body is not None:
                 bodies.append(body)
-    listed = _listed_contacts(top.raw("contacts", None), raw_bodies, problems, dim,
-                              any(g.friction > 0.0 for g in grounds or []))
+    listed = _listed_contacts(top.raw("contacts", None), raw_bodies, problems, dim)
     simulation = _simulation(TableReader(top.raw("simulation", None), "simulation", problems, SIMULATION_KEYS))
     top.finish()
     total = sum(b.n_particles for b in bodies)
@@ -1029,8 +1029,7 @@ def _overdamped_links(bodies: list[Body]) -> list[str]:
 # --------------------------------------------------------------------------- bodies touching
 
 
-def _listed_contacts(raw: Any, raw_bodies: Any, problems: Problems, dim: int,
-                     rough_grounds: bool) -> list[BodyContact] | None:
+def _listed_contacts(raw: Any, raw_bodies: Any, problems: Problems, dim: int) -> list[BodyContact] | None:
     """The ``[[contacts]]`` tables, checked against the body names (read from the raw tables,
     so a mistake in a body does not hide one here); None when any is wrong."""
     if raw is None:
@@ -1070,15 +1069,14 @@ def _listed_contacts(raw: Any, raw_bodies: Any, problems: Problems, dim: int,
             continue
         where[indices] = k
         out.append(BodyContact(bodies=indices, friction=friction, restitution=restitution, edges=edges))
-    # an edge row coupled to a rough row (this pair's, another's, a ground's) would need tangent rows of its own
-    rough = ", ".join(f"contacts[{where[c.bodies]}] (friction = {c.friction:g})" for c in out if c.friction > 0.0)
-    if rough or rough_grounds:
-        for c in out:
-            if c.edges:
-                problems.add(f"contacts[{where[c.bodies]}].edges", True, "needs friction = 0 on every pair and ground "
-                             "(edge contacts are frictionless so far; grounds with friction: "
-                             f"{'yes' if rough_grounds else 'no'}; pairs with friction: {rough or 'none'})")
-                ok = False
+    # an edge row has no tangent rows of its own (frictionless); rough rows beside it (another
+    # pair's, a ground's, this pair's particles') keep theirs
+    for c in out:
+        if c.edges and c.friction > 0.0:
+            problems.add(f"contacts[{where[c.bodies]}].edges", True, f"needs friction = 0 on this pair, not "
+                         f"{c.friction:g} (edge contacts are frictionless so far; other pairs and the grounds may "
+                         "have friction)")
+            ok = False
     return out if ok else None
 
 
