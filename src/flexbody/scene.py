@@ -261,8 +261,8 @@ class BodyContact:
     edges : bool
         Whether their surfaces' edges touch each other too (3D, this pair frictionless;
         other pairs and the grounds may have friction: :class:`flexbody.edge_contact.EdgeSlots`);
-        default False: only a particle of one
-        touches the other's surface, and edges that meet pass through each other (measured).
+        default False: only a particle of one touches the other's surface, and edges that
+        meet pass through each other (measured).
     """
 
     bodies: tuple[int, int]
@@ -1055,6 +1055,10 @@ def _listed_contacts(raw: Any, raw_bodies: Any, problems: Problems, dim: int) ->
             r.fail("edges", edges, "applies to 3D bodies only (edges of triangle surfaces; a 2D boundary's "
                    "segments meet at particles)")
             edges = None
+        elif edges and friction:  # edge rows have no tangent rows; other pairs' and grounds' rows keep theirs
+            r.fail("edges", edges, f"needs friction = 0 on this pair, not {friction:g} (edge contacts are "
+                   "frictionless so far; other pairs and the grounds may have friction)")
+            edges = None
         r.finish()
         indices = _contact_bodies(r, pair, names, self_contact)
         if indices is not None and indices in where:
@@ -1069,14 +1073,6 @@ def _listed_contacts(raw: Any, raw_bodies: Any, problems: Problems, dim: int) ->
             continue
         where[indices] = k
         out.append(BodyContact(bodies=indices, friction=friction, restitution=restitution, edges=edges))
-    # an edge row has no tangent rows of its own (frictionless); rough rows beside it (another
-    # pair's, a ground's, this pair's particles') keep theirs
-    for c in out:
-        if c.edges and c.friction > 0.0:
-            problems.add(f"contacts[{where[c.bodies]}].edges", True, f"needs friction = 0 on this pair, not "
-                         f"{c.friction:g} (edge contacts are frictionless so far; other pairs and the grounds may "
-                         "have friction)")
-            ok = False
     return out if ok else None
 
 
