@@ -6,6 +6,7 @@ from __future__ import annotations
 import errno
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -185,7 +186,8 @@ def test_an_internal_error_is_a_bug_not_a_user_mistake(tmp_path, monkeypatch, ca
 
 def test_a_stiffness_the_integrator_cannot_step_ends_too_slow(tmp_path):
     """stiffness = 1e20: the compiled integrator takes ~1e-11 s steps inside one C call; it
-    checks the wall-time budget itself, so --max-wall-time ends the run, with exit 1."""
+    checks the wall-time budget itself, so --max-wall-time ends the run, with exit 1; the
+    message counts its steps (their mean length says: tiny) and events."""
     scene = tmp_path / "stiff.toml"
     bundled = Path(__file__).parents[1] / "src" / "flexbody" / "scenes" / "thesis_ball.toml"
     scene.write_text(bundled.read_text().replace("stiffness = 2000.0", "stiffness = 1e20"))
@@ -193,6 +195,8 @@ def test_a_stiffness_the_integrator_cannot_step_ends_too_slow(tmp_path):
     run = run_cli("run", str(scene), "--out", str(out), "--no-figures", "--quiet", "--max-wall-time", "2", timeout=120)
     assert run.returncode == 1, run.stderr
     assert "simulation failed (too_slow)" in run.stderr and "Traceback" not in run.stderr
+    steps, mean = re.search(r"\((\d+) steps, ([0-9.e+-]+) s each on average, and \d+ events\)", run.stderr).groups()
+    assert int(steps) > 1000 and float(mean) < 1e-6
     assert not out.exists()
 
 

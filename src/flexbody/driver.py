@@ -186,9 +186,11 @@ def _lowest_gaps(positions: np.ndarray, grounds, held: np.ndarray) -> tuple[floa
     return float(gaps[~on].min(initial=np.inf)), float(gaps[on].min(initial=np.inf))
 
 
-def _too_slow(t: float) -> tuple[str, str]:
-    return "too_slow", (f"stopped at t = {t:.6g} s: the run exceeded its max_wall_time. If the scene is very stiff "
-                        "(tiny steps), try an implicit method (--method Radau or BDF) or a softer body.")
+def _too_slow(t: float, spent: str) -> tuple[str, str]:
+    """The status and message of a run stopped by its wall-time budget at ``t`` (s); ``spent``:
+    what the run had done by then."""
+    return "too_slow", (f"stopped at t = {t:.6g} s: the run exceeded its max_wall_time{spent}. If the scene is very "
+                        "stiff (tiny steps), try an implicit method (--method Radau or BDF) or a softer body.")
 
 
 def _dense(matrix) -> np.ndarray:
@@ -519,6 +521,8 @@ class _Run:
         self.keep_samples(start, start + n_new)
         self.min_gap = c.min_gap.value
         if status < 0:
+            if status == TOO_SLOW:
+                raise SimulationFailed(*self.too_slow(t_stop))
             lock = _gimbal_lock(self.scene, self.model, self.y, t_stop) if status in (STEP_COLLAPSE, SINGULAR) else None
             raise SimulationFailed(*(lock or self.COMPILED_FAILURES[status](s.method, t_stop)))
         return _Stop(t_stop, c.touching, c.leaving, status == EVENT)
@@ -529,7 +533,6 @@ class _Run:
             "this method or tolerance: try --method Radau or BDF, or a looser --rtol."),
         NON_FINITE: lambda m, t: _non_finite(t),
         SINGULAR: lambda m, t: ("blow_up", f"at t = {t:.9g} s: mass or contact matrix not positive definite."),
-        TOO_SLOW: lambda m, t: _too_slow(t),
     }
 
     def segment_scipy(self, t0: float, t_bound: float) -> _Stop:
@@ -1028,7 +1031,14 @@ class _Run:
 
     def check_deadline(self, t: float) -> None:
         if time.perf_counter() > self.deadline:
-            raise SimulationFailed(*_too_slow(t))
+            raise SimulationFailed(*self.too_slow(t))
+
+    def too_slow(self, t: float) -> tuple[str, str]:
+        """The status and message of this run stopped by its wall-time budget at ``t`` (s),
+        with its steps and events so far: tiny steps, or many events."""
+        steps = self.steps + int(self.counters[1])  # SciPy's and the compiled loop's
+        return _too_slow(t, f" ({steps} steps, {t / max(steps, 1):.2g} s each on average, and {len(self.events)} "
+                            "events)")
 
     def check_guards(self, t: float, new_events: list[Event]) -> None:
         self.check_deadline(t)
