@@ -13,6 +13,7 @@ colliding obliquely in free space with friction keep their momentum and angular 
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -319,14 +320,20 @@ def test_a_row_of_boxes_whose_frictional_force_lcp_tied_across_large_divisors_ru
 def test_the_same_row_cut_to_two_boxes_runs_to_its_end_instead_of_crawling():
     """The row above cut to b0 and b1 (tests/reference/fuzz_friction_pair_near_tie.json,
     ~30 s) was `too_slow`: 120 s of wall time to reach 0.000745 s, RK45's steps shrunk to
-    5.5e-8 s.  With the same ratio test it reaches its end (51 events).  An edge of b0
-    passes through a triangle of b1 (frictional pairs have no edge contacts): a warning,
-    and the only one."""
+    5.5e-8 s.  With the same ratio test it reaches its end (51 events then; 72 with this
+    stop's LCP and edge changes, 76 since the 3D friction check's floor accepts a rounding
+    level misfit of an earlier alignment round).  An edge of b0 passes through a triangle
+    of b1 (frictional pairs have no edge contacts): a warning.  The only other warning
+    allowed is a missed impact far below the issue's 1e-9 m (1.1e-11 m since that floor)."""
     table = reference_table("fuzz_friction_pair_near_tie")
     r = flexbody.simulate(flexbody.load_scene(table), max_wall_time=150.0)
     assert r.status == "success", r.message
-    assert r.stats["max_penetration_m"] < 1e-9 and r.stats["energy_drift_relative"] < 1e-6
-    assert [w.split(" crossed ")[1][:12] for w in r.stats["warnings"]] == ["edge on edge"]
+    assert r.stats["max_penetration_m"] < 1e-10 and r.stats["energy_drift_relative"] < 1e-6
+    crossing = [w for w in r.stats["warnings"] if " crossed edge on edge " in w]
+    missed = [w for w in r.stats["warnings"] if "an impact was missed" in w]
+    assert len(crossing) == 1 and len(crossing) + len(missed) == len(r.stats["warnings"])
+    for w in missed:
+        assert float(re.search(r"went ([0-9.e+-]+) m below", w).group(1)) < 1e-10
 
 
 def _icosahedra(friction: float) -> flexbody.SimulationResult:
