@@ -149,6 +149,12 @@ def _flexible(table: dict, t_end: float) -> dict:
     return table
 
 
+def _third_box(table: dict) -> dict:
+    """``table`` with a box ``c`` like ``a`` beside it on the ground, at y = 0.5."""
+    table["bodies"].append({**table["bodies"][0], "name": "c", "position": [0.0, 0.5, SIDE * np.sqrt(2) / 2]})
+    return table
+
+
 def test_edge_contacts_hold_beside_friction_on_the_ground_and_on_other_pairs():
     """An edge row is frictionless (no tangent rows); the rough rows beside it keep theirs:
     the ground's (mu 0.3 under the lower box) and another pair's (a third box, mu 0.4, on
@@ -161,8 +167,7 @@ def test_edge_contacts_hold_beside_friction_on_the_ground_and_on_other_pairs():
         table = _flexible(_crossed_boxes(DROP, edges=True), 0.3)
         table["grounds"][0]["friction"] = mu
         if mu:
-            table["bodies"].append({**table["bodies"][0], "name": "c", "position": [0.0, 0.5, SIDE * np.sqrt(2) / 2]})
-            table["contacts"].append({"bodies": ["a", "c"], "friction": 0.4})
+            _third_box(table)["contacts"].append({"bodies": ["a", "c"], "friction": 0.4})
         runs[mu] = r = flexbody.simulate(flexbody.load_scene(table))
         assert r.success, r.message
         assert r.stats["max_edge_crossing_m"] == 0.0 and r.stats["max_penetration_m"] < 1e-9
@@ -644,8 +649,7 @@ def test_edge_rows_take_the_laws_of_their_own_pair_wherever_it_is_listed():
     from flexbody.driver import _rebound_laws
     from flexbody.model import load_model
 
-    table = _flexible(_crossed_boxes(DROP, edges=True), 0.1)
-    table["bodies"].append({**table["bodies"][0], "name": "c", "position": [0.0, 0.5, SIDE * np.sqrt(2) / 2]})
+    table = _third_box(_flexible(_crossed_boxes(DROP, edges=True), 0.1))
     table["contacts"] = [{"bodies": ["a", "c"], "friction": 0.4, "restitution": 0.1},
                          {"bodies": ["a", "b"], "restitution": 0.5, "edges": True}]
     scene = flexbody.load_scene(table)

@@ -299,12 +299,12 @@ def solve_impact_friction(W: np.ndarray, v_minus: np.ndarray, restitution: np.nd
     vn, vt = v[:nc], v[nc:]
     qn = np.where(on, vn + e * np.minimum(vn, 0.0), 0.0)
     if fast and _decoupled(W, nc):
-        Wn, Wt = np.diag(W)[:nc], np.diag(W)[nc:]
+        Wn, Wt = np.diag(W)[:nc], _moving(np.diag(W)[nc:])
         Pn = np.where(on, np.maximum(-qn, 0.0) / Wn, 0.0)
         if dim == 2:
-            Pt = -np.sign(vt) * np.minimum(np.abs(vt) / _moving(Wt), mu * Pn)  # stop sliding, or slide on
+            Pt = -np.sign(vt) * np.minimum(np.abs(vt) / Wt, mu * Pn)  # stop sliding, or slide on
         else:
-            Pt = _into_disc(-vt / _moving(Wt), mu * Pn)  # the same, radially
+            Pt = _into_disc(-vt / Wt, mu * Pn)  # the same, radially
         P = np.concatenate([Pn, Pt])
         return _friction_solution(nc, W, v, P, "solved", "decoupled contacts: closed form.", "decoupled", 0)
     friction = on & (mu > 0.0)
@@ -366,12 +366,12 @@ def solve_forces_friction(W: np.ndarray, a_free: np.ndarray, mu: np.ndarray | fl
     kinetic = np.where(sliding[:, None], -mu[:, None] * along, 0.0)  # lam_t / lam_n when sliding
     drag = np.vstack([np.diag(k) for k in kinetic.T])  # lam_t = drag lam_n: ((dim - 1) nc, nc)
     if fast and _decoupled(W, nc):
-        Wn, Wt = np.diag(W)[:nc], np.diag(W)[nc:]
+        Wn, Wt = np.diag(W)[:nc], _moving(np.diag(W)[nc:])
         lam_n = np.maximum(-an, 0.0) / Wn
         if dim == 2:
-            stick = np.clip(-at / _moving(Wt), -mu * lam_n, mu * lam_n)  # held if it can be, else slip at mu lam_n
+            stick = np.clip(-at / Wt, -mu * lam_n, mu * lam_n)  # held if it can be, else slip at mu lam_n
         else:
-            stick = _into_disc(-at / _moving(Wt), mu * lam_n)  # the same, radially
+            stick = _into_disc(-at / Wt, mu * lam_n)  # the same, radially
         lam = np.concatenate([lam_n, np.where(np.tile(sliding, dim - 1), (kinetic * lam_n[:, None]).T.ravel(), stick)])
         return _friction_solution(nc, W, a, lam, "solved", "decoupled contacts: closed form.", "decoupled", 0)
     lam, status, message, pivots = _friction_lcp(W, an, at, mu, on, (mu > 0.0) & ~sliding, drag)

@@ -186,13 +186,6 @@ def _lowest_gaps(positions: np.ndarray, grounds, held: np.ndarray) -> tuple[floa
     return float(gaps[~on].min(initial=np.inf)), float(gaps[on].min(initial=np.inf))
 
 
-def _too_slow(t: float, spent: str) -> tuple[str, str]:
-    """The status and message of a run stopped by its wall-time budget at ``t`` (s); ``spent``:
-    what the run had done by then."""
-    return "too_slow", (f"stopped at t = {t:.6g} s: the run exceeded its max_wall_time{spent}. If the scene is very "
-                        "stiff (tiny steps), try an implicit method (--method Radau or BDF) or a softer body.")
-
-
 def _dense(matrix) -> np.ndarray:
     return matrix.toarray() if hasattr(matrix, "toarray") else matrix
 
@@ -1037,8 +1030,10 @@ class _Run:
         """The status and message of this run stopped by its wall-time budget at ``t`` (s),
         with its steps and events so far: tiny steps, or many events."""
         steps = self.steps + int(self.counters[1])  # SciPy's and the compiled loop's
-        return _too_slow(t, f" ({steps} steps, {t / max(steps, 1):.2g} s each on average, and {len(self.events)} "
-                            "events)")
+        return "too_slow", (f"stopped at t = {t:.6g} s: the run exceeded its max_wall_time ({steps} steps, "
+                            f"{t / max(steps, 1):.2g} s each on average, and {len(self.events)} events). If the "
+                            "scene is very stiff (tiny steps), try an implicit method (--method Radau or BDF) or a "
+                            "softer body.")
 
     def check_guards(self, t: float, new_events: list[Event]) -> None:
         self.check_deadline(t)

@@ -220,16 +220,15 @@ def solve_lcp(
     answer = _lemke(M, q, d, limit, pivot_tol, check_tol, walk)
     if answer.status == "solved":
         return answer
-    if answer.status == "iterations":  # rounding made the path wander: other paths
-        return _searched(M, q, _other_coverings(M, q, answer, limit, pivot_tol, check_tol, walk), check_tol)
     # A nearly singular M (redundant contacts) can lose the pivots' feasibility to rounding,
     # or end them on a ray: again on M + shift I, a compliance far below the check's
     # tolerance.  Its answer counts only if it solves the original problem and is of the
     # size of the pivots' last point (M + s I has an answer of size ~1/s where the original
-    # problem has none).
+    # problem has none).  A path that reached the pivot limit (rounding made it wander)
+    # goes to other paths at once.
     size = float(np.abs(np.diag(M)).max()) or float(np.abs(M).max()) or 1.0
     largest = SHIFT_GROWTH * max(float(np.abs(answer.z).max()), float(np.abs(q).max()) / size)
-    for relative in SHIFTS:
+    for relative in SHIFTS if answer.status != "iterations" else ():
         shift = relative * size
         retry = _lemke(M + shift * np.eye(n), q, d, limit, pivot_tol, check_tol, walk)
         if retry.status == "solved" and np.abs(retry.z).max() <= largest:
