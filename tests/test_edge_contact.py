@@ -172,6 +172,47 @@ def test_candidates_hold_every_pair_within_reach(rng):
         assert len(candidates) < 0.1 * closest.size
 
 
+def test_every_row_asked_at_once_finds_what_each_finds_alone(rng):
+    """A cube turned 45 deg about z over another, its bottom edges 1 mm above (or 0.1 mm
+    through) the lower top's rims, each across two of them, some rows held: asking for every
+    row at once (a search's whole sweep, with its shortcuts: the kept list in its order,
+    only the rows with a held sibling looked up) gives each row the edge, side and gap it
+    gets asked alone, and each row's left-out edges are its siblings' codes decoded."""
+    from flexbody.edge_contact import EdgeSlots
+
+    for h in (1e-3, -1e-4):
+        top = (CUBE - 0.5) @ rotation_matrix([0.0, 0.0, np.pi / 4]).T + [0.5, 0.5, 1.5 + h]
+        x = np.vstack([top, CUBE])
+        elements = np.vstack([hull(top), hull(CUBE) + 8])
+        slots = EdgeSlots(elements, np.repeat([0, 1], [len(hull(top)), len(hull(CUBE))]), [(0, 1)], x,
+                          deforming=(0, 1))
+        every, free = np.arange(len(slots)), np.full(len(slots), -1)
+        gap, edge, side = slots.closest(x, every, free, reach=0.05)
+        found = np.flatnonzero(edge >= 0)
+        assert len(found) == 8 and np.allclose(gap[found], h, rtol=1e-9)  # 4 edges across 2 rims each
+        for trial in range(4):
+            held = free.copy()
+            chosen = rng.choice(found, size=1 + trial, replace=False)
+            held[chosen] = slots.encode(edge[chosen], side[chosen])
+            answers = slots.closest(x, every, held, reach=0.05)
+            for row in every.tolist():
+                alone = slots.closest(x, np.array([row]), held, reach=0.05)
+                assert [a[row] for a in answers] == [a[0] for a in alone], row
+            left_out = slots.held_by_siblings(every, held)
+            for row in every.tolist():
+                want = [-1 if s == row or held[s] < 0 else held[s] % len(slots.edges)
+                        for s in slots.siblings(np.array([row]))[0].tolist()]
+                assert left_out[row].tolist() == want
+            # with one of an edge's two rims held, its free rows take the other rim, once
+            for row in chosen.tolist():
+                pair = [r for r in slots.siblings(np.array([row]))[0].tolist() if r in found]
+                if all(held[r] >= 0 for r in pair):
+                    continue
+                taken = sorted(int(answers[1][r]) for r in slots.siblings(np.array([row]))[0].tolist()
+                               if held[r] < 0 and answers[1][r] >= 0)
+                assert taken == sorted(int(edge[r]) for r in pair if r != row)
+
+
 def test_an_edge_across_two_rims_is_held_by_two_of_its_rows():
     """A bar's bottom edges (along x) lie across a cube's two top rims (along y, at x = 0
     and 1), 1 cm above: each bottom edge has ``PER_EDGE`` rows, the first takes one rim,
