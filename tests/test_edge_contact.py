@@ -509,17 +509,22 @@ def test_a_crossing_counts_how_deep_the_edges_points_are_inside_the_other_body()
     both points are h outside.  Two cubes side by side, the second turned 1e-3 rad about x
     and pushed d = 1e-6 m into the first (coincident rim edges nearly parallel, as in a
     struck row of boxes): their top rims' lines read d crossed along x, yet their closest
-    points lie on the other cube's top face (a vertex's depth, 0, not d's)."""
+    points lie on the other cube's top face (a vertex's depth, 0, not d's).  The C kernels
+    and surface search read the same as NumPy's, to rounding."""
     from flexbody.edge_contact import EdgeSlots
 
     def crossing(x, n_first, own_edge):
         elements = np.vstack([hull(x[:n_first]), hull(x[n_first:]) + n_first])
         element_body = np.repeat([0, 1], [len(hull(x[:n_first])), len(hull(x[n_first:]))])
-        slots = EdgeSlots(elements, element_body, [(0, 1)], x)
-        row = next(r for r in range(slots.n_primary) if own_edge(x[slots.edges[slots.own[r]]]))
-        gap, edge, side = slots.closest(x, np.array([row]), np.full(len(slots), -1), reach=0.05)
-        assert edge[0] >= 0
-        return gap[0], slots.crossing_depths(x, np.array([row]), slots.encode(edge, side))[0]
+        read = []
+        for backend in ("numpy", "c"):
+            slots = EdgeSlots(elements, element_body, [(0, 1)], x, backend)
+            row = next(r for r in range(slots.n_primary) if own_edge(x[slots.edges[slots.own[r]]]))
+            gap, edge, side = slots.closest(x, np.array([row]), np.full(len(slots), -1), reach=0.05)
+            assert edge[0] >= 0
+            read.append((gap[0], slots.crossing_depths(x, np.array([row]), slots.encode(edge, side))[0]))
+        np.testing.assert_allclose(read[1], read[0], rtol=1e-13, atol=1e-16)
+        return read[0]
 
     for h in (0.01, -0.01):
         x, *_ = crossed_cubes(h)

@@ -346,6 +346,13 @@ class EdgeSlots:
         self.body = np.tile(np.concatenate(body + [np.zeros(0, np.intp)]), self.PER_EDGE).astype(np.intp)
         self.pair = np.tile(np.concatenate(pair + [np.zeros(0, np.intp)]), self.PER_EDGE).astype(np.intp)
         self._elements = elements
+        # the crossing tests' searches of a whole surface: in C with the C kernels (each is a
+        # point against every triangle of a body, a few hundred, at many event evaluations)
+        self._surface_search = None
+        if backend == "c":
+            from .surface_contact import CompiledClosestFeatures
+
+            self._surface_search = CompiledClosestFeatures(elements, len(x0))
         self._kept: tuple | None = None  # (reach, the edges' ends when made, start, other, row): see _candidates
         self.rebuilds = 0
         self._body_elements = {b: np.flatnonzero(element_body == b) for b in bodies}
@@ -704,7 +711,8 @@ class EdgeSlots:
             surfaces = [self._body_elements[int(b)] for b in self.edge_body[other_edge]]
             pairs = np.column_stack([np.repeat(np.arange(len(pair)), [len(e) for e in surfaces]),
                                      np.concatenate(surfaces)])
-            out[:, j] = closest_features(point, x, self._elements, pairs).gap
+            out[:, j] = (closest_features(point, x, self._elements, pairs) if self._surface_search is None
+                         else self._surface_search(point, x, pairs)).gap
         return out
 
     def crossing_depths(self, x: FloatArray, rows: IntArray, codes: IntArray) -> FloatArray:
