@@ -123,6 +123,41 @@ def test_head_on_bodies_conserve_momentum_and_mirror_symmetry(e):
         assert result.impact_loss[-1] > 0.0
 
 
+def test_two_segments_crossed_like_a_plus_are_as_deep_as_the_least_move_that_frees_them():
+    """A segment along x from -1 to 1 and one along y at x = 0.3 from -0.2 to 0.5 cross; the
+    nearest end to the other's line is 0.2 away: 0.2 deep.  An end on the other's line, a
+    shared particle, or a depth asked above 0.2: none."""
+    from flexbody.surface import segments_across
+
+    points = np.array([[-1.0, 0.0], [1.0, 0.0], [0.3, -0.2], [0.3, 0.5], [0.3, 0.0]])
+    rows, depths = segments_across(points, np.array([[0, 1], [2, 3]]), 0.0)
+    assert rows.tolist() == [[0, 1]] and depths[0] == pytest.approx(0.2, rel=1e-12)
+    assert len(segments_across(points, np.array([[0, 1], [2, 3]]), 0.25)[0]) == 0
+    assert len(segments_across(points, np.array([[0, 1], [4, 3]]), 0.0)[0]) == 0  # touching at (0.3, 0)
+    assert len(segments_across(points, np.array([[0, 1], [1, 3]]), 0.0)[0]) == 0  # sharing particle 1
+
+
+def _plus(offset: float) -> dict:
+    """Two thin 2D bars (0.2 x 0.01 m) crossed like a plus sign at the origin, the second
+    ``offset`` along y: at 0 no particle of either is inside the other, yet they overlap."""
+    bar = [[-0.1, -0.005], [0.1, -0.005], [0.1, 0.005], [-0.1, 0.005]]
+    upright = [[-y, x] for x, y in bar]
+    bodies = [{"name": name, "shape": "polygon", "vertices": vertices, "mass": 0.05, "stiffness": 2000.0,
+               "damping": 0.0, "position": [0.0, 0.5 + shift], "collide": True}
+              for name, vertices, shift in (("bar", bar, 0.0), ("upright", upright, offset))]
+    return {"name": "plus", "gravity": [0.0, 0.0], "bodies": bodies, "simulation": {"t_end": 0.01, "output_dt": 0.001}}
+
+
+def test_bodies_that_start_crossed_like_a_plus_are_refused():
+    """Two bars crossed like a plus, no particle inside the other: refused as crossed,
+    naming both bodies and the segments; moved apart along the upright (its end 1 mm above the
+    bar), the same bars run."""
+    with pytest.raises(flexbody.InputError, match=r"'bar' and 'upright' start crossed segment across segment "
+                                                  r"\('bar': its segment \[\d+, \d+\] across the other's segment"):
+        flexbody.simulate(flexbody.load_scene(_plus(0.0)))
+    assert flexbody.simulate(flexbody.load_scene(_plus(0.106))).success
+
+
 # A ring with spokes dropped onto a block that lies on the ground.
 RING_ON_BLOCK = {
     "name": "ring_on_block",

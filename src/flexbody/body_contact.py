@@ -106,8 +106,8 @@ from .mixed import MixedModel
 from .model import GeneratedModel, Model
 from .own_surface import OwnSurface
 from .scene import Scene
-from .surface import (STRICT, closure_problem, cross, crossings, edges, edges_through, piercings, signed_measure,
-                      winding_numbers)
+from .surface import (STRICT, closure_problem, cross, crossings, edges, edges_through, piercings, segments_across,
+                      signed_measure, winding_numbers)
 from .surface_contact import (FACE, CompiledClosestFeatures, SurfaceContact, closest_features, segment_normals,
                               thinnest_width, triangle_normals, vertex_elements)
 
@@ -924,16 +924,26 @@ class BodyContactModel(Model):
         return None
 
     def crossed_edges(self, y, p, depth: float) -> tuple[float, int, int, str] | None:
-        """3D: the deepest crossing of two bodies that may touch whose surfaces cross along
-        edges (an edge of one passes through a triangle of the other by more than ``depth``
-        m, :func:`flexbody.surface.edges_through`): its depth (m), the edge's body, the
-        triangle's and a description; None where none does.  Without edge contacts two edges
-        meeting (boxes crossed edge on edge, coarse polyhedra colliding) is no contact: the
-        edges pass through each other with no particle inside the other body.  Only elements inside the overlap of two bodies' bounding boxes are
-        tested, in one search.  Edge contacts (``edges = true``, :mod:`flexbody.edge_contact`)
-        keep a pair's edges from this; elsewhere it is the measure of what they would catch."""
-        if self.dim != 3 or not self.n_slots:
+        """The deepest crossing of two bodies that may touch whose surfaces cross along
+        edges, by more than ``depth`` m: its depth (m), the first body, the second and a
+        description; None where none does.  Only elements inside the overlap of two bodies'
+        bounding boxes are tested, in one search.
+
+        3D: an edge of one passes through a triangle of the other
+        (:func:`flexbody.surface.edges_through`; the edge's body first).  Without edge
+        contacts two edges meeting (boxes crossed edge on edge, coarse polyhedra colliding)
+        is no contact: the edges pass through each other with no particle inside the other
+        body.  Edge contacts (``edges = true``, :mod:`flexbody.edge_contact`) keep a pair's
+        edges from this; elsewhere it is the measure of what they would catch.
+
+        2D: a segment of one crosses a segment of the other
+        (:func:`flexbody.surface.segments_across`): two tips through each other, no particle
+        inside, which the event location's corner cuts are there to stop.  A body's own
+        segments crossing are a fold (:meth:`fold`)."""
+        if not self.n_slots:
             return None
+        if self.dim == 2:
+            return self._crossed_segments(self._state(y, p)[0], depth)
         x = self._state(y, p)[0]
         low, high = x[self.elements].min(axis=1), x[self.elements].max(axis=1)
         bodies = [b for b in range(len(self._body_elements)) if len(self._body_elements[b])]
@@ -964,6 +974,18 @@ class BodyContactModel(Model):
         edge, triangle = self._edges[segments[rows[k, 1]]].tolist(), self.elements[triangles[rows[k, 0]]].tolist()
         return (float(depths[k]), int(edge_body[k]), int(triangle_body[k]),
                 f"its edge {edge} through the other's triangle {triangle}, {depths[k]:.2g} m deep")
+
+    def _crossed_segments(self, x: FloatArray, depth: float) -> tuple[float, int, int, str] | None:
+        """:meth:`crossed_edges` in 2D at the positions ``x`` (n, 2)."""
+        rows, depths = segments_across(x, self.elements, depth)
+        first, second = self.element_body[rows[:, 0]], self.element_body[rows[:, 1]]
+        between = (first != second) & self.allowed[first, second]
+        if not between.any():
+            return None
+        k = int(np.flatnonzero(between)[np.argmax(depths[between])])
+        one, other = self.elements[rows[k]].tolist()
+        return (float(depths[k]), int(first[k]), int(second[k]),
+                f"its segment {one} across the other's segment {other}, {depths[k]:.2g} m deep")
 
     def start_segment(self, free: np.ndarray, q, p) -> None:
         """A segment starts at ``q``: free slots (``free`` (nc,) bool) pick their element

@@ -256,18 +256,7 @@ def crossings(points: np.ndarray, segments: np.ndarray) -> np.ndarray:
     ndarray of int, shape (k, 2)
         Rows ``(a, b)``, ``a < b``, of ``segments``, ascending.
     """
-    from scipy.spatial import cKDTree
-
-    segments = np.asarray(segments, dtype=np.intp)
-    if len(segments) < 2:
-        return np.zeros((0, 2), np.intp)
-    ends = points[segments]  # (m, 2 ends, 2)
-    reach = float(np.linalg.norm(ends[:, 1] - ends[:, 0], axis=1).max())
-    pairs = cKDTree(ends.mean(axis=1)).query_pairs(reach, output_type="ndarray").reshape(-1, 2)
-    pairs = np.sort(pairs, axis=1)
-    pairs = pairs[np.lexsort((pairs[:, 1], pairs[:, 0]))]
-    pairs = pairs[_share_none(segments[pairs[:, 0]], segments[pairs[:, 1]])]
-    first, second = ends[pairs[:, 0]], ends[pairs[:, 1]]
+    pairs, first, second = _near_segments(points, segments)
 
     def apart(line: np.ndarray, x: np.ndarray) -> np.ndarray:  # the ends x strictly on either side
         d = line[:, 1] - line[:, 0]
@@ -276,6 +265,62 @@ def crossings(points: np.ndarray, segments: np.ndarray) -> np.ndarray:
 
     hit = apart(first, second) & apart(second, first)
     return pairs[hit]
+
+
+def segments_across(points: np.ndarray, segments: np.ndarray, depth: float) -> tuple[np.ndarray, np.ndarray]:
+    """The pairs of 2D segments that share no particle and cross by more than ``depth``: each
+    one's ends on either side of the other's line, each end more than ``depth`` from it.  Two
+    bodies' boundaries crossing like a plus sign (thin tips through each other) do this with
+    no particle inside the other body; a particle inside by d makes its two segments cross
+    the other's by at most about d.  The 2D twin of :func:`edges_through`; the candidates
+    are :func:`crossings`'.
+
+    Parameters
+    ----------
+    points : ndarray, shape (n, 2)
+    segments : ndarray of int, shape (m, 2)
+    depth : float
+        How far past touching a crossing must be (m).
+
+    Returns
+    -------
+    pairs : ndarray of int, shape (k, 2)
+        Rows ``(a, b)``, ``a < b``, of ``segments``, ascending.
+    depths : ndarray, shape (k,)
+        How far an end must move to stop the crossing (m): the least of the four ends'
+        distances to the other segment's line.
+    """
+    pairs, first, second = _near_segments(points, segments)
+
+    def sides(line: np.ndarray, x: np.ndarray) -> np.ndarray:  # signed distances of the ends x, (k, 2)
+        d = line[:, 1] - line[:, 0]
+        with np.errstate(divide="ignore", invalid="ignore"):  # a zero-length segment's NaNs cross nothing
+            return np.stack([(d[:, 0] * r[:, 1] - d[:, 1] * r[:, 0]) for r in (x[:, 0] - line[:, 0],
+                                                                              x[:, 1] - line[:, 0])], axis=1) \
+                / np.linalg.norm(d, axis=1)[:, None]
+
+    a, b = sides(first, second), sides(second, first)
+    depths = np.minimum(np.abs(a).min(axis=1), np.abs(b).min(axis=1))
+    hit = (a[:, 0] * a[:, 1] < 0.0) & (b[:, 0] * b[:, 1] < 0.0) & (depths > depth)
+    return pairs[hit], depths[hit]
+
+
+def _near_segments(points: np.ndarray, segments: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The pairs of 2D ``segments`` (m, 2) sharing no particle whose midpoints are within the
+    longest one's length (only these can cross; a k-d tree, ``scipy.spatial.cKDTree``), rows
+    ``(a, b)``, ``a < b``, ascending, shape (k, 2), and their ends, (k, 2, 2) each."""
+    from scipy.spatial import cKDTree
+
+    segments = np.asarray(segments, dtype=np.intp)
+    if len(segments) < 2:
+        return np.zeros((0, 2), np.intp), np.zeros((0, 2, 2)), np.zeros((0, 2, 2))
+    ends = points[segments]  # (m, 2 ends, 2)
+    reach = float(np.linalg.norm(ends[:, 1] - ends[:, 0], axis=1).max())
+    pairs = cKDTree(ends.mean(axis=1)).query_pairs(reach, output_type="ndarray").reshape(-1, 2)
+    pairs = np.sort(pairs, axis=1)
+    pairs = pairs[np.lexsort((pairs[:, 1], pairs[:, 0]))]
+    pairs = pairs[_share_none(segments[pairs[:, 0]], segments[pairs[:, 1]])]
+    return pairs, ends[pairs[:, 0]], ends[pairs[:, 1]]
 
 
 def _share_none(a: np.ndarray, b: np.ndarray) -> np.ndarray:
