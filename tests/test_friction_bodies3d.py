@@ -336,6 +336,24 @@ def test_the_same_row_cut_to_two_boxes_runs_to_its_end_instead_of_crawling():
         assert float(re.search(r"went ([0-9.e+-]+) m below", w).group(1)) < 1e-10
 
 
+def test_a_slip_creeping_just_outside_its_cone_is_held_not_followed_at_its_stiffness_limit():
+    """A fuzz's row (tests/reference/fuzz_creeping_slip_outside_its_cone.json: a flexible
+    sphere resting on a flexible box and on a rough ground, mu 0.2).  Corners of the sphere
+    on the ground slip at 4e-7 m/s, 1.3 speed tolerances, outside their cones by 0.5 % of
+    their pull, for milliseconds: the pull and friction balance through the coupled rows, so
+    the slip neither grows nor stops.  Followed, friction turns with it at mu lam / (m |v|)
+    = 1.4e8 rad/s per unit, and RK45 crawled at 2e-8 s: 84 000 steps to 0.315 s (118 s to
+    the scene's end).  A slip within ``SLOW_SLIP`` speed tolerances of rest that friction
+    alone reverses within the step is held along its step's direction as one inside its
+    cone is, and stops at its event; the run takes 2 060 steps, nothing inside anything
+    by 1e-9 m, the ledger closed to 1e-6."""
+    table = reference_table("fuzz_creeping_slip_outside_its_cone")
+    r = flexbody.simulate(flexbody.load_scene(table), max_wall_time=60.0)
+    assert r.status == "success", r.message
+    assert r.stats["steps"] < 10_000
+    assert r.stats["max_penetration_m"] < 1e-9 and r.stats["energy_drift_relative"] < 1e-6
+
+
 def _icosahedra(friction: float) -> flexbody.SimulationResult:
     """Two flexible icosahedra (12 particles, axial dampers: central forces) meeting
     obliquely and off-centre in free space (the ground 10 m away), e = 0.5."""
