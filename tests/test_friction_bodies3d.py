@@ -341,9 +341,9 @@ def test_a_slip_creeping_just_outside_its_cone_is_held_not_followed_at_its_stiff
     sphere resting on a flexible box and on a rough ground, mu 0.2).  Corners of the sphere
     on the ground slip at 4e-7 m/s, 1.3 speed tolerances, outside their cones by 0.5 % of
     their pull, for milliseconds: the pull and friction balance through the coupled rows, so
-    the slip neither grows nor stops.  Followed, friction turns with it at mu lam / (m |v|)
-    = 1.4e8 rad/s per unit, and RK45 crawled at 2e-8 s: 84 000 steps to 0.315 s (118 s to
-    the scene's end).  A slip within ``SLOW_SLIP`` speed tolerances of rest that friction
+    the slip neither grows nor stops.  Followed, friction turns with it at up to
+    mu lam / (m |v|) = 1.4e8 rad/s, and RK45 crawled at 2e-8 s: 84 000 steps to 0.315 s
+    (118 s to the scene's end).  A slip within ``SLOW_SLIP`` speed tolerances of rest that friction
     alone reverses within the step is held along its step's direction as one inside its
     cone is, and stops at its event; the run takes 2 060 steps, nothing inside anything
     by 1e-9 m, the ledger closed to 1e-6."""

@@ -90,11 +90,12 @@ class EventFunctions:
         rad/s: 2e-8 s in a fuzzed row).  A faster slip outside its cone is followed: held
         over the long steps its smooth law allows, it would turn late
         (tests/test_friction.py).  A lone particle's slow slip outside its cone speeds up
-        and is followed in a few steps, as the compiled loop does.  A contact the last instant set sliding from rest
-        (``Phases.started``) slides from rest in its first step whatever round-off slip it
-        has, also where that step is taken again from its start, shorter (else the round-off
-        slip's direction holds its friction there: along the pull, measured, which stopped it
-        at once, an instant at one time again and again).  Returns whether a slip is or was
+        and is followed in a few steps, as the compiled loop does.  A contact the last
+        instant set sliding from rest (``Phases.started``) slides from rest in its first
+        step whatever round-off slip it has, also where that step is taken again from its
+        start, shorter (else the round-off slip's direction holds its friction there: along
+        the pull, measured, which stopped it at once, an instant at one time again and
+        again).  Returns whether a slip is or was
         held: then the right-hand side at ``y`` changed (a stepper's first stage, kept from
         the last step, is stale)."""
         if not self.friction:
