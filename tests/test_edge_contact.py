@@ -512,13 +512,15 @@ def test_a_crossing_counts_how_deep_the_edges_points_are_inside_the_other_body()
     points lie on the other cube's top face (a vertex's depth, 0, not d's).  The C kernels
     and surface search read the same as NumPy's, to rounding."""
     from flexbody.edge_contact import EdgeSlots
+    from flexbody.surface_contact import CompiledClosestFeatures
 
     def crossing(x, n_first, own_edge):
         elements = np.vstack([hull(x[:n_first]), hull(x[n_first:]) + n_first])
         element_body = np.repeat([0, 1], [len(hull(x[:n_first])), len(hull(x[n_first:]))])
         read = []
         for backend in ("numpy", "c"):
-            slots = EdgeSlots(elements, element_body, [(0, 1)], x, backend)
+            search = CompiledClosestFeatures(elements, len(x), element_body) if backend == "c" else None
+            slots = EdgeSlots(elements, element_body, [(0, 1)], x, backend, surface_search=search)
             row = next(r for r in range(slots.n_primary) if own_edge(x[slots.edges[slots.own[r]]]))
             gap, edge, side = slots.closest(x, np.array([row]), np.full(len(slots), -1), reach=0.05)
             assert edge[0] >= 0

@@ -209,7 +209,11 @@ class BodyContactModel(Model):
         listed = np.array([k for k, c in enumerate(scene.contacts) if c.edges], np.intp)  # 3D, frictionless pairs
         pairs = [tuple(scene.contacts[k].bodies) for k in listed]
         flexible = {k for k, body in enumerate(scene.bodies) if not body.rigid}
-        self._edge_slots = EdgeSlots(self.elements, self.element_body, pairs, x0, self.backend, flexible) if pairs else None
+        # The narrow phase runs at every gap evaluation: in C with a C model, its NumPy twin otherwise.
+        self._narrow = (CompiledClosestFeatures(self.elements, self.n_particles, self.element_body)
+                        if self.backend == "c" else None)
+        self._edge_slots = (EdgeSlots(self.elements, self.element_body, pairs, x0, self.backend, flexible, self._narrow)
+                            if pairs else None)
         if self._edge_slots is not None:
             es = self._edge_slots
             self.slot_particle = np.concatenate([self.slot_particle, es.edges[es.own, 0]])
@@ -252,9 +256,6 @@ class BodyContactModel(Model):
         #: The self-contact neighbourhoods (:mod:`flexbody.own_surface`), or None without self-contact.
         self.own = (OwnSurface(scene, self.elements, self.element_body, self.particle_body, own, self.margin,
                                self._incident_start, self._incident_flat) if own else None)
-        # The narrow phase runs at every gap evaluation: in C with a C model, its NumPy twin otherwise.
-        self._narrow = (CompiledClosestFeatures(self.elements, self.n_particles, self.element_body)
-                        if self.backend == "c" else None)
         # each slot's element while constrained; an edge row's edge and side (EdgeSlots.encode):
         # so held_on and the driver's samples restore an edge row's side with its edge
         self.element_of = np.full(self.n_slots, -1, np.intp)
@@ -942,9 +943,9 @@ class BodyContactModel(Model):
         segments crossing are a fold (:meth:`fold`)."""
         if not self.n_slots:
             return None
-        if self.dim == 2:
-            return self._crossed_segments(self._state(y, p)[0], depth)
         x = self._state(y, p)[0]
+        if self.dim == 2:
+            return self._crossed_segments(x, depth)
         low, high = x[self.elements].min(axis=1), x[self.elements].max(axis=1)
         bodies = [b for b in range(len(self._body_elements)) if len(self._body_elements[b])]
         box = {b: (low[self._body_elements[b]].min(axis=0), high[self._body_elements[b]].max(axis=0)) for b in bodies}

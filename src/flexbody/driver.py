@@ -186,6 +186,11 @@ def _lowest_gaps(positions: np.ndarray, grounds, held: np.ndarray) -> tuple[floa
     return float(gaps[~on].min(initial=np.inf)), float(gaps[on].min(initial=np.inf))
 
 
+#: How two bodies' surfaces cross with no particle inside the other, by dimension
+#: (:meth:`flexbody.body_contact.BodyContactModel.crossed_edges`).
+_CROSSED = {2: "segment across segment", 3: "edge on edge"}
+
+
 def _dense(matrix) -> np.ndarray:
     return matrix.toarray() if hasattr(matrix, "toarray") else matrix
 
@@ -304,10 +309,9 @@ def _check_apart(scene: Scene, model: Model, q: np.ndarray, p: np.ndarray) -> No
         crossed = model.crossed_edges(np.concatenate([q, np.zeros(model.nu + 2)]), p, EDGE_DEPTH * 1e-12 * size)
         if crossed is not None:  # no particle inside, and yet two surfaces cross
             _, first, second, how = crossed
-            crossed = "segment across segment" if model.dim == 2 else "edge on edge"
             raise InputError(f"invalid scene:\n  - bodies {scene.bodies[first].name!r} and {scene.bodies[second].name!r}"
-                             f" start crossed {crossed} ({scene.bodies[first].name!r}: {how}); bodies that may touch "
-                             "must start apart (or touching)")
+                             f" start crossed {_CROSSED[model.dim]} ({scene.bodies[first].name!r}: {how}); bodies that "
+                             "may touch must start apart (or touching)")
         return
     names = [b.name for b in scene.bodies]
     problems = []
@@ -1202,19 +1206,17 @@ class _Run:
             lo, hi, first, second, how = self.edge_crossing
             when = f"from t = {hi:.9g} s" if hi - lo <= 1e-12 * max(1.0, abs(hi)) else \
                 f"from between t = {lo:.9g} and {hi:.9g} s"
-            deep = f"up to {self.max_edge_crossing:.2g} m deep where checked ({EDGE_CHECKS} times per output interval)"
-            if self.model.dim == 2:
-                out.append(f"bodies {first!r} and {second!r} crossed segment across segment {when} ({first!r}: "
-                           f"{how}), {deep}: two corners passed through each other with no particle inside the "
-                           "other body, which no contact sees (the event location watches a particle passing "
-                           "another body's corner, and this one went unseen); a tighter --rtol or more particles "
-                           "on the bodies make it rarer")
-            else:
-                out.append(f"bodies {first!r} and {second!r} crossed edge on edge {when} ({first!r}: {how}), {deep}: "
-                           "two edges meeting are a contact only between bodies whose [[contacts]] entry has "
-                           f"edges = true (3D, without friction; at most {EdgeSlots.PER_EDGE} edges of the second body "
-                           "under one edge of the first at once), so here edges passed through each other unseen; finer "
-                           "surfaces make it rarer (a vertex meets a face first more often)")
+            why = ("two corners passed through each other with no particle inside the other body, which no "
+                   "contact sees (the event location watches a particle passing another body's corner, and this one "
+                   "went unseen); a tighter --rtol or more particles on the bodies make it rarer"
+                   if self.model.dim == 2 else
+                   "two edges meeting are a contact only between bodies whose [[contacts]] entry has edges = true "
+                   f"(3D, without friction; at most {EdgeSlots.PER_EDGE} edges of the second body under one edge of "
+                   "the first at once), so here edges passed through each other unseen; finer surfaces make it rarer "
+                   "(a vertex meets a face first more often)")
+            out.append(f"bodies {first!r} and {second!r} crossed {_CROSSED[self.model.dim]} {when} ({first!r}: {how}), "
+                       f"up to {self.max_edge_crossing:.2g} m deep where checked ({EDGE_CHECKS} times per output "
+                       f"interval): {why}")
         if s.rtol > LOOSE_RTOL:
             out.append(f"rtol = {s.rtol:g} is loose: impacts and lift-offs can differ from a tight run's; check the "
                        "event count against a run with a tighter --rtol")

@@ -39,6 +39,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .surface import cross, segments_through
+from .surface_contact import CompiledClosestFeatures, closest_features
 
 FloatArray = np.ndarray
 IntArray = np.ndarray
@@ -292,6 +293,11 @@ class EdgeSlots:
         is the lowest line of that face: in a fuzzed stack of boxes, a rigid box's rim went
         0.5 mm through a flexible box's bottom diagonal, which was left out as flat at the
         start).
+    surface_search : CompiledClosestFeatures, optional
+        The C narrow phase over ``elements`` (the body-contact model's), for the crossing
+        tests' searches of a whole surface (a point against every triangle of a body, a few
+        hundred, at many event evaluations); without it NumPy's
+        :func:`~flexbody.surface_contact.closest_features`.
 
     Attributes
     ----------
@@ -313,7 +319,8 @@ class EdgeSlots:
     PER_EDGE = 5
 
     def __init__(self, elements: IntArray, element_body: IntArray, pairs: list[tuple[int, int]],
-                 x0: FloatArray, backend: str = "numpy", deforming: Collection[int] = ()) -> None:
+                 x0: FloatArray, backend: str = "numpy", deforming: Collection[int] = (),
+                 surface_search: CompiledClosestFeatures | None = None) -> None:
         self.kernels = EdgeKernels(backend)
         elements = np.asarray(elements, np.intp)
         bodies = sorted({b for pair in pairs for b in pair})
@@ -346,13 +353,7 @@ class EdgeSlots:
         self.body = np.tile(np.concatenate(body + [np.zeros(0, np.intp)]), self.PER_EDGE).astype(np.intp)
         self.pair = np.tile(np.concatenate(pair + [np.zeros(0, np.intp)]), self.PER_EDGE).astype(np.intp)
         self._elements = elements
-        # the crossing tests' searches of a whole surface: in C with the C kernels (each is a
-        # point against every triangle of a body, a few hundred, at many event evaluations)
-        self._surface_search = None
-        if backend == "c":
-            from .surface_contact import CompiledClosestFeatures
-
-            self._surface_search = CompiledClosestFeatures(elements, len(x0))
+        self._surface_search = surface_search
         self._kept: tuple | None = None  # (reach, the edges' ends when made, start, other, row): see _candidates
         self.rebuilds = 0
         self._body_elements = {b: np.flatnonzero(element_body == b) for b in bodies}
@@ -700,8 +701,6 @@ class EdgeSlots:
         """The signed distances of the closest points (parameters ``s`` on the first edge and
         ``t`` on the second, (k,) each) of edge ``pair`` (k, 2) to the other edge's body's
         surface (< 0: inside it), shape (k, 2): the first edge's point's, then the second's."""
-        from .surface_contact import closest_features
-
         first, second = self.edges[pair[:, 0]], self.edges[pair[:, 1]]
         points = [x[first[:, 0]] + s[:, None] * (x[first[:, 1]] - x[first[:, 0]]),
                   x[second[:, 0]] + t[:, None] * (x[second[:, 1]] - x[second[:, 0]])]

@@ -260,8 +260,8 @@ def crossings(points: np.ndarray, segments: np.ndarray) -> np.ndarray:
 
     def apart(line: np.ndarray, x: np.ndarray) -> np.ndarray:  # the ends x strictly on either side
         d = line[:, 1] - line[:, 0]
-        u, v = ((d[:, 0] * r[:, 1] - d[:, 1] * r[:, 0]) for r in (x[:, 0] - line[:, 0], x[:, 1] - line[:, 0]))
-        return (u * v < 0.0) & (np.minimum(np.abs(u), np.abs(v)) > STRICT * np.einsum("ij,ij->i", d, d))
+        u = _ends_across(line, x)
+        return (u[:, 0] * u[:, 1] < 0.0) & (np.abs(u).min(axis=1) > STRICT * np.einsum("ij,ij->i", d, d))
 
     hit = apart(first, second) & apart(second, first)
     return pairs[hit]
@@ -293,16 +293,22 @@ def segments_across(points: np.ndarray, segments: np.ndarray, depth: float) -> t
     pairs, first, second = _near_segments(points, segments)
 
     def sides(line: np.ndarray, x: np.ndarray) -> np.ndarray:  # signed distances of the ends x, (k, 2)
-        d = line[:, 1] - line[:, 0]
         with np.errstate(divide="ignore", invalid="ignore"):  # a zero-length segment's NaNs cross nothing
-            return np.stack([(d[:, 0] * r[:, 1] - d[:, 1] * r[:, 0]) for r in (x[:, 0] - line[:, 0],
-                                                                              x[:, 1] - line[:, 0])], axis=1) \
-                / np.linalg.norm(d, axis=1)[:, None]
+            return _ends_across(line, x) / np.linalg.norm(line[:, 1] - line[:, 0], axis=1)[:, None]
 
     a, b = sides(first, second), sides(second, first)
     depths = np.minimum(np.abs(a).min(axis=1), np.abs(b).min(axis=1))
     hit = (a[:, 0] * a[:, 1] < 0.0) & (b[:, 0] * b[:, 1] < 0.0) & (depths > depth)
     return pairs[hit], depths[hit]
+
+
+def _ends_across(line: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """``d x (x_end - a)`` for each of the two ends of segments ``x`` against the lines
+    ``line`` (a -> b, d = b - a), (k, 2, 2) each: |d| times each end's signed distance from
+    the line (> 0 on its left), shape (k, 2)."""
+    d = line[:, 1] - line[:, 0]
+    r = x - line[:, :1]
+    return d[:, None, 0] * r[:, :, 1] - d[:, None, 1] * r[:, :, 0]
 
 
 def _near_segments(points: np.ndarray, segments: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
