@@ -563,6 +563,24 @@ def test_held_rows_kept_layout_gives_the_rows_of_a_fresh_model_and_W_is_J_M_inv_
         np.testing.assert_allclose(kept.W, kept.scaled @ kept.J.T, rtol=1e-13, atol=1e-13 * np.abs(kept.W).max())
 
 
+@pytest.mark.parametrize("m, c", [(20, 90), (300, 60), (300, 1200)])
+def test_products_of_contact_rows_are_A_B_T_densely_and_through_sparse_matrices(m, c):
+    """``_gram`` multiplies contact rows densely unless there are many and they are wide
+    (then through sparse matrices, the last case): either way ``A @ B.T`` to rounding, on
+    rows of 12 nonzeros as a 3D slot's (its particle and three vertices)."""
+    from flexbody.body_contact import SPARSE_ROWS, SPARSE_WIDTH, _gram
+
+    rng = np.random.default_rng(m + c)
+    A, B = np.zeros((m, c)), np.zeros((m, c))
+    for row in range(m):
+        for Z in (A, B):
+            Z[row, rng.choice(c, 12, replace=False)] = rng.standard_normal(12)
+    B[:, : c // 2] = A[:, : c // 2]  # rows that share coordinates, as C and G do
+    assert (m >= SPARSE_ROWS and c > SPARSE_WIDTH) == (c == 1200)
+    expected = A @ B.T
+    np.testing.assert_allclose(_gram(A, B), expected, rtol=0, atol=1e-14 * np.abs(expected).max())
+
+
 def test_redundant_rows_are_found_block_by_block_as_by_ranks_of_the_whole():
     """coupled._redundant finds the rows in the span of the others by blocks of rows that
     share columns: it must say for each row what two ranks of the whole matrix say (the row
