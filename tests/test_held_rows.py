@@ -14,6 +14,7 @@ import pytest
 
 import flexbody
 from flexbody import body_contact
+from flexbody.constants import VELOCITY_ROUNDOFF
 from flexbody.assembly import _kernels_module
 from flexbody.bench_bodies import bodies_scene_table
 from flexbody.dynamics import contact_solve
@@ -255,6 +256,93 @@ def test_the_c_rows_equal_the_numpy_rows_along_a_run(table):
         model._held_rows = compiled
     if table is _box_on_wedge:
         assert coupled_grounds == len(states)  # the wedge's foot: ground rows solved with the slots
+
+
+def _rough_spheres() -> dict:
+    """Two rough flexible spheres (mu = 0.4), the upper one landing on the lower with a
+    sideways speed: its contacts slide, then stick."""
+    table = _sphere_pair()
+    table["bodies"][1]["velocity"] = [0.4, 0.1, 0.0]
+    table["contacts"] = [{"bodies": ["s0", "s1"], "friction": 0.4}]
+    table["grounds"] = [{"point": [0.0, 0.0, 0.0], "normal": [0.0, 0.0, 1.0], "friction": 0.4}]
+    return table
+
+
+def _ring_stack() -> dict:
+    """The bundled ring_stack (2D, mu = 0.5 between the bodies), the upper ring thrown
+    sideways: it lands sliding and sticks."""
+    import tomllib
+    from pathlib import Path
+
+    table = tomllib.loads((Path(flexbody.__file__).parent / "scenes" / "ring_stack.toml").read_text())
+    table["simulation"]["t_end"] = 0.4
+    table["bodies"][2]["velocity"] = [0.3, 0.0]  # the upper ring lands sliding
+    return table
+
+
+@pytest.mark.parametrize("table", [_ring_stack, _rough_spheres], ids=["rings_2d", "spheres_3d"])
+def test_the_c_friction_rows_equal_the_numpy_rows_along_a_run(table):
+    """The held rows with friction (sticking rows held, sliding ones dragged) solved in C
+    (fb_held_friction, fb_held_slips) against the NumPy rows of the same states: forces,
+    friction, slip rates, tangents and the right-hand side to rounding of the forces'
+    accelerations; stick and slide both met.  A slide whose slip is within 1e3 of the
+    velocities' round-off (slipping at 2e-13 m/s, its friction follows that slip) has its
+    direction from the rounding alone, which the two sums make differently (2e-4 rad
+    apart, measured): such states are counted, not compared."""
+    model, states = _states_of(table(), every=3)
+    compiled, stuck, slid, rounding = model._held_rows, 0, 0, 0
+    for y, p, held, push, elements in states:
+        model.element_of[:] = elements
+        model._held_rows = compiled
+        c = model._solve(y, p, held, push)
+        model._held_rows = None
+        reference = model._solve(y, p, held, push)
+        model._held_rows = compiled
+        np.testing.assert_array_equal(c.rows, reference.rows)
+        np.testing.assert_array_equal(c.stick, reference.stick)
+        speed = max(np.abs(y[model.nq : model.nq + model.nu]).max(), 1.0)
+        np.testing.assert_allclose(c.tangents, reference.tangents, rtol=0, atol=1e-14)
+        np.testing.assert_allclose(c.slip, reference.slip, rtol=0, atol=1e-14 * speed)
+        sliding = np.asarray(held)[c.rows] == body_contact.SLIDING
+        if (sliding & (np.linalg.norm(c.slip, axis=1) < 1e3 * VELOCITY_ROUNDOFF * speed)).any():
+            rounding += 1
+            continue
+        stuck += bool(c.stick.any())
+        slid += bool(sliding.any())
+        force = max(np.abs(reference.lam).max(), 9.81 * model.masses.max())
+        np.testing.assert_allclose(c.lam, reference.lam, rtol=0, atol=1e-12 * force)
+        np.testing.assert_allclose(c.lam_t, reference.lam_t, rtol=0, atol=1e-12 * force)
+        np.testing.assert_allclose(c.ydot, reference.ydot, rtol=0, atol=1e-12 * force / model.masses.min())
+    assert stuck > 5 and slid > 5 and rounding < (stuck + slid) / 4, (stuck, slid, rounding)
+
+
+def test_friction_rows_of_a_particle_on_a_ground_give_the_forces_by_hand():
+    """One particle (m = 0.2 kg) held on a ground y = 0 with a sideways pull a_x = 3 m/s^2:
+    sticking, its normal force is m g and its friction -m a_x (it stays put); sliding along
+    +x (its tangent t = (-n_y, n_x) = (-1, 0), so drag mu = 0.5 along t) the friction is
+    -mu m g along x and it speeds up at a_x - mu g."""
+    m, mu, a_x = 0.2, 0.5, 3.0
+    rows = held_rows([m], 2)
+    x, v, frame = np.zeros((1, 2)), np.zeros((1, 2)), np.array([[[0.0, 1.0], [-1.0, 0.0]]])
+    acc = np.array([a_x, -G])
+    lam_n, lam_t = rows.friction(x, v, acc, [0], frame, np.zeros((0, 3), int), np.array([True]), np.zeros((1, 1)))
+    assert lam_n[0] == pytest.approx(m * G, rel=1e-14) and lam_t[0, 0] == pytest.approx(m * a_x, rel=1e-14)
+    np.testing.assert_allclose(acc, 0.0, atol=1e-14)
+    acc = np.array([a_x, -G])
+    lam_n, lam_t = rows.friction(x, v, acc, [0], frame, np.zeros((0, 3), int), np.array([False]), np.array([[mu]]))
+    assert lam_n[0] == pytest.approx(m * G, rel=1e-14) and lam_t[0, 0] == pytest.approx(mu * m * G, rel=1e-14)
+    np.testing.assert_allclose(acc, [a_x - mu * G, 0.0], atol=1e-14)
+
+
+def test_dependent_friction_rows_are_handed_back_untouched():
+    """The same ground row twice on one particle: its rows are dependent (the least-squares
+    twin picks among the answers), so C hands back and leaves the accelerations alone."""
+    rows = held_rows([0.2], 2)
+    frames = np.array([[[0.0, 1.0], [-1.0, 0.0]]] * 2)
+    acc = np.array([3.0, -G])
+    assert rows.friction(np.zeros((1, 2)), np.zeros((1, 2)), acc, [0, 0], frames, np.zeros((0, 3), int),
+                         np.array([True, True]), np.zeros((2, 1))) is None
+    np.testing.assert_array_equal(acc, [3.0, -G])
 
 
 @pytest.mark.parametrize("dim", [2, 3])

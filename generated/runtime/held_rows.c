@@ -257,3 +257,292 @@ int fb_held_rows(int dim, int n, const double *x, const double *v, const double 
     free(terms), free(ints), free(reals), free(offset), free(W);
     return status ? 1 : 0;
 }
+
+/* ---- With friction: each contact's tangent rows too ----
+ *
+ * The C twin of the frictional branch of flexbody.body_contact.BodyContactModel._solve on
+ * particle coordinates.  A contact's rows share its particles and their weights (a ground
+ * row's particle, 1; a slot's particle, 1, and its element's vertices, -w_k) and differ in
+ * direction: its normal, then its dim - 1 tangents (a ground's: its ground kernel's axes,
+ * given; a slot's: 2D t = (-n_y, n_x), 3D the slip kernel's t1, t2).  A sticking contact
+ * holds its tangent rows' accelerations at 0 too; a sliding one's normal force drags its
+ * friction along (-mu along its slip, given as drag): the force of its normal unknown acts
+ * along n + sum_j drag_j t_j.  Then J M^-1 G^T is not symmetric (LU with partial pivoting;
+ * Cholesky where no contact of a block is dragged).  Where the rows are (nearly) dependent
+ * the NumPy twin's least squares picks one of several answers: a pivot within
+ * FRICTION_GUARD of the largest entry leaves the whole problem to it. */
+#define FRICTION_GUARD 1e-9
+
+typedef struct {
+    int points, particle[4];
+    double weight[4], direction[3][3], bias[3]; /* normal then tangents; their accelerations' velocity terms */
+} Contact;
+
+static void ground_contact(int dim, int particle, const double *frame, Contact *c)
+{
+    c->points = 1;
+    c->particle[0] = particle;
+    c->weight[0] = 1.0;
+    for (int r = 0; r < dim; ++r) {
+        for (int k = 0; k < dim; ++k) c->direction[r][k] = frame[dim * r + k];
+        c->bias[r] = 0.0; /* a ground and its axes do not move */
+    }
+}
+
+static void slot_contact(int dim, const int *points, const double *x, const double *v, Contact *c)
+{
+    double gap, weights[3], normal[3], jacobian[12], rate, tangential[3];
+    const int p = points[0], a = points[1], b = points[2];
+    if (dim == 2) {
+        double s, slip_rate;
+        fb_k_segment_2d(x + 2 * p, x + 2 * a, x + 2 * b, &gap, &s, normal, jacobian);
+        fb_k_segment_2d_velocity(x + 2 * p, x + 2 * a, x + 2 * b, v + 2 * p, v + 2 * a, v + 2 * b, &rate,
+                                 tangential, &c->bias[0], &slip_rate, &c->bias[1]);
+        weights[0] = 1.0 - s;
+        weights[1] = s;
+        c->direction[1][0] = -normal[1];
+        c->direction[1][1] = normal[0];
+    } else {
+        const int q = points[3];
+        double slip_rate[2], tangents[6];
+        fb_k_triangle_3d(x + 3 * p, x + 3 * a, x + 3 * b, x + 3 * q, &gap, weights, normal, jacobian);
+        fb_k_triangle_3d_velocity(x + 3 * p, x + 3 * a, x + 3 * b, x + 3 * q, v + 3 * p, v + 3 * a, v + 3 * b,
+                                  v + 3 * q, &rate, tangential, &c->bias[0]);
+        fb_k_triangle_3d_slip(x + 3 * p, x + 3 * a, x + 3 * b, x + 3 * q, v + 3 * p, v + 3 * a, v + 3 * b,
+                              v + 3 * q, slip_rate, c->bias + 1, tangents);
+        for (int k = 0; k < 3; ++k) {
+            c->direction[1][k] = tangents[k];
+            c->direction[2][k] = tangents[3 + k];
+        }
+    }
+    for (int k = 0; k < dim; ++k) c->direction[0][k] = normal[k];
+    c->points = dim + 1;
+    for (int j = 0; j <= dim; ++j) {
+        c->particle[j] = points[j];
+        c->weight[j] = j == 0 ? 1.0 : -weights[j - 1];
+    }
+}
+
+static Contact *held_contacts(int dim, const double *x, const double *v, int k_g, const int *ground_particle,
+                              const double *ground_frame, int k_s, const int *slot_points)
+{
+    Contact *contacts = malloc((size_t)(k_g + k_s > 0 ? k_g + k_s : 1) * sizeof *contacts);
+    if (!contacts) return NULL;
+    for (int r = 0; r < k_g; ++r) ground_contact(dim, ground_particle[r], ground_frame + dim * dim * r, contacts + r);
+    for (int s = 0; s < k_s; ++s) slot_contact(dim, slot_points + (dim + 1) * s, x, v, contacts + k_g + s);
+    return contacts;
+}
+
+static inline double dot(int dim, const double *a, const double *b)
+{
+    double s = 0.0;
+    for (int k = 0; k < dim; ++k) s += a[k] * b[k];
+    return s;
+}
+
+/* Each held contact's slip rates along its tangents and those tangents.
+ *
+ * in: as fb_held_friction (no masses, stick or drag).
+ * out: slip (k, dim - 1) (m/s), tangents (k, dim - 1, dim); k = k_g + k_s.
+ * Returns 0, or -1 if memory ran out. */
+int fb_held_slips(int dim, const double *x, const double *v, int k_g, const int *ground_particle,
+                  const double *ground_frame, int k_s, const int *slot_points, double *slip, double *tangents)
+{
+    const int k = k_g + k_s;
+    Contact *contacts = held_contacts(dim, x, v, k_g, ground_particle, ground_frame, k_s, slot_points);
+    if (!contacts) return -1;
+    for (int i = 0; i < k; ++i) {
+        const Contact *c = contacts + i;
+        for (int m = 0; m < dim - 1; ++m) {
+            double rate = 0.0;
+            for (int j = 0; j < c->points; ++j) rate += c->weight[j] * dot(dim, c->direction[1 + m], v + dim * c->particle[j]);
+            slip[(dim - 1) * i + m] = rate;
+            for (int d = 0; d < dim; ++d) tangents[((dim - 1) * i + m) * dim + d] = c->direction[1 + m][d];
+        }
+    }
+    free(contacts);
+    return 0;
+}
+
+/* A (n, n) = L U in place with partial pivoting (its rows and rhs's swapped alike), solving
+ * A z = rhs in place; 1 if a pivot is within floor of 0. */
+static int lu_solve(double *A, int n, double *rhs, double floor)
+{
+    for (int j = 0; j < n; ++j) {
+        int best = j;
+        for (int i = j + 1; i < n; ++i)
+            if (fabs(A[i * n + j]) > fabs(A[best * n + j])) best = i;
+        if (!(fabs(A[best * n + j]) > floor)) return 1;
+        if (best != j) {
+            for (int k = 0; k < n; ++k) {
+                const double t = A[j * n + k];
+                A[j * n + k] = A[best * n + k];
+                A[best * n + k] = t;
+            }
+            const double t = rhs[j];
+            rhs[j] = rhs[best];
+            rhs[best] = t;
+        }
+        for (int i = j + 1; i < n; ++i) {
+            const double f = A[i * n + j] / A[j * n + j];
+            A[i * n + j] = f;
+            for (int k = j + 1; k < n; ++k) A[i * n + k] -= f * A[j * n + k];
+            rhs[i] -= f * rhs[j];
+        }
+    }
+    for (int i = n - 1; i >= 0; --i) {
+        double s = rhs[i];
+        for (int k = i + 1; k < n; ++k) s -= A[i * n + k] * rhs[k];
+        rhs[i] = s / A[i * n + i];
+    }
+    return 0;
+}
+
+/* A symmetric positive semidefinite (n, n) = L L^T in place (cholesky_within, against the
+ * largest entry of all the blocks), solving A z = rhs in place; 1 if a pivot is within
+ * floor of 0 (a dependent row: left to the least-squares twin). */
+static int cholesky_strict(double *A, int n, double *rhs, double floor, double largest)
+{
+    if (cholesky_within(A, n, largest)) return 1;
+    for (int j = 0; j < n; ++j)
+        if (!(A[j * n + j] * A[j * n + j] > floor)) return 1;
+    cholesky_solve(A, n, rhs);
+    return 0;
+}
+
+/* The held rows' forces with friction and the accelerations they give.
+ *
+ * in: dim (2 or 3), n particles, positions x and velocities v (n, dim), inverse masses (n);
+ * k_g ground rows: their particles (k_g) and their grounds' frames (k_g, dim, dim: the unit
+ * normal, then the tangents); k_s held slots: their points (k_s, dim + 1), the particle then
+ * its element's vertices; stick (k): whether each contact holds its tangent rows too; drag
+ * (k, dim - 1): each contact's friction per unit of its normal force along its tangents
+ * (0 unless it slides); k = k_g + k_s.
+ * in/out: acc (n, dim), the free accelerations, returned with the rows' forces added.
+ * out: lam_n (k), the normal forces (N); lam_t (k, dim - 1), the friction along the tangents.
+ * Returns 0; 1 if a pivot fell within FRICTION_GUARD of the largest entry of the matrices
+ * (nothing added to acc: solve with the least-squares twin); -1 if memory ran out. */
+int fb_held_friction(int dim, int n, const double *x, const double *v, const double *inverse_mass, int k_g,
+                     const int *ground_particle, const double *ground_frame, int k_s, const int *slot_points,
+                     const int *stick, const double *drag, double *acc, double *lam_n, double *lam_t)
+{
+    const int k = k_g + k_s, t_dim = dim - 1;
+    Contact *contacts = held_contacts(dim, x, v, k_g, ground_particle, ground_frame, k_s, slot_points);
+    int n_terms = 0;
+    for (int i = 0; contacts && i < k; ++i) n_terms += contacts[i].points;
+    Term *terms = calloc((size_t)(n_terms > 0 ? n_terms : 1), sizeof *terms);
+    /* per particle: head; per term: next; per contact: parent, block, local, first (its first
+     * unknown within its block); per block (+1): its contacts, its unknowns, their start */
+    int *ints = malloc((size_t)(n + n_terms + 4 * k + 3 * (k + 1)) * sizeof *ints);
+    double *pull = malloc((size_t)(dim * k + 1) * sizeof *pull); /* each contact's normal force direction */
+    if (!contacts || !terms || !ints || !pull) {
+        free(contacts), free(terms), free(ints), free(pull);
+        return -1;
+    }
+    int *head = ints, *next = head + n, *parent = next + n_terms, *block = parent + k, *local = block + k,
+        *first = local + k, *n_contacts = first + k, *n_unknowns = n_contacts + (k + 1),
+        *unknown_start = n_unknowns + (k + 1);
+    for (int i = 0, t = 0; i < k; ++i)
+        for (int j = 0; j < contacts[i].points; ++j, ++t) {
+            terms[t].row = i;
+            terms[t].particle = contacts[i].particle[j];
+            terms[t].c[0] = contacts[i].weight[j];
+        }
+    link_terms(n, n_terms, terms, head, next);
+    const int n_blocks = number_blocks(k, n_terms, terms, head, parent, block);
+    /* within a block: its contacts ascending, each its normal unknown then (sticking) its tangents */
+    for (int b = 0; b <= n_blocks; ++b) n_contacts[b] = n_unknowns[b] = 0;
+    for (int i = 0; i < k; ++i) {
+        local[i] = n_contacts[block[i]]++;
+        first[i] = n_unknowns[block[i]];
+        n_unknowns[block[i]] += stick[i] ? dim : 1;
+    }
+    long s_size = 0, a_size = 0;
+    unknown_start[0] = 0;
+    for (int b = 0; b < n_blocks; ++b) {
+        unknown_start[b + 1] = unknown_start[b] + n_unknowns[b];
+        s_size += (long)n_contacts[b] * n_contacts[b];
+        a_size += (long)n_unknowns[b] * n_unknowns[b];
+    }
+    long *offset = malloc((size_t)(2 * n_blocks + 2) * sizeof *offset);
+    double *reals = calloc((size_t)(s_size + a_size + unknown_start[n_blocks] + 1), sizeof *reals);
+    int *unknown_contact = malloc((size_t)(2 * unknown_start[n_blocks] + 1) * sizeof *unknown_contact);
+    if (!offset || !reals || !unknown_contact) {
+        free(contacts), free(terms), free(ints), free(pull), free(offset), free(reals), free(unknown_contact);
+        return -1;
+    }
+    int *unknown_direction = unknown_contact + unknown_start[n_blocks];
+    long *s_offset = offset, *a_offset = offset + n_blocks + 1;
+    s_offset[0] = a_offset[0] = 0;
+    for (int b = 0; b < n_blocks; ++b) {
+        s_offset[b + 1] = s_offset[b] + (long)n_contacts[b] * n_contacts[b];
+        a_offset[b + 1] = a_offset[b] + (long)n_unknowns[b] * n_unknowns[b];
+    }
+    double *S = reals, *A = S + s_size, *z = A + a_size;
+    for (int i = 0; i < k; ++i) {
+        const int u = unknown_start[block[i]] + first[i];
+        for (int r = 0; r < (stick[i] ? dim : 1); ++r) {
+            unknown_contact[u + r] = i;
+            unknown_direction[u + r] = r;
+        }
+        for (int d = 0; d < dim; ++d) {
+            double g = contacts[i].direction[0][d];
+            for (int m = 0; m < t_dim; ++m) g += drag[t_dim * i + m] * contacts[i].direction[1 + m][d];
+            pull[dim * i + d] = g;
+        }
+    }
+    /* S_ii' = sum over the particles p contacts i and i' share of w_ip w_i'p / m_p */
+    for (int t = 0; t < n_terms; ++t) {
+        const int i = terms[t].row, b = block[i], nb = n_contacts[b];
+        for (int u = head[terms[t].particle]; u >= 0; u = next[u])
+            S[s_offset[b] + (long)local[i] * nb + local[terms[u].row]] +=
+                terms[t].c[0] * terms[u].c[0] * inverse_mass[terms[t].particle];
+    }
+    /* A_ab = S_ij (C_a . G_b); z_a = -(C_a acc + bias_a): C_a row a's direction, G_b unknown b's force's */
+    double largest = 0.0;
+    for (int b = 0; b < n_blocks; ++b) {
+        const int nu = n_unknowns[b], nb = n_contacts[b];
+        for (int a = 0; a < nu; ++a) {
+            const int ia = unknown_contact[unknown_start[b] + a], ra = unknown_direction[unknown_start[b] + a];
+            const Contact *ca = contacts + ia;
+            for (int c = 0; c < nu; ++c) {
+                const int ic = unknown_contact[unknown_start[b] + c], rc = unknown_direction[unknown_start[b] + c];
+                const double *g = rc == 0 ? pull + dim * ic : contacts[ic].direction[rc];
+                const double entry = S[s_offset[b] + (long)local[ia] * nb + local[ic]] * dot(dim, ca->direction[ra], g);
+                A[a_offset[b] + (long)a * nu + c] = entry;
+                largest = fmax(largest, fabs(entry));
+            }
+            double rate = ca->bias[ra];
+            for (int j = 0; j < ca->points; ++j)
+                rate += ca->weight[j] * dot(dim, ca->direction[ra], acc + dim * ca->particle[j]);
+            z[unknown_start[b] + a] = -rate;
+        }
+    }
+    int status = 0;
+    for (int b = 0; b < n_blocks && !status; ++b) {
+        int dragged = 0;
+        for (int u = unknown_start[b]; u < unknown_start[b + 1]; ++u)
+            for (int m = 0; m < t_dim; ++m) dragged |= drag[t_dim * unknown_contact[u] + m] != 0.0;
+        double *Ab = A + a_offset[b], *zb = z + unknown_start[b];
+        status = dragged ? lu_solve(Ab, n_unknowns[b], zb, FRICTION_GUARD * largest)
+                         : cholesky_strict(Ab, n_unknowns[b], zb, FRICTION_GUARD * largest, largest);
+    }
+    if (!status) {
+        for (int i = 0; i < k; ++i) {
+            const double *zi = z + unknown_start[block[i]] + first[i];
+            lam_n[i] = zi[0];
+            for (int m = 0; m < t_dim; ++m) lam_t[t_dim * i + m] = stick[i] ? zi[1 + m] : drag[t_dim * i + m] * zi[0];
+        }
+        for (int u = 0; u < unknown_start[n_blocks]; ++u) {
+            const int i = unknown_contact[u], r = unknown_direction[u];
+            const double *g = r == 0 ? pull + dim * i : contacts[i].direction[r];
+            for (int j = 0; j < contacts[i].points; ++j) {
+                const int p = contacts[i].particle[j];
+                const double push = z[u] * contacts[i].weight[j] * inverse_mass[p];
+                for (int d = 0; d < dim; ++d) acc[dim * p + d] += push * g[d];
+            }
+        }
+    }
+    free(contacts), free(terms), free(ints), free(pull), free(offset), free(reals), free(unknown_contact);
+    return status;
+}

@@ -289,9 +289,10 @@ class BodyContactModel(Model):
         self._layouts: dict[tuple, _Layout] = {}  # held rows -> where their terms go (see _rows)
         self._allowed_pairs: tuple[IntArray, IntArray] | None = None  # (kept pairs, the allowed ones; see _allowed_kept)
         self._element = ElementKernels(self.dim, self.backend)
-        # frictionless held rows on particles, solved in C with a C model (see _solve)
+        # held rows on particles, solved in C with a C model (see _solve and _frictional_rows)
         self._held_rows = (CompiledHeldRows(self.masses, self.dim)
                            if self.backend == "c" and isinstance(self._coordinates, _ParticleCoordinates) else None)
+        self._frames_of: tuple[bytes, FloatArray] | None = None  # the grounds' frames at one p (_ground_frames)
         text = f"{inner.digest}|{self.slot_particle.tolist()}|{self.slot_body.tolist()}"
         self.digest = hashlib.sha256(f"bodies|{text}".encode()).hexdigest()[:16]
 
@@ -614,19 +615,19 @@ class BodyContactModel(Model):
             if force is not None:  # else a pivot fell below the drop threshold: contact_solve's fallback below
                 lam[rows] = force
                 return _Solved(ydot, lam, fast, rows, none, none, np.zeros((k, m, self.dim)), stick)
-        r = self._rows(ground_rows, held_slots, q, u, p, tangents=bool((mu > 0.0).any()))
         if not (stick | sliding).any():  # frictionless: no tangent rows, a symmetric system
+            r = self._rows(ground_rows, held_slots, q, u, p, tangents=bool((mu > 0.0).any()))
             force = contact_solve(r.W, -(r.J @ acc[r.columns] + r.bias))
             acc[r.columns] += r.scaled.T @ force
             lam[rows] = force
             return _Solved(ydot, lam, fast, rows, none, none, r.tangents, stick)
-        slip = (r.J[k:] @ u[r.columns]).reshape(m, k).T
+        slip, tangents, fastest, forces = self._frictional_rows(ground_rows, held_slots, q, u, p, mu)
         # a sliding contact's friction is -mu lam_n along its slip direction (the step start's,
         # continued past a stop, as for a ground, taken into the contact's tangent plane now),
         # or from rest (a slip at round-off of the velocities counts as none) against the pull
         # that slips it
-        along = _unit_rows(np.einsum("kd,kmd->km", self._slip[rows], r.tangents))
-        moving = np.linalg.norm(slip, axis=1) > VELOCITY_ROUNDOFF * max(1.0, float(np.abs(u[r.columns]).max(initial=0.0)))
+        along = _unit_rows(np.einsum("kd,kmd->km", self._slip[rows], tangents))
+        moving = np.linalg.norm(slip, axis=1) > VELOCITY_ROUNDOFF * max(1.0, fastest)
         if self.dim == 3:
             # A 3D slip turns within a step: its friction follows it, as a ground contact's
             # solved alone does, unless the phase machine holds it along the step start's
@@ -640,15 +641,66 @@ class BodyContactModel(Model):
         along[none_yet & moving] = _unit_rows(slip[none_yet & moving])
         none_yet = ~along.any(axis=1)
         if (sliding & none_yet).any():
-            held_t = self._coupled_forces(r, acc, k, mu, stick | sliding, np.zeros((k, m)))[1]
+            held_t = forces(stick | sliding, np.zeros((k, m)), acc.copy())[1]
             along[none_yet] = -_unit_rows(held_t[none_yet])
         drag = np.where(sliding[:, None], -mu[:, None] * along, 0.0)
-        lam_n, lam_t, delta = self._coupled_forces(r, acc, k, mu, stick, drag)
-        acc[r.columns] += delta
+        lam_n, lam_t = forces(stick, drag, acc)
         lam[rows] = lam_n
         # the power sliding friction dissipates (>= 0): the contact work entry of the state, as a ground's
         ydot[self.nq + self.nu + 1] -= float(np.sum(np.where(sliding[:, None], lam_t * slip, 0.0)))
-        return _Solved(ydot, lam, fast, rows, slip, lam_t, r.tangents, stick)
+        return _Solved(ydot, lam, fast, rows, slip, lam_t, tangents, stick)
+
+    def _frictional_rows(self, ground_rows: IntArray, slots: IntArray, q, u, p, mu: FloatArray):
+        """The held rows of :meth:`_solve` with their tangent rows: each contact's slip rates
+        (k, dim - 1) along its tangents (k, dim - 1, dim), the largest speed of the
+        coordinates they move, and ``forces(stick, drag, acc) -> (lam_n (k,), lam_t (k, dim -
+        1))``, which adds the rows' accelerations to ``acc`` (:meth:`_coupled_forces`).  In C
+        on particles (:meth:`flexbody.held_rows.CompiledHeldRows.friction`; edge rows and
+        frames keep NumPy), where (nearly) dependent rows fall back to the NumPy rows."""
+        k, m = len(ground_rows) + len(slots), self.dim - 1
+        numpy_rows = []
+
+        def solved(stick, drag, acc):  # the NumPy rows', built once
+            if not numpy_rows:
+                numpy_rows.append(self._rows(ground_rows, slots, q, u, p, tangents=True))
+            r = numpy_rows[0]
+            lam_n, lam_t, delta = self._coupled_forces(r, acc, k, mu, stick, drag)
+            acc[r.columns] += delta
+            return lam_n, lam_t
+
+        if self._held_rows is None or (np.asarray(slots) >= self.first_edge).any():
+            r = self._rows(ground_rows, slots, q, u, p, tangents=True)
+            numpy_rows.append(r)
+            return ((r.J[k:] @ u[r.columns]).reshape(m, k).T, r.tangents,
+                    float(np.abs(u[r.columns]).max(initial=0.0)), solved)
+        d = self.dim
+        x, v = q.reshape(-1, d), u.reshape(-1, d)
+        at, points = self.inner.contacts[ground_rows, 0], self._slot_points(slots)
+        frames = self._ground_frames(p, ground_rows)
+        slip, tangents = self._held_rows.slips(x, v, at, frames, points)
+
+        def forces(stick, drag, acc):
+            answer = self._held_rows.friction(x, v, acc, at, frames, points, stick, drag)
+            return solved(stick, drag, acc) if answer is None else answer
+
+        fastest = max(float(np.abs(v[at]).max(initial=0.0)), float(np.abs(v[points]).max(initial=0.0)))
+        return slip, tangents, fastest, forces
+
+    def _ground_frames(self, p, ground_rows: IntArray) -> FloatArray:
+        """Each ground row's frame (k_g, dim, dim): its ground's unit normal, then its
+        tangents (2D: t = (-n_y, n_x); 3D: the ``ground_3d`` kernel's pair, as :meth:`_rows`
+        takes them), each ground's made once per parameter vector."""
+        grounds = self.inner.contacts[ground_rows, 1]
+        key = np.asarray(p).tobytes()
+        if self._frames_of is None or self._frames_of[0] != key:
+            normals = self._coordinates.ground_normals(p)
+            if self.dim == 2:
+                axes = np.column_stack([-normals[:, 1], normals[:, 0]])[:, None, :]
+            else:
+                zeros = np.zeros((3, len(normals)))
+                axes = self._element.numpy.ground_3d(zeros, zeros, normals.T)[3].transpose(2, 0, 1)
+            self._frames_of = (key, np.concatenate([normals[:, None, :], axes], axis=1))
+        return self._frames_of[1][grounds]
 
     def _coupled_grounds(self, held: np.ndarray, held_slots: IntArray) -> IntArray:
         """The held ground contacts :meth:`_solve` solves with the held slots ``held_slots``

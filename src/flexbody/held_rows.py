@@ -9,6 +9,12 @@ share particles, each solved by the ordered Cholesky of
 dropped relative to the largest diagonal entry of all the rows, as ``contact_solve`` drops
 them).  A pile's right-hand side solves such rows at every
 evaluation; in NumPy their assembly cost three times the whole C right-hand side.
+
+With friction (``fb_held_slips``, ``fb_held_friction``): each contact's tangent rows too,
+as the frictional branch of ``_solve`` takes them (a sticking contact holds them, a sliding
+one's friction is dragged along by its normal force, so the matrix is not symmetric: LU by
+blocks).  Where the rows are (nearly) dependent the NumPy twin's least squares chooses
+among several answers, so C hands the problem back to it.
 """
 
 from __future__ import annotations
@@ -35,6 +41,7 @@ class CompiledHeldRows:
 
         lib = runtime.library()
         self._call, self._blocks = lib.fb_held_rows, lib.fb_row_blocks
+        self._slips, self._friction = lib.fb_held_slips, lib.fb_held_friction
         self.dim = dim
         self.n = len(masses)
         self.inverse_mass = np.ascontiguousarray(1.0 / np.asarray(masses, float))
@@ -63,18 +70,9 @@ class CompiledHeldRows:
             falls below ``-REDUNDANT`` of the largest diagonal entry (the caller solves with
             :func:`flexbody.dynamics.contact_solve`, whose pivoted fallback copes).
         """
-        x, v = np.ascontiguousarray(x, float), np.ascontiguousarray(v, float)
-        d = self.dim
-        if x.shape != (self.n, d) or v.shape != (self.n, d):
-            raise ValueError(f"positions and velocities must be ({self.n}, {d}); got {x.shape} and {v.shape}")
-        if acc.dtype != np.float64 or not acc.flags.c_contiguous or acc.shape != (self.n * d,):
-            raise ValueError(f"acc must be a C-contiguous float64 array of shape ({self.n * d},), written in place")
-        ground_particles = np.ascontiguousarray(ground_particles, np.intc)
-        ground_normals = np.ascontiguousarray(ground_normals, float)
-        slot_points = np.ascontiguousarray(slot_points, np.intc)
-        for name, index in (("ground_particles", ground_particles), ("slot_points", slot_points)):
-            if index.size and not (0 <= index.min() and index.max() < self.n):
-                raise ValueError(f"{name} must be particle indices in [0, {self.n}); got {index.min()}..{index.max()}")
+        x, v, ground_particles, ground_normals, slot_points = self._rows(x, v, ground_particles, ground_normals,
+                                                                         slot_points, frames=False)
+        self._check_acc(acc)
         lam = np.empty(len(ground_particles) + len(slot_points))
         status = self._call(self.dim, len(x), x.ctypes.data, v.ctypes.data, self._inverse_mass,
                             len(ground_particles), ground_particles.ctypes.data, ground_normals.ctypes.data,
@@ -82,6 +80,101 @@ class CompiledHeldRows:
         if status < 0:
             raise MemoryError(f"cannot allocate the held rows' work buffers ({len(lam)} rows)")
         return None if status else lam
+
+    def slips(self, x: FloatArray, v: FloatArray, ground_particles: IntArray, ground_frames: FloatArray,
+              slot_points: IntArray) -> tuple[FloatArray, FloatArray]:
+        """Each held contact's slip rates along its tangents, and those tangents.
+
+        Parameters
+        ----------
+        x, v : ndarray, shape (n, dim)
+        ground_particles : ndarray of int, shape (k_g,)
+        ground_frames : ndarray, shape (k_g, dim, dim)
+            Each ground row's frame: its ground's unit normal, then its tangents.
+        slot_points : ndarray of int, shape (k_s, dim + 1)
+
+        Returns
+        -------
+        slip : ndarray, shape (k, dim - 1)
+            m/s; k = k_g + k_s, ground rows first.
+        tangents : ndarray, shape (k, dim - 1, dim)
+        """
+        x, v, ground_particles, ground_frames, slot_points = self._rows(x, v, ground_particles, ground_frames,
+                                                                        slot_points)
+        d, k = self.dim, len(ground_particles) + len(slot_points)
+        slip, tangents = np.empty((k, d - 1)), np.empty((k, d - 1, d))
+        if self._slips(d, x.ctypes.data, v.ctypes.data, len(ground_particles), ground_particles.ctypes.data,
+                       ground_frames.ctypes.data, len(slot_points), slot_points.ctypes.data, slip.ctypes.data,
+                       tangents.ctypes.data) < 0:
+            raise MemoryError(f"cannot allocate the work buffers of {k} held contacts")
+        return slip, tangents
+
+    def friction(self, x: FloatArray, v: FloatArray, acc: FloatArray, ground_particles: IntArray,
+                 ground_frames: FloatArray, slot_points: IntArray, stick: np.ndarray,
+                 drag: FloatArray) -> tuple[FloatArray, FloatArray] | None:
+        """The held contacts' forces with friction, adding their accelerations to ``acc`` in
+        place: a sticking contact (``stick``) holds its tangent rows too, a sliding one's
+        friction is ``drag`` times its normal force (the frictional branch of
+        :meth:`flexbody.body_contact.BodyContactModel._solve`).
+
+        Parameters
+        ----------
+        x, v, ground_particles, ground_frames, slot_points
+            As :meth:`slips`.
+        acc : ndarray, shape (n * dim,)
+            The free accelerations, C-contiguous, written in place.
+        stick : ndarray of bool, shape (k,)
+        drag : ndarray, shape (k, dim - 1)
+            Friction per newton of normal force along each contact's tangents (0 unless it slides).
+
+        Returns
+        -------
+        (lam_n, lam_t) : ndarray, shapes (k,) and (k, dim - 1), or None
+            The normal forces and the friction along the tangents (N); None, with ``acc``
+            unchanged, where the rows are (nearly) dependent (a pivot within 1e-9 of the
+            largest entry): the least-squares twin picks among their answers.
+        """
+        x, v, ground_particles, ground_frames, slot_points = self._rows(x, v, ground_particles, ground_frames,
+                                                                        slot_points)
+        self._check_acc(acc)
+        d, k = self.dim, len(ground_particles) + len(slot_points)
+        stick = np.ascontiguousarray(stick, np.intc)
+        drag = np.ascontiguousarray(drag, float)
+        if stick.shape != (k,) or drag.shape != (k, d - 1):
+            raise ValueError(f"stick must be ({k},) and drag ({k}, {d - 1}); got {stick.shape} and {drag.shape}")
+        lam_n, lam_t = np.empty(k), np.empty((k, d - 1))
+        status = self._friction(d, self.n, x.ctypes.data, v.ctypes.data, self._inverse_mass, len(ground_particles),
+                                ground_particles.ctypes.data, ground_frames.ctypes.data, len(slot_points),
+                                slot_points.ctypes.data, stick.ctypes.data, drag.ctypes.data, acc.ctypes.data,
+                                lam_n.ctypes.data, lam_t.ctypes.data)
+        if status < 0:
+            raise MemoryError(f"cannot allocate the work buffers of {k} held contacts")
+        return None if status else (lam_n, lam_t)
+
+    def _rows(self, x, v, ground_particles, ground_axes, slot_points, frames: bool = True):
+        """The rows' arguments as the C routines take them, checked: ``ground_axes`` each
+        ground row's frame (k_g, dim, dim), or with ``frames`` False its normal (k_g, dim)."""
+        x, v = np.ascontiguousarray(x, float), np.ascontiguousarray(v, float)
+        d = self.dim
+        if x.shape != (self.n, d) or v.shape != (self.n, d):
+            raise ValueError(f"positions and velocities must be ({self.n}, {d}); got {x.shape} and {v.shape}")
+        ground_particles = np.ascontiguousarray(ground_particles, np.intc)
+        ground_axes = np.ascontiguousarray(ground_axes, float)
+        slot_points = np.ascontiguousarray(slot_points, np.intc).reshape(-1, d + 1)
+        shape = (len(ground_particles), d, d) if frames else (len(ground_particles), d)
+        if ground_axes.shape != shape:
+            raise ValueError(f"the ground rows' {'frames' if frames else 'normals'} must be {shape}; "
+                             f"got {ground_axes.shape}")
+        for name, index in (("ground_particles", ground_particles), ("slot_points", slot_points)):
+            if index.size and not (0 <= index.min() and index.max() < self.n):
+                raise ValueError(f"{name} must be particle indices in [0, {self.n}); got {index.min()}..{index.max()}")
+        return x, v, ground_particles, ground_axes, slot_points
+
+    def _check_acc(self, acc: FloatArray) -> None:
+        """``acc`` must be the C routines' in-place accelerations (n * dim,)."""
+        if acc.dtype != np.float64 or not acc.flags.c_contiguous or acc.shape != (self.n * self.dim,):
+            raise ValueError(f"acc must be a C-contiguous float64 array of shape ({self.n * self.dim},), "
+                             "written in place")
 
     def blocks(self, ground_particles: IntArray, slot_points: IntArray) -> IntArray:
         """Which block each row is in, shape (k_g + k_s,): rows joined through a particle
