@@ -267,11 +267,11 @@ int fb_held_rows(int dim, int n, const double *x, const double *v, const double 
  * given; a slot's: 2D t = (-n_y, n_x), 3D the slip kernel's t1, t2).  A sticking contact
  * holds its tangent rows' accelerations at 0 too; a sliding one's normal force drags its
  * friction along (-mu along its slip, given as drag): the force of its normal unknown acts
- * along n + sum_j drag_j t_j.  Then J M^-1 G^T is not symmetric (LU with partial pivoting;
- * Cholesky where no contact of a block is dragged).  Where the rows are (nearly) dependent
- * the NumPy twin's least squares picks one of several answers: a pivot within
- * FRICTION_GUARD of the largest entry leaves the whole problem to it. */
-#define FRICTION_GUARD 1e-9
+ * along n + sum_j drag_j t_j.  Then J M^-1 G^T is not symmetric (each block inverted).  Where the rows are (nearly) dependent the NumPy twin's least
+ * squares picks one of several answers (it drops singular values below 1e-12 of the
+ * largest, and a sticking contact's columns are scaled by up to 1e6 first): a block whose
+ * condition exceeds FRICTION_CONDITION leaves the whole problem to it. */
+#define FRICTION_CONDITION 1e6
 
 typedef struct {
     int points, particle[4];
@@ -364,50 +364,53 @@ int fb_held_slips(int dim, const double *x, const double *v, int k_g, const int 
     return 0;
 }
 
-/* A (n, n) = L U in place with partial pivoting (its rows and rhs's swapped alike), solving
- * A z = rhs in place; 1 if a pivot is within floor of 0. */
-static int lu_solve(double *A, int n, double *rhs, double floor)
+/* A (n, n) replaced by its inverse, by Gauss-Jordan elimination with partial pivoting
+ * (swapped: n ints of work); 1 if a pivot is 0.  Partial pivoting does not reveal a
+ * (nearly) singular matrix by a small pivot (measured: a fuzz's 21 x 21 frictional block of
+ * singular value 5e-15 had its least pivot 1e-9 of the largest), its inverse's size does:
+ * the caller judges the condition ||A|| ||A^-1||. */
+static int invert(double *A, int n, int *swapped)
 {
     for (int j = 0; j < n; ++j) {
         int best = j;
         for (int i = j + 1; i < n; ++i)
             if (fabs(A[i * n + j]) > fabs(A[best * n + j])) best = i;
-        if (!(fabs(A[best * n + j]) > floor)) return 1;
-        if (best != j) {
-            for (int k = 0; k < n; ++k) {
-                const double t = A[j * n + k];
-                A[j * n + k] = A[best * n + k];
-                A[best * n + k] = t;
-            }
-            const double t = rhs[j];
-            rhs[j] = rhs[best];
-            rhs[best] = t;
+        if (A[best * n + j] == 0.0) return 1;
+        swapped[j] = best;
+        for (int k = 0; best != j && k < n; ++k) {
+            const double t = A[j * n + k];
+            A[j * n + k] = A[best * n + k];
+            A[best * n + k] = t;
         }
-        for (int i = j + 1; i < n; ++i) {
-            const double f = A[i * n + j] / A[j * n + j];
-            A[i * n + j] = f;
-            for (int k = j + 1; k < n; ++k) A[i * n + k] -= f * A[j * n + k];
-            rhs[i] -= f * rhs[j];
+        const double pivot = A[j * n + j];
+        A[j * n + j] = 1.0;
+        for (int k = 0; k < n; ++k) A[j * n + k] /= pivot;
+        for (int i = 0; i < n; ++i) {
+            const double f = A[i * n + j];
+            if (i == j || f == 0.0) continue;
+            A[i * n + j] = 0.0;
+            for (int k = 0; k < n; ++k) A[i * n + k] -= f * A[j * n + k];
         }
     }
-    for (int i = n - 1; i >= 0; --i) {
-        double s = rhs[i];
-        for (int k = i + 1; k < n; ++k) s -= A[i * n + k] * rhs[k];
-        rhs[i] = s / A[i * n + i];
-    }
+    for (int j = n - 1; j >= 0; --j) /* the rows swapped are the inverse's columns */
+        for (int i = 0; swapped[j] != j && i < n; ++i) {
+            const double t = A[i * n + j];
+            A[i * n + j] = A[i * n + swapped[j]];
+            A[i * n + swapped[j]] = t;
+        }
     return 0;
 }
 
-/* A symmetric positive semidefinite (n, n) = L L^T in place (cholesky_within, against the
- * largest entry of all the blocks), solving A z = rhs in place; 1 if a pivot is within
- * floor of 0 (a dependent row: left to the least-squares twin). */
-static int cholesky_strict(double *A, int n, double *rhs, double floor, double largest)
+/* The largest column sum of |A| (n, n): its 1-norm. */
+static double norm_1(const double *A, int n)
 {
-    if (cholesky_within(A, n, largest)) return 1;
-    for (int j = 0; j < n; ++j)
-        if (!(A[j * n + j] * A[j * n + j] > floor)) return 1;
-    cholesky_solve(A, n, rhs);
-    return 0;
+    double largest = 0.0;
+    for (int k = 0; k < n; ++k) {
+        double sum = 0.0;
+        for (int i = 0; i < n; ++i) sum += fabs(A[i * n + k]);
+        largest = fmax(largest, sum);
+    }
+    return largest;
 }
 
 /* The held rows' forces with friction and the accelerations they give.
@@ -420,8 +423,8 @@ static int cholesky_strict(double *A, int n, double *rhs, double floor, double l
  * (0 unless it slides); k = k_g + k_s.
  * in/out: acc (n, dim), the free accelerations, returned with the rows' forces added.
  * out: lam_n (k), the normal forces (N); lam_t (k, dim - 1), the friction along the tangents.
- * Returns 0; 1 if a pivot fell within FRICTION_GUARD of the largest entry of the matrices
- * (nothing added to acc: solve with the least-squares twin); -1 if memory ran out. */
+ * Returns 0; 1 if a block's condition exceeds FRICTION_CONDITION (nothing added to acc:
+ * solve with the least-squares twin); -1 if memory ran out. */
 int fb_held_friction(int dim, int n, const double *x, const double *v, const double *inverse_mass, int k_g,
                      const int *ground_particle, const double *ground_frame, int k_s, const int *slot_points,
                      const int *stick, const double *drag, double *acc, double *lam_n, double *lam_t)
@@ -432,16 +435,18 @@ int fb_held_friction(int dim, int n, const double *x, const double *v, const dou
     for (int i = 0; contacts && i < k; ++i) n_terms += contacts[i].points;
     Term *terms = calloc((size_t)(n_terms > 0 ? n_terms : 1), sizeof *terms);
     /* per particle: head; per term: next; per contact: parent, block, local, first (its first
-     * unknown within its block); per block (+1): its contacts, its unknowns, their start */
-    int *ints = malloc((size_t)(n + n_terms + 4 * k + 3 * (k + 1)) * sizeof *ints);
-    double *pull = malloc((size_t)(dim * k + 1) * sizeof *pull); /* each contact's normal force direction */
+     * unknown within its block); per block (+1): its contacts, its unknowns, their start; a
+     * block's row swaps (at most dim k) */
+    int *ints = malloc((size_t)(n + n_terms + 4 * k + 3 * (k + 1) + dim * k) * sizeof *ints);
+    /* each contact's normal force direction (dim k), then a block's answer (at most dim k) */
+    double *pull = malloc((size_t)(2 * dim * k + 1) * sizeof *pull);
     if (!contacts || !terms || !ints || !pull) {
         free(contacts), free(terms), free(ints), free(pull);
         return -1;
     }
     int *head = ints, *next = head + n, *parent = next + n_terms, *block = parent + k, *local = block + k,
         *first = local + k, *n_contacts = first + k, *n_unknowns = n_contacts + (k + 1),
-        *unknown_start = n_unknowns + (k + 1);
+        *unknown_start = n_unknowns + (k + 1), *swapped = unknown_start + (k + 1);
     for (int i = 0, t = 0; i < k; ++i)
         for (int j = 0; j < contacts[i].points; ++j, ++t) {
             terms[t].row = i;
@@ -499,7 +504,6 @@ int fb_held_friction(int dim, int n, const double *x, const double *v, const dou
                 terms[t].c[0] * terms[u].c[0] * inverse_mass[terms[t].particle];
     }
     /* A_ab = S_ij (C_a . G_b); z_a = -(C_a acc + bias_a): C_a row a's direction, G_b unknown b's force's */
-    double largest = 0.0;
     for (int b = 0; b < n_blocks; ++b) {
         const int nu = n_unknowns[b], nb = n_contacts[b];
         for (int a = 0; a < nu; ++a) {
@@ -510,7 +514,6 @@ int fb_held_friction(int dim, int n, const double *x, const double *v, const dou
                 const double *g = rc == 0 ? pull + dim * ic : contacts[ic].direction[rc];
                 const double entry = S[s_offset[b] + (long)local[ia] * nb + local[ic]] * dot(dim, ca->direction[ra], g);
                 A[a_offset[b] + (long)a * nu + c] = entry;
-                largest = fmax(largest, fabs(entry));
             }
             double rate = ca->bias[ra];
             for (int j = 0; j < ca->points; ++j)
@@ -518,14 +521,19 @@ int fb_held_friction(int dim, int n, const double *x, const double *v, const dou
             z[unknown_start[b] + a] = -rate;
         }
     }
+    /* the whole (block diagonal) matrix's condition: its largest block's norm, each inverse's */
+    double size = 0.0;
+    for (int b = 0; b < n_blocks; ++b) size = fmax(size, norm_1(A + a_offset[b], n_unknowns[b]));
     int status = 0;
     for (int b = 0; b < n_blocks && !status; ++b) {
-        int dragged = 0;
-        for (int u = unknown_start[b]; u < unknown_start[b + 1]; ++u)
-            for (int m = 0; m < t_dim; ++m) dragged |= drag[t_dim * unknown_contact[u] + m] != 0.0;
-        double *Ab = A + a_offset[b], *zb = z + unknown_start[b];
-        status = dragged ? lu_solve(Ab, n_unknowns[b], zb, FRICTION_GUARD * largest)
-                         : cholesky_strict(Ab, n_unknowns[b], zb, FRICTION_GUARD * largest, largest);
+        const int nu = n_unknowns[b];
+        double *Ab = A + a_offset[b], *zb = z + unknown_start[b], *x = pull + dim * k; /* x: nu <= dim k reals */
+        status = invert(Ab, nu, swapped) || !(size * norm_1(Ab, nu) <= FRICTION_CONDITION);
+        for (int i = 0; !status && i < nu; ++i) {
+            x[i] = 0.0;
+            for (int j = 0; j < nu; ++j) x[i] += Ab[(long)i * nu + j] * zb[j];
+        }
+        for (int i = 0; !status && i < nu; ++i) zb[i] = x[i];
     }
     if (!status) {
         for (int i = 0; i < k; ++i) {

@@ -28,6 +28,9 @@ The studies, each printed as a table and saved as JSON and PNG in ``--out``:
   methods over Coulomb's mu x Newton's e (:mod:`flexbody.bench_friction`).
 * ``lcp`` — Lemke's method compiled against its NumPy path on the LCPs the fuzzes saved:
   one path and the whole solve with its rescues, bit for bit the same answers.
+* ``held_friction`` — the held contacts between bodies with friction, their rows in C
+  against NumPy, on a 2D and a 3D scene that slide and stick
+  (:mod:`flexbody.bench_held_friction`).
 
 Each chart is drawn from its study's JSON alone (:data:`PLOTS`): ``python -m
 flexbody.bench [FOLDER]`` redraws the PNGs beside the JSON files without running anything.
@@ -601,6 +604,12 @@ def _plot_bodies(data: dict):
     return plot_bodies(data)
 
 
+def _plot_held_friction(data: dict):
+    from .bench_held_friction import plot_held_friction
+
+    return plot_held_friction(data)
+
+
 def _plot_friction_map(data: dict):
     from .bench_friction import plot_friction_map
 
@@ -609,7 +618,7 @@ def _plot_friction_map(data: dict):
 
 PLOTS = {"work_precision": plot_work_precision, "stability_map": plot_stability, "resolution": plot_resolution,
          "mujoco": plot_mujoco, "mujoco3d": plot_mujoco, "work_precision_incline": plot_work_precision,
-         "friction_map": _plot_friction_map, "bodies": _plot_bodies}
+         "friction_map": _plot_friction_map, "bodies": _plot_bodies, "held_friction": _plot_held_friction}
 
 
 def replot(folder: Path) -> list[Path]:
@@ -725,6 +734,12 @@ def _bodies(out: Path, quick: bool) -> dict:
     return bodies_study(out, quick)
 
 
+def _held_friction(out: Path, repeats: int, quick: bool) -> dict:
+    from .bench_held_friction import held_friction_study
+
+    return held_friction_study(out, repeats, quick)
+
+
 def _friction_wp(out: Path, repeats: int, quick: bool) -> dict:
     from .bench_friction import friction_work_precision
 
@@ -797,7 +812,7 @@ def lcp_study(out: Path, repeats: int, quick: bool) -> dict | None:
 STUDIES = {"wp": work_precision, "stability": stability_map, "resolution": resolution_study,
            "mujoco": mujoco_comparison, "mujoco3d": mujoco3d_comparison, "run": run_study, "scale": _scale,
            "sweep": sweep_benchmark, "friction_wp": _friction_wp, "friction_map": _friction_map, "bodies": _bodies,
-           "lcp": lcp_study}
+           "lcp": lcp_study, "held_friction": _held_friction}
 
 
 def bench_command(args) -> int:
@@ -805,7 +820,7 @@ def bench_command(args) -> int:
     out = Path(args.out)
     for name in args.study or list(STUDIES):
         start = time.perf_counter()
-        if name in ("wp", "friction_wp", "lcp"):
+        if name in ("wp", "friction_wp", "lcp", "held_friction"):
             STUDIES[name](out, args.repeats if not args.quick else 1, args.quick)
         elif name == "run":
             run_study(out, args.repeats if not args.quick else 3)

@@ -117,10 +117,12 @@ def _parser() -> argparse.ArgumentParser:
                                        "(stability), resolution study (resolution), MuJoCo side by side in 2D (mujoco) and "
                                        "3D (mujoco3d), the whole run command (run), cost vs size (scale), Dask sweeps "
                                        "(sweep), friction: work-precision on the incline (friction_wp) and the mu x e map "
-                                       "(friction_map), bodies that touch each other (bodies), Lemke's method in C against NumPy (lcp); "
+                                       "(friction_map), bodies that touch each other (bodies), Lemke's method in C against NumPy (lcp), "
+                                       "held contacts with friction in C against NumPy (held_friction); "
                                        "JSON and PNG in --out.")
     bench.add_argument("--study", choices=("wp", "stability", "resolution", "mujoco", "mujoco3d", "run", "scale", "sweep",
-                                           "friction_wp", "friction_map", "bodies", "lcp"), action="append",
+                                           "friction_wp", "friction_map", "bodies", "lcp", "held_friction"),
+                       action="append",
                        help="which study (repeatable; default: all; mujoco and mujoco3d need flexbody[mujoco])")
     bench.add_argument("--out", default="bench", metavar="DIR", help="output folder")
     bench.add_argument("--repeats", type=int, default=5, help="timing repeats (median is reported)")
