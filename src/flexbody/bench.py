@@ -29,7 +29,7 @@ The studies, each printed as a table and saved as JSON and PNG in ``--out``:
 * ``lcp`` — Lemke's method compiled against its NumPy path on the LCPs the fuzzes saved:
   one path and the whole solve with its rescues, bit for bit the same answers.
 * ``held_friction`` — the held contacts between bodies with friction, their rows in C
-  against NumPy, on a 2D and a 3D scene that slide and stick
+  against NumPy, on three scenes (one 2D, two 3D) that slide and stick
   (:mod:`flexbody.bench_held_friction`).
 
 Each chart is drawn from its study's JSON alone (:data:`PLOTS`): ``python -m

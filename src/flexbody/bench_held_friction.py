@@ -4,11 +4,14 @@
 Three scenes whose contacts between bodies slide and stick: ``ring_stack`` (2D) with its
 upper ring thrown sideways; two rough flexible spheres (3D) on a rough ground, the upper
 one landing with a sideways speed (few held rows: most of the run is elsewhere); and a
-stack of three rough flexible boxes, the upper two thrown sideways (many held rows).  Each is run with both backends of the rows,
-alternating, ``repeats`` times; the medians of the wall time, the runs' events, steps,
-penetration and energy drift (the trajectories differ in the last bits, so their event
-counts may too), and the ratio NumPy / C.  Printed, and saved as ``held_friction.json`` and
-``held_friction.png``.
+stack of three rough flexible boxes, the upper two thrown sideways (many held rows).  Each
+is run both ways, alternating, ``repeats`` times: the model's rows in C (with friction;
+the frictionless ones and the instants' blocks were in C before) and all of them in NumPy
+(the model without its :class:`flexbody.held_rows.CompiledHeldRows`, as the tests compare
+them).  The medians of the wall time, the runs' events, steps, penetration and energy
+drift (the trajectories differ in the last bits, so their event counts may too), how many
+frictional solves C made and handed back to NumPy, and the ratio NumPy / C.  Printed, and
+saved as ``held_friction.json`` and ``held_friction.png``.
 """
 
 from __future__ import annotations
@@ -19,7 +22,7 @@ from pathlib import Path
 
 from .scene import Scene, load_scene
 
-#: The C rows hand a (nearly) dependent problem back to NumPy (held_rows): these scenes have none.
+#: The rows in C (the model's own) and in NumPy.
 BACKENDS = ("c", "numpy")
 
 
@@ -73,15 +76,25 @@ def _run(scene: Scene, backend: str) -> dict:
     from .model import load_model
 
     model = load_model(scene)
+    solves = [0, 0]  # frictional solves made in C, handed back to NumPy
     if backend == "numpy":
         model._held_rows = None  # the NumPy rows, as the tests compare them (flexbody.body_contact._solve)
+    else:
+        rows, friction = model._held_rows, model._held_rows.friction
+
+        def counted(*args):
+            answer = friction(*args)
+            solves[answer is None] += 1
+            return answer
+
+        rows.friction = counted
     start = time.perf_counter()
     result = simulate(scene, model=model)
     wall = time.perf_counter() - start
     s = result.stats
     return {"wall_s": wall, "status": result.status, "events": s["events"], "steps": s["steps"],
             "rhs_evaluations": s["rhs_evaluations"], "max_penetration_m": s["max_penetration_m"],
-            "energy_drift_relative": s["energy_drift_relative"]}
+            "energy_drift_relative": s["energy_drift_relative"], "solved_in_c": solves[0], "handed_back": solves[1]}
 
 
 def held_friction_study(out: Path, repeats: int, quick: bool) -> dict:
@@ -96,7 +109,7 @@ def held_friction_study(out: Path, repeats: int, quick: bool) -> dict:
     repeats = max(1, repeats)
     print(f"held_friction: the held rows with friction, C against NumPy, median of {repeats} (alternating)")
     print(f"  {'scene':24s} {'rows':>5s} {'status':>8s} {'wall s':>8s} {'events':>6s} {'steps':>6s} "
-          f"{'penetration m':>13s} {'drift':>8s}")
+          f"{'penetration m':>13s} {'drift':>8s} {'C solves':>8s} {'back':>5s}")
     rows = []
     for name, scene in scenes.items():
         runs = {backend: [] for backend in BACKENDS}
@@ -110,7 +123,7 @@ def held_friction_study(out: Path, repeats: int, quick: bool) -> dict:
                               "walls_s": [r["wall_s"] for r in runs[backend]]}
             print(f"  {name:24s} {backend:>5s} {last['status']:>8s} {entry[backend]['wall_s']:8.2f} "
                   f"{last['events']:6d} {last['steps']:6d} {last['max_penetration_m']:13.2e} "
-                  f"{last['energy_drift_relative']:8.1e}")
+                  f"{last['energy_drift_relative']:8.1e} {last['solved_in_c']:8d} {last['handed_back']:5d}")
         entry["numpy_over_c"] = entry["numpy"]["wall_s"] / entry["c"]["wall_s"]
         print(f"  {'':24s} NumPy / C: {entry['numpy_over_c']:.2f}x")
         rows.append(entry)

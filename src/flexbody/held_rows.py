@@ -12,8 +12,8 @@ evaluation; in NumPy their assembly cost three times the whole C right-hand side
 
 With friction (``fb_held_slips``, ``fb_held_friction``): each contact's tangent rows too,
 as the frictional branch of ``_solve`` takes them (a sticking contact holds them, a sliding
-one's friction is dragged along by its normal force, so the matrix is not symmetric: LU by
-blocks).  Where the rows are (nearly) dependent the NumPy twin's least squares chooses
+one's friction is dragged along by its normal force, so the matrix is not symmetric: each
+block is inverted).  Where the rows are (nearly) dependent the NumPy twin's least squares chooses
 among several answers, so C hands the problem back to it.
 """
 
@@ -131,8 +131,9 @@ class CompiledHeldRows:
         -------
         (lam_n, lam_t) : ndarray, shapes (k,) and (k, dim - 1), or None
             The normal forces and the friction along the tangents (N); None, with ``acc``
-            unchanged, where the rows are (nearly) dependent (a pivot within 1e-9 of the
-            largest entry): the least-squares twin picks among their answers.
+            unchanged, where the rows are (nearly) dependent (the matrix's condition, a bound
+            on its 2-norm one, above 1e6) or a term is not finite: the least-squares twin
+            picks among the answers, or reports the blow-up.
         """
         x, v, ground_particles, ground_frames, slot_points = self._rows(x, v, ground_particles, ground_frames,
                                                                         slot_points)
