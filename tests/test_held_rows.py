@@ -334,13 +334,30 @@ def test_friction_rows_of_a_particle_on_a_ground_give_the_forces_by_hand():
     rows = held_rows([m], 2)
     x, v, frame = np.zeros((1, 2)), np.zeros((1, 2)), np.array([[[0.0, 1.0], [-1.0, 0.0]]])
     acc = np.array([a_x, -G])
-    lam_n, lam_t = rows.friction(x, v, acc, [0], frame, np.zeros((0, 3), int), np.array([True]), np.zeros((1, 1)))
+    lam_n, lam_t = rows.friction(x, v, acc, [0], frame, np.zeros((0, 3), int), [mu], np.array([True]),
+                                 np.zeros((1, 1)))
     assert lam_n[0] == pytest.approx(m * G, rel=1e-14) and lam_t[0, 0] == pytest.approx(m * a_x, rel=1e-14)
     np.testing.assert_allclose(acc, 0.0, atol=1e-14)
     acc = np.array([a_x, -G])
-    lam_n, lam_t = rows.friction(x, v, acc, [0], frame, np.zeros((0, 3), int), np.array([False]), np.array([[mu]]))
+    lam_n, lam_t = rows.friction(x, v, acc, [0], frame, np.zeros((0, 3), int), [mu], np.array([False]),
+                                 np.array([[mu]]))
     assert lam_n[0] == pytest.approx(m * G, rel=1e-14) and lam_t[0, 0] == pytest.approx(mu * m * G, rel=1e-14)
     np.testing.assert_allclose(acc, [a_x - mu * G, 0.0], atol=1e-14)
+
+
+def test_a_sticking_contact_that_pulls_is_handed_back_to_the_twins_split():
+    """The same particle pulled off its ground (a_y = +g) while sticking: its normal force is
+    -m g, and the NumPy twin, which splits sticking friction as mu lam_n, scales its tangent
+    column by sqrt(1e-300) and leaves it no friction, where the exact solve gives it m a_x
+    (a fuzzed 2D pile: 0.14 N in C, none in NumPy, the right-hand sides 9 % apart).  C
+    hands such a problem back; pushed onto the ground it answers."""
+    rows = held_rows([0.2], 2)
+    frame = np.array([[[0.0, 1.0], [-1.0, 0.0]]])
+    for a_y, handed_back in ((G, True), (-G, False)):
+        acc = np.array([3.0, a_y])
+        answer = rows.friction(np.zeros((1, 2)), np.zeros((1, 2)), acc, [0], frame, np.zeros((0, 3), int), [0.5],
+                               np.array([True]), np.zeros((1, 1)))
+        assert (answer is None) == handed_back
 
 
 def test_dependent_friction_rows_are_handed_back_untouched():
@@ -350,7 +367,7 @@ def test_dependent_friction_rows_are_handed_back_untouched():
     frames = np.array([[[0.0, 1.0], [-1.0, 0.0]]] * 2)
     acc = np.array([3.0, -G])
     assert rows.friction(np.zeros((1, 2)), np.zeros((1, 2)), acc, [0, 0], frames, np.zeros((0, 3), int),
-                         np.array([True, True]), np.zeros((2, 1))) is None
+                         [0.5, 0.5], np.array([True, True]), np.zeros((2, 1))) is None
     np.testing.assert_array_equal(acc, [3.0, -G])
 
 
@@ -366,7 +383,7 @@ def test_a_singular_frictional_block_with_no_small_pivot_is_handed_back():
     data = np.load(Path(__file__).parent / "reference" / "friction_rows_singular.npz")
     acc = data["acc"].copy()
     answer = held_rows(data["masses"], 3).friction(data["x"], data["v"], acc, data["at"], data["frames"],
-                                                    data["points"], data["stick"], data["drag"])
+                                                    data["points"], data["mu"], data["stick"], data["drag"])
     assert answer is None
     np.testing.assert_array_equal(acc, data["acc"])
 

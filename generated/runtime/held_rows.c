@@ -271,11 +271,11 @@ int fb_held_rows(int dim, int n, const double *x, const double *v, const double 
  * friction along (-mu along its slip, given as drag): the force of its normal unknown acts
  * along n + sum_j drag_j t_j.  Then J M^-1 G^T is not symmetric: each block is inverted.
  * Where the rows are (nearly) dependent the NumPy twin's least squares picks one of several
- * answers (it drops singular values below 1e-12 of the largest, and a sticking contact's
- * columns are scaled by up to 1e6 first): where the whole matrix's 1-norm condition times
- * its size (a bound on its 2-norm condition) exceeds FRICTION_CONDITION, or a term is not
- * finite (the twin reports a blow-up), the whole problem is left to it. */
-#define FRICTION_CONDITION 1e6
+ * answers (it drops singular values below 1e-12 of the largest, after scaling each sticking
+ * contact's tangent columns, see below): where a bound on the scaled matrix's 2-norm
+ * condition exceeds FRICTION_CONDITION (1e12 with a margin of 100), or a term is not finite
+ * (the twin reports a blow-up), the whole problem is left to it. */
+#define FRICTION_CONDITION 1e10
 
 typedef struct {
     int points, particle[4];
@@ -424,14 +424,15 @@ static double norm_1(const double *A, int n)
  * normal, then the tangents); k_s held slots: their points (k_s, dim + 1), the particle then
  * its element's vertices; stick (k): whether each contact holds its tangent rows too; drag
  * (k, dim - 1): each contact's friction per unit of its normal force along its tangents
- * (0 unless it slides); k = k_g + k_s.
+ * (0 unless it slides); mu (k): the contacts' friction coefficients; k = k_g + k_s.
  * in/out: acc (n, dim), the free accelerations, returned with the rows' forces added.
  * out: lam_n (k), the normal forces (N); lam_t (k, dim - 1), the friction along the tangents.
- * Returns 0; 1 if the condition exceeds FRICTION_CONDITION or a term is not finite
+ * Returns 0; 1 if the condition bound exceeds FRICTION_CONDITION or a term is not finite
  * (nothing added to acc: solve with the least-squares twin); -1 if memory ran out. */
 int fb_held_friction(int dim, int n, const double *x, const double *v, const double *inverse_mass, int k_g,
                      const int *ground_particle, const double *ground_frame, int k_s, const int *slot_points,
-                     const int *stick, const double *drag, double *acc, double *lam_n, double *lam_t)
+                     const double *mu, const int *stick, const double *drag, double *acc, double *lam_n,
+                     double *lam_t)
 {
     const int k = k_g + k_s, t_dim = dim - 1;
     Contact *contacts = held_contacts(dim, x, v, k_g, ground_particle, ground_frame, k_s, slot_points);
@@ -525,10 +526,9 @@ int fb_held_friction(int dim, int n, const double *x, const double *v, const dou
             z[unknown_start[b] + a] = -rate;
         }
     }
-    /* the whole (block diagonal) matrix's condition: its largest block's norm, each inverse's,
-     * times its size (the 2-norm condition is at most that) */
+    /* the whole (block diagonal) matrix: its largest block's norm, its blocks' inverses' */
     const int n_all = unknown_start[n_blocks];
-    double size = 0.0;
+    double size = 0.0, inverse_size = 0.0;
     int status = 0;
     for (int b = 0; b < n_blocks; ++b) size = fmax(size, norm_1(A + a_offset[b], n_unknowns[b]));
     for (long e = 0; e < a_size; ++e) status |= !isfinite(A[e]);
@@ -536,13 +536,32 @@ int fb_held_friction(int dim, int n, const double *x, const double *v, const dou
     for (int b = 0; b < n_blocks && !status; ++b) {
         const int nu = n_unknowns[b];
         double *Ab = A + a_offset[b], *zb = z + unknown_start[b], *answer = pull + dim * k; /* nu <= dim k */
-        status = invert(Ab, nu, swapped) || !(n_all * size * norm_1(Ab, nu) <= FRICTION_CONDITION);
+        status = invert(Ab, nu, swapped);
+        inverse_size = fmax(inverse_size, norm_1(Ab, nu));
         for (int i = 0; !status && i < nu; ++i) {
             answer[i] = 0.0;
             for (int j = 0; j < nu; ++j) answer[i] += Ab[(long)i * nu + j] * zb[j];
         }
         for (int i = 0; !status && i < nu; ++i) zb[i] = answer[i];
     }
+    /* The twin splits sticking friction as mu lam_n: its least squares scales each sticking
+     * contact's tangent columns by sqrt(max(mu lam_n, 1e-12 of the largest such, or 1e-300)),
+     * the normal ones by 1, then drops singular values below 1e-12 of the largest.  The
+     * scaled matrix's 2-norm condition is at most size x 1-norm condition x the scales'
+     * spread: below FRICTION_CONDITION nothing is dropped and its answer is this one.
+     * (Above it, a contact that pulls with all the sticking ones is left without friction
+     * there, measured: 0.14 N in C where the twin has none.) */
+    double largest_limit = -INFINITY, low = 1.0, high = 1.0;
+    for (int i = 0; !status && i < k; ++i)
+        if (stick[i]) largest_limit = fmax(largest_limit, mu[i] * z[unknown_start[block[i]] + first[i]]);
+    const double floor_limit = fmax(1e-12 * largest_limit, 1e-300);
+    for (int i = 0; !status && i < k; ++i)
+        if (stick[i]) {
+            const double scale = sqrt(fmax(mu[i] * z[unknown_start[block[i]] + first[i]], floor_limit));
+            low = fmin(low, scale);
+            high = fmax(high, scale);
+        }
+    status = status || !(n_all * size * inverse_size * (high / low) <= FRICTION_CONDITION);
     if (!status) {
         for (int i = 0; i < k; ++i) {
             const double *zi = z + unknown_start[block[i]] + first[i];

@@ -680,7 +680,7 @@ class BodyContactModel(Model):
         slip, tangents = self._held_rows.slips(x, v, at, frames, points)
 
         def forces(stick, drag, acc):
-            answer = self._held_rows.friction(x, v, acc, at, frames, points, stick, drag)
+            answer = self._held_rows.friction(x, v, acc, at, frames, points, mu, stick, drag)
             return solved(stick, drag, acc) if answer is None else answer
 
         fastest = max(float(np.abs(v[at]).max(initial=0.0)), float(np.abs(v[points]).max(initial=0.0)))

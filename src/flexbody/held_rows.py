@@ -110,7 +110,7 @@ class CompiledHeldRows:
         return slip, tangents
 
     def friction(self, x: FloatArray, v: FloatArray, acc: FloatArray, ground_particles: IntArray,
-                 ground_frames: FloatArray, slot_points: IntArray, stick: np.ndarray,
+                 ground_frames: FloatArray, slot_points: IntArray, mu: FloatArray, stick: np.ndarray,
                  drag: FloatArray) -> tuple[FloatArray, FloatArray] | None:
         """The held contacts' forces with friction, adding their accelerations to ``acc`` in
         place: a sticking contact (``stick``) holds its tangent rows too, a sliding one's
@@ -123,6 +123,9 @@ class CompiledHeldRows:
             As :meth:`slips`.
         acc : ndarray, shape (n * dim,)
             The free accelerations, C-contiguous, written in place.
+        mu : ndarray, shape (k,)
+            The contacts' friction coefficients (a sticking one's friction is split as mu
+            lam_n where it is not unique, as the NumPy twin's least squares does).
         stick : ndarray of bool, shape (k,)
         drag : ndarray, shape (k, dim - 1)
             Friction per newton of normal force along each contact's tangents (0 unless it slides).
@@ -131,22 +134,25 @@ class CompiledHeldRows:
         -------
         (lam_n, lam_t) : ndarray, shapes (k,) and (k, dim - 1), or None
             The normal forces and the friction along the tangents (N); None, with ``acc``
-            unchanged, where the rows are (nearly) dependent (the matrix's condition, a bound
-            on its 2-norm one, above 1e6) or a term is not finite: the least-squares twin
-            picks among the answers, or reports the blow-up.
+            unchanged, where the twin's least squares might drop a singular value (a bound
+            on its scaled matrix's condition above 1e10: the rows (nearly) dependent, or a
+            sticking contact's friction split by a normal force at or below 0) or a term is
+            not finite: the twin picks among the answers, or reports the blow-up.
         """
         x, v, ground_particles, ground_frames, slot_points = self._rows(x, v, ground_particles, ground_frames,
                                                                         slot_points)
         self._check_acc(acc)
         d, k = self.dim, len(ground_particles) + len(slot_points)
-        stick = np.ascontiguousarray(stick, np.intc)
+        mu, stick = np.ascontiguousarray(mu, float), np.ascontiguousarray(stick, np.intc)
         drag = np.ascontiguousarray(drag, float)
-        if stick.shape != (k,) or drag.shape != (k, d - 1):
-            raise ValueError(f"stick must be ({k},) and drag ({k}, {d - 1}); got {stick.shape} and {drag.shape}")
+        if mu.shape != (k,) or stick.shape != (k,) or drag.shape != (k, d - 1):
+            raise ValueError(f"mu and stick must be ({k},) and drag ({k}, {d - 1}); got {mu.shape}, {stick.shape} "
+                             f"and {drag.shape}")
         lam_n, lam_t = np.empty(k), np.empty((k, d - 1))
         status = self._friction(d, self.n, x.ctypes.data, v.ctypes.data, self._inverse_mass, len(ground_particles),
                                 ground_particles.ctypes.data, ground_frames.ctypes.data, len(slot_points),
-                                slot_points.ctypes.data, stick.ctypes.data, drag.ctypes.data, acc.ctypes.data,
+                                slot_points.ctypes.data, mu.ctypes.data, stick.ctypes.data, drag.ctypes.data,
+                                acc.ctypes.data,
                                 lam_n.ctypes.data, lam_t.ctypes.data)
         if status < 0:
             raise MemoryError(f"cannot allocate the work buffers of {k} held contacts")

@@ -62,7 +62,7 @@ SIGNATURES = {
     "fb_row_blocks": (_int, [_int, _int, _int, _ptr, _int, _ptr, _ptr]),
     "fb_held_slips": (_int, [_int, _ptr, _ptr, _int, _ptr, _ptr, _int, _ptr, _ptr, _ptr]),
     "fb_held_friction": (_int, [_int, _int, _ptr, _ptr, _ptr, _int, _ptr, _ptr, _int, _ptr, _ptr, _ptr, _ptr, _ptr,
-                                _ptr]),
+                                _ptr, _ptr]),
     "fb_lemke": (_int, [_int, _ptr, _ptr, _ptr, _int, _double, _double, _ptr, _ptr, _ptr]),
 }
 
