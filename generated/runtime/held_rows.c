@@ -31,31 +31,76 @@ static int root_of(int *parent, int r)
     return r;
 }
 
+/* A held contact's rows: the particles they move with their weights (a ground row's
+ * particle, 1; a slot's particle, 1, and its element's vertices, -w_k) and its directions
+ * (its normal, then with friction its tangents; see fb_held_friction). */
+typedef struct {
+    int points, particle[4];
+    double weight[4], direction[3][3], bias[3]; /* normal then tangents; their accelerations' velocity terms */
+} Contact;
+
+static void ground_contact(int dim, int particle, const double *frame, Contact *c)
+{
+    c->points = 1;
+    c->particle[0] = particle;
+    c->weight[0] = 1.0;
+    for (int r = 0; r < dim; ++r) {
+        for (int k = 0; k < dim; ++k) c->direction[r][k] = frame[dim * r + k];
+        c->bias[r] = 0.0; /* a ground and its axes do not move */
+    }
+}
+
+/* A held slot's contact: the element kernels at its particle and element (points: the
+ * particle, then the element's vertices); its tangents with friction only (3D: the slip
+ * kernel, 1 535 operations, which frictionless rows do not need). */
+static void slot_contact(int dim, const int *points, const double *x, const double *v, int tangents,
+                         Contact *c)
+{
+    double gap, weights[3], normal[3], jacobian[12], rate, tangential[3];
+    const int p = points[0], a = points[1], b = points[2];
+    if (dim == 2) {
+        double s, slip_rate;
+        fb_k_segment_2d(x + 2 * p, x + 2 * a, x + 2 * b, &gap, &s, normal, jacobian);
+        fb_k_segment_2d_velocity(x + 2 * p, x + 2 * a, x + 2 * b, v + 2 * p, v + 2 * a, v + 2 * b, &rate,
+                                 tangential, &c->bias[0], &slip_rate, &c->bias[1]);
+        weights[0] = 1.0 - s;
+        weights[1] = s;
+        c->direction[1][0] = -normal[1];
+        c->direction[1][1] = normal[0];
+    } else {
+        const int q = points[3];
+        double slip_rate[2], axes[6];
+        fb_k_triangle_3d(x + 3 * p, x + 3 * a, x + 3 * b, x + 3 * q, &gap, weights, normal, jacobian);
+        fb_k_triangle_3d_velocity(x + 3 * p, x + 3 * a, x + 3 * b, x + 3 * q, v + 3 * p, v + 3 * a, v + 3 * b,
+                                  v + 3 * q, &rate, tangential, &c->bias[0]);
+        if (tangents)
+            fb_k_triangle_3d_slip(x + 3 * p, x + 3 * a, x + 3 * b, x + 3 * q, v + 3 * p, v + 3 * a, v + 3 * b,
+                                  v + 3 * q, slip_rate, c->bias + 1, axes);
+        for (int k = 0; tangents && k < 3; ++k) {
+            c->direction[1][k] = axes[k];
+            c->direction[2][k] = axes[3 + k];
+        }
+    }
+    for (int k = 0; k < dim; ++k) c->direction[0][k] = normal[k];
+    c->points = dim + 1;
+    for (int j = 0; j <= dim; ++j) {
+        c->particle[j] = points[j];
+        c->weight[j] = j == 0 ? 1.0 : -weights[j - 1];
+    }
+}
+
 /* A held slot's row: its dim + 1 terms (the particle, then the element's vertices) and the
  * velocity term of its gap acceleration. */
 static void slot_row(int dim, const int *points, const double *x, const double *v, int row, Term *terms,
                      double *bias)
 {
-    double gap, weights[3], normal[3], jacobian[12], rate, tangential[3];
-    const int p = points[0], a = points[1], b = points[2];
-    if (dim == 2) {
-        double s, slip_rate, slip_bias;
-        fb_k_segment_2d(x + 2 * p, x + 2 * a, x + 2 * b, &gap, &s, normal, jacobian);
-        fb_k_segment_2d_velocity(x + 2 * p, x + 2 * a, x + 2 * b, v + 2 * p, v + 2 * a, v + 2 * b, &rate,
-                                 tangential, bias, &slip_rate, &slip_bias);
-        weights[0] = 1.0 - s;
-        weights[1] = s;
-    } else {
-        const int c = points[3];
-        fb_k_triangle_3d(x + 3 * p, x + 3 * a, x + 3 * b, x + 3 * c, &gap, weights, normal, jacobian);
-        fb_k_triangle_3d_velocity(x + 3 * p, x + 3 * a, x + 3 * b, x + 3 * c, v + 3 * p, v + 3 * a, v + 3 * b,
-                                  v + 3 * c, &rate, tangential, bias);
-    }
+    Contact c;
+    slot_contact(dim, points, x, v, 0, &c);
+    *bias = c.bias[0];
     for (int j = 0; j <= dim; j++) {
-        const double w = j == 0 ? 1.0 : -weights[j - 1];
         terms[j].row = row;
-        terms[j].particle = points[j];
-        for (int k = 0; k < dim; k++) terms[j].c[k] = w * normal[k];
+        terms[j].particle = c.particle[j];
+        for (int k = 0; k < dim; k++) terms[j].c[k] = c.weight[j] * c.direction[0][k];
     }
 }
 
@@ -277,63 +322,13 @@ int fb_held_rows(int dim, int n, const double *x, const double *v, const double 
  * (the twin reports a blow-up), the whole problem is left to it. */
 #define FRICTION_CONDITION 1e10
 
-typedef struct {
-    int points, particle[4];
-    double weight[4], direction[3][3], bias[3]; /* normal then tangents; their accelerations' velocity terms */
-} Contact;
-
-static void ground_contact(int dim, int particle, const double *frame, Contact *c)
-{
-    c->points = 1;
-    c->particle[0] = particle;
-    c->weight[0] = 1.0;
-    for (int r = 0; r < dim; ++r) {
-        for (int k = 0; k < dim; ++k) c->direction[r][k] = frame[dim * r + k];
-        c->bias[r] = 0.0; /* a ground and its axes do not move */
-    }
-}
-
-static void slot_contact(int dim, const int *points, const double *x, const double *v, Contact *c)
-{
-    double gap, weights[3], normal[3], jacobian[12], rate, tangential[3];
-    const int p = points[0], a = points[1], b = points[2];
-    if (dim == 2) {
-        double s, slip_rate;
-        fb_k_segment_2d(x + 2 * p, x + 2 * a, x + 2 * b, &gap, &s, normal, jacobian);
-        fb_k_segment_2d_velocity(x + 2 * p, x + 2 * a, x + 2 * b, v + 2 * p, v + 2 * a, v + 2 * b, &rate,
-                                 tangential, &c->bias[0], &slip_rate, &c->bias[1]);
-        weights[0] = 1.0 - s;
-        weights[1] = s;
-        c->direction[1][0] = -normal[1];
-        c->direction[1][1] = normal[0];
-    } else {
-        const int q = points[3];
-        double slip_rate[2], tangents[6];
-        fb_k_triangle_3d(x + 3 * p, x + 3 * a, x + 3 * b, x + 3 * q, &gap, weights, normal, jacobian);
-        fb_k_triangle_3d_velocity(x + 3 * p, x + 3 * a, x + 3 * b, x + 3 * q, v + 3 * p, v + 3 * a, v + 3 * b,
-                                  v + 3 * q, &rate, tangential, &c->bias[0]);
-        fb_k_triangle_3d_slip(x + 3 * p, x + 3 * a, x + 3 * b, x + 3 * q, v + 3 * p, v + 3 * a, v + 3 * b,
-                              v + 3 * q, slip_rate, c->bias + 1, tangents);
-        for (int k = 0; k < 3; ++k) {
-            c->direction[1][k] = tangents[k];
-            c->direction[2][k] = tangents[3 + k];
-        }
-    }
-    for (int k = 0; k < dim; ++k) c->direction[0][k] = normal[k];
-    c->points = dim + 1;
-    for (int j = 0; j <= dim; ++j) {
-        c->particle[j] = points[j];
-        c->weight[j] = j == 0 ? 1.0 : -weights[j - 1];
-    }
-}
-
 static Contact *held_contacts(int dim, const double *x, const double *v, int k_g, const int *ground_particle,
                               const double *ground_frame, int k_s, const int *slot_points)
 {
     Contact *contacts = malloc((size_t)(k_g + k_s > 0 ? k_g + k_s : 1) * sizeof *contacts);
     if (!contacts) return NULL;
     for (int r = 0; r < k_g; ++r) ground_contact(dim, ground_particle[r], ground_frame + dim * dim * r, contacts + r);
-    for (int s = 0; s < k_s; ++s) slot_contact(dim, slot_points + (dim + 1) * s, x, v, contacts + k_g + s);
+    for (int s = 0; s < k_s; ++s) slot_contact(dim, slot_points + (dim + 1) * s, x, v, 1, contacts + k_g + s);
     return contacts;
 }
 
@@ -568,7 +563,7 @@ int fb_held_friction(int dim, int n, const double *x, const double *v, const dou
             lam_n[i] = zi[0];
             for (int m = 0; m < t_dim; ++m) lam_t[t_dim * i + m] = stick[i] ? zi[1 + m] : drag[t_dim * i + m] * zi[0];
         }
-        for (int u = 0; u < unknown_start[n_blocks]; ++u) {
+        for (int u = 0; u < n_all; ++u) {
             const int i = unknown_contact[u], r = unknown_direction[u];
             const double *g = r == 0 ? pull + dim * i : contacts[i].direction[r];
             for (int j = 0; j < contacts[i].points; ++j) {

@@ -26,7 +26,8 @@ IntArray = np.ndarray
 
 
 class CompiledHeldRows:
-    """``fb_held_rows`` for the particles of one model.
+    """``fb_held_rows`` (and with friction ``fb_held_slips``, ``fb_held_friction``) for the
+    particles of one model.
 
     Parameters
     ----------
@@ -34,6 +35,11 @@ class CompiledHeldRows:
         The particles' masses (kg), all positive.
     dim : int
         2 or 3.
+
+    Attributes
+    ----------
+    friction_solves : list of int
+        How many frictional problems :meth:`friction` solved, and how many it handed back.
     """
 
     def __init__(self, masses: FloatArray, dim: int) -> None:
@@ -46,6 +52,7 @@ class CompiledHeldRows:
         self.n = len(masses)
         self.inverse_mass = np.ascontiguousarray(1.0 / np.asarray(masses, float))
         self._inverse_mass = self.inverse_mass.ctypes.data  # taken once: each address costs microseconds
+        self.friction_solves = [0, 0]
 
     def __call__(self, x: FloatArray, v: FloatArray, acc: FloatArray, ground_particles: IntArray,
                  ground_normals: FloatArray, slot_points: IntArray) -> FloatArray | None:
@@ -70,7 +77,7 @@ class CompiledHeldRows:
             falls below ``-REDUNDANT`` of the largest diagonal entry (the caller solves with
             :func:`flexbody.dynamics.contact_solve`, whose pivoted fallback copes).
         """
-        x, v, ground_particles, ground_normals, slot_points = self._rows(x, v, ground_particles, ground_normals,
+        x, v, ground_particles, ground_normals, slot_points = self._checked(x, v, ground_particles, ground_normals,
                                                                          slot_points, frames=False)
         self._check_acc(acc)
         lam = np.empty(len(ground_particles) + len(slot_points))
@@ -99,7 +106,7 @@ class CompiledHeldRows:
             m/s; k = k_g + k_s, ground rows first.
         tangents : ndarray, shape (k, dim - 1, dim)
         """
-        x, v, ground_particles, ground_frames, slot_points = self._rows(x, v, ground_particles, ground_frames,
+        x, v, ground_particles, ground_frames, slot_points = self._checked(x, v, ground_particles, ground_frames,
                                                                         slot_points)
         d, k = self.dim, len(ground_particles) + len(slot_points)
         slip, tangents = np.empty((k, d - 1)), np.empty((k, d - 1, d))
@@ -139,7 +146,7 @@ class CompiledHeldRows:
             sticking contact's friction split by a normal force at or below 0) or a term is
             not finite: the twin picks among the answers, or reports the blow-up.
         """
-        x, v, ground_particles, ground_frames, slot_points = self._rows(x, v, ground_particles, ground_frames,
+        x, v, ground_particles, ground_frames, slot_points = self._checked(x, v, ground_particles, ground_frames,
                                                                         slot_points)
         self._check_acc(acc)
         d, k = self.dim, len(ground_particles) + len(slot_points)
@@ -152,13 +159,13 @@ class CompiledHeldRows:
         status = self._friction(d, self.n, x.ctypes.data, v.ctypes.data, self._inverse_mass, len(ground_particles),
                                 ground_particles.ctypes.data, ground_frames.ctypes.data, len(slot_points),
                                 slot_points.ctypes.data, mu.ctypes.data, stick.ctypes.data, drag.ctypes.data,
-                                acc.ctypes.data,
-                                lam_n.ctypes.data, lam_t.ctypes.data)
+                                acc.ctypes.data, lam_n.ctypes.data, lam_t.ctypes.data)
         if status < 0:
             raise MemoryError(f"cannot allocate the work buffers of {k} held contacts")
+        self.friction_solves[status] += 1
         return None if status else (lam_n, lam_t)
 
-    def _rows(self, x, v, ground_particles, ground_axes, slot_points, frames: bool = True):
+    def _checked(self, x, v, ground_particles, ground_axes, slot_points, frames: bool = True):
         """The rows' arguments as the C routines take them, checked: ``ground_axes`` each
         ground row's frame (k_g, dim, dim), or with ``frames`` False its normal (k_g, dim)."""
         x, v = np.ascontiguousarray(x, float), np.ascontiguousarray(v, float)
