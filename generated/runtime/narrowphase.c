@@ -12,6 +12,7 @@
  * Elements are oriented counter-clockwise seen from outside; a segment's outward normal is
  * (e_y, -e_x) of its edge e, a triangle's (b - a) x (c - a).
  */
+#include <float.h>
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -167,6 +168,39 @@ static int in_box(int dim, const double *x, const double *vertices, const int *c
     return 1;
 }
 
+/* The row of a particle at xp on its chosen element: the closest feature's kind, vertices
+ * f (dim, -1 padded) and weights w (dim), the contact normal n (dim) (the element's on a
+ * face; else from the feature to the particle, or the pseudo-normal where they coincide);
+ * returns the gap, signed by the pseudo-normal (negative inside the body). */
+static double signed_gap(int dim, const double *xp, const double *vertices, const int *elements,
+                         const int *incident_start, const int *incident, int element, int *kind, int *f, double *w,
+                         double *n)
+{
+    const double distance = closest_on_element(dim, xp, vertices, elements + dim * element, kind, f, w);
+    double offset[3], pseudo[3], face[3], along = 0.0;
+    element_normal(dim, vertices, elements + dim * element, face);
+    if (*kind == FB_FACE)
+        memcpy(pseudo, face, sizeof face);
+    else
+        pseudo_normal(dim, vertices, elements, incident_start, incident, *kind, f, pseudo);
+    for (int k = 0; k < dim; k++) {
+        double closest = 0.0;
+        for (int j = 0; j < dim; j++)
+            if (f[j] >= 0) closest += w[j] * vertices[dim * f[j] + k];
+        offset[k] = xp[k] - closest;
+        along += offset[k] * pseudo[k];
+    }
+    const double sign = along < 0.0 ? -1.0 : 1.0;
+    double pseudo_norm = 0.0;
+    for (int k = 0; k < dim; k++) pseudo_norm += pseudo[k] * pseudo[k];
+    pseudo_norm = sqrt(pseudo_norm);
+    for (int k = 0; k < dim; k++) {
+        const double direction = distance > 0.0 ? offset[k] / distance : pseudo[k] / pseudo_norm;
+        n[k] = *kind == FB_FACE ? face[k] : sign * direction;
+    }
+    return sign * distance;
+}
+
 /* Each particle's nearest candidate element (per particle and surface body) and its signed
  * gap.  in: x (n, dim) particle positions, vertices (nv, dim), elements (m, dim), the
  * body of each element (m; NULL: one surface), pairs (n_pairs, 2) of (particle, element),
@@ -198,37 +232,148 @@ int fb_closest_features(int dim, int n_pairs, const double *x, const double *ver
     for (int r = 0; r < n_candidates; r++) {
         const Candidate *c = candidates + r;
         if (r > 0 && c->particle == c[-1].particle && c->surface == c[-1].surface) continue;
-        int *f = feature + dim * rows;
-        double *w = weights + dim * rows, *n = normal + dim * rows;
-        const double *xp = x + dim * c->particle;
         /* Recomputed for the rows kept only: cheaper than storing every pair's answer. */
-        const double distance = closest_on_element(dim, xp, vertices, elements + dim * c->element, kind + rows, f, w);
-        double offset[3], pseudo[3], face[3], along = 0.0;
-        element_normal(dim, vertices, elements + dim * c->element, face);
-        if (kind[rows] == FB_FACE)
-            memcpy(pseudo, face, sizeof face);
-        else
-            pseudo_normal(dim, vertices, elements, incident_start, incident, kind[rows], f, pseudo);
-        for (int k = 0; k < dim; k++) {
-            double closest = 0.0;
-            for (int j = 0; j < dim; j++)
-                if (f[j] >= 0) closest += w[j] * vertices[dim * f[j] + k];
-            offset[k] = xp[k] - closest;
-            along += offset[k] * pseudo[k];
-        }
-        const double sign = along < 0.0 ? -1.0 : 1.0;
-        double pseudo_norm = 0.0;
-        for (int k = 0; k < dim; k++) pseudo_norm += pseudo[k] * pseudo[k];
-        pseudo_norm = sqrt(pseudo_norm);
-        for (int k = 0; k < dim; k++) {
-            const double direction = distance > 0.0 ? offset[k] / distance : pseudo[k] / pseudo_norm;
-            n[k] = kind[rows] == FB_FACE ? face[k] : sign * direction;
-        }
+        gap[rows] = signed_gap(dim, x + dim * c->particle, vertices, elements, incident_start, incident, c->element,
+                               kind + rows, feature + dim * rows, weights + dim * rows, normal + dim * rows);
         particle[rows] = c->particle;
         element[rows] = c->element;
-        gap[rows] = sign * distance;
         rows++;
     }
     free(candidates);
     return rows;
+}
+
+/* ---- A free contact's impact instant on a Runge-Kutta step's dense output ---- */
+
+/* One particle's gap to one body's surface along a step, as flexbody.events.EventFunctions.one
+ * reads it for a free contact between bodies: the nearest of the body's elements (ties to
+ * the lowest-numbered, as fb_closest_features), its gap signed by the pseudo-normal, margin
+ * where that is farther than margin or where there is no element, less the contact's floor.
+ * Positions come from the dense output of SciPy's RkDenseOutput: coordinate j of y at t is
+ * h (Q s)_j + y_old_j, s = (s_1, ..., s_powers), s_k = ((t - t_old) / h)^k, and the
+ * positions are y's first n dim coordinates (the assembled particles).  Only the particle's
+ * and the listed vertices (every vertex of the body's surface) are evaluated. */
+#define FB_DENSE_POWERS 8
+typedef struct {
+    int dim, particle, n_candidates, n_listed, powers;
+    const int *candidates, *listed, *elements, *incident_start, *incident;
+    const double *y_old, *Q;
+    double t_old, h, floor, margin;
+    double *x;
+} DenseGap;
+
+/* Vertex v's position at the powers of s given, into g->x. */
+static void dense_position(const DenseGap *g, const double *power, int v)
+{
+    for (int k = 0; k < g->dim; k++) {
+        const int j = g->dim * v + k;
+        double sum = 0.0;
+        for (int m = 0; m < g->powers; m++) sum += g->Q[g->powers * j + m] * power[m];
+        g->x[j] = g->h * sum + g->y_old[j];
+    }
+}
+
+static double dense_gap(const DenseGap *g, double t)
+{
+    const int dim = g->dim;
+    double power[FB_DENSE_POWERS], s = (t - g->t_old) / g->h;
+    power[0] = s;
+    for (int k = 1; k < g->powers; k++) power[k] = power[k - 1] * s;
+    dense_position(g, power, g->particle);
+    for (int i = 0; i < g->n_listed; i++) dense_position(g, power, g->listed[i]);
+    const double *xp = g->x + dim * g->particle;
+    double nearest = INFINITY;
+    int chosen = -1;
+    for (int r = 0; r < g->n_candidates; r++) {
+        const int e = g->candidates[r];
+        int kind, feature[3];
+        double weights[3];
+        const double distance = closest_on_element(dim, xp, g->x, g->elements + dim * e, &kind, feature, weights);
+        if (distance < nearest || (distance == nearest && e < chosen)) {
+            nearest = distance;
+            chosen = e;
+        }
+    }
+    if (chosen < 0) return g->margin - g->floor;
+    int kind, feature[3];
+    double weights[3], normal[3];
+    const double gap = signed_gap(dim, xp, g->x, g->elements, g->incident_start, g->incident, chosen, &kind, feature,
+                                  weights, normal);
+    return (fabs(gap) <= g->margin ? gap : g->margin) - g->floor;
+}
+
+/* flexbody.events.first_fired on dense_gap, step for step (its comments say why): the time in
+ * [lo, hi] where the gap fires (<= 0, a NaN counting as fired), given g(lo) = g_lo > 0 and
+ * g(hi) = g_hi <= 0, within 2 (xtol + 4 eps |t|) after the crossing, by Chandrupatla's
+ * method; a value of exactly 0 is told from the inside of a plateau of zeros (a particle in
+ * a coplanar face's plane) by a point 2 tol toward the unfired end.  Returns the fired end. */
+static double first_fired(const DenseGap *g, double lo, double hi, double g_lo, double g_hi, double xtol)
+{
+    const double eps = DBL_EPSILON;
+    double a = hi, g_a = g_hi, b = lo, g_b = g_lo, c = b, g_c = g_b, t = 0.5;
+    for (;;) {
+        double width = fabs(b - a);
+        const double tol = xtol + 4.0 * eps * fmax(fabs(a), fabs(b));
+        if (width <= 2.0 * tol) break;
+        if (g_a == 0.0 && g_b > 0.0) {
+            const double x = a + 2.0 * tol / width * (b - a), g_x = dense_gap(g, x);
+            if (g_x > 0.0) return a;
+            a = x;
+            g_a = g_x;
+            t = 0.5;
+            width = fabs(b - a);
+            if (width <= 2.0 * tol) break;
+        }
+        const double limit = tol / width;
+        const double x = a + fmin(1.0 - limit, fmax(limit, t)) * (b - a);
+        if (x == a || x == b) break;
+        const double g_x = dense_gap(g, x);
+        if ((g_x > 0.0) == (g_a > 0.0)) {
+            c = a;
+            g_c = g_a;
+        } else {
+            c = b;
+            g_c = g_b;
+            b = a;
+            g_b = g_a;
+        }
+        a = x;
+        g_a = g_x;
+        if (g_a == 0.0 || g_b == 0.0 || g_c == 0.0 || g_c == g_b) {
+            t = 0.5;
+            continue;
+        }
+        const double xi = (a - b) / (c - b), phi = (g_a - g_b) / (g_c - g_b);
+        if (phi * phi < xi && (1.0 - phi) * (1.0 - phi) < 1.0 - xi)
+            t = g_a / (g_b - g_a) * g_c / (g_b - g_c) + (c - a) / (b - a) * g_a / (g_c - g_a) * g_b / (g_c - g_b);
+        else
+            t = 0.5;
+    }
+    return g_a > 0.0 ? b : a;
+}
+
+/* The impact instant of one particle on one body's surface in [ta, tb] of a step, as
+ * flexbody.events._root finds a free contact's: the first time its gap (dense_gap) fires.
+ * in: dim; the particle; the body's elements (n_candidates, their indices into elements
+ * (m, dim)) with each vertex's elements as CSR (incident_start, incident); the listed
+ * vertices (n_listed: every vertex of those elements); the step's dense output (y_old (ny),
+ * Q (ny, powers <= FB_DENSE_POWERS) row-major, t_old, h); the contact's floor, margin,
+ * ta, tb, xtol; x (n, dim): scratch, only the listed rows are written.
+ * out: *root, and the gap at ta.  Returns 0 with *root the instant (tb where the gap stays
+ * above 0 at tb, as _root), 1 where the gap at ta is not above 0 (the caller decides), or
+ * -1 for more powers than FB_DENSE_POWERS. */
+int fb_gap_root(int dim, int particle, int n_candidates, const int *candidates, const int *elements,
+                const int *incident_start, const int *incident, int n_listed, const int *listed, const double *y_old,
+                const double *Q, int powers, double t_old, double h, double floor, double margin, double ta, double tb,
+                double xtol, double *x, double *root, double *g_ta)
+{
+    if (powers < 1 || powers > FB_DENSE_POWERS) return -1;
+    const DenseGap g = {dim, particle, n_candidates, n_listed, powers, candidates, listed, elements, incident_start,
+                        incident, y_old, Q, t_old, h, floor, margin, x};
+    const double fa = dense_gap(&g, ta);
+    *g_ta = fa;
+    if (!(fa > 0.0)) return 1;
+    const double fb = dense_gap(&g, tb);
+    *root = fb > 0.0 ? tb : first_fired(&g, ta, tb, fa, fb, xtol);
+    return 0;
 }

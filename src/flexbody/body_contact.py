@@ -108,8 +108,8 @@ from .own_surface import OwnSurface
 from .scene import Scene
 from .surface import (STRICT, closure_problem, cross, crossings, edges, edges_through, piercings, segments_across,
                       signed_measure, winding_numbers)
-from .surface_contact import (FACE, CompiledClosestFeatures, SurfaceContact, closest_features, segment_normals,
-                              thinnest_width, triangle_normals, vertex_elements)
+from .surface_contact import (FACE, CompiledClosestFeatures, CompiledGapRoot, SurfaceContact, closest_features,
+                              segment_normals, thinnest_width, triangle_normals, vertex_elements)
 
 FloatArray = np.ndarray
 IntArray = np.ndarray
@@ -266,6 +266,11 @@ class BodyContactModel(Model):
         # each slot's element while constrained; an edge row's edge and side (EdgeSlots.encode):
         # so held_on and the driver's samples restore an edge row's side with its edge
         self.element_of = np.full(self.n_slots, -1, np.intp)
+        # A free slot's impact instant in C: on the particles' own coordinates (no rigid
+        # frame), where its gap is its body's surface's nearest element (no self-contact).
+        self._gap_root = (CompiledGapRoot(self._narrow, self.element_body, self.n_particles)
+                          if self._narrow is not None and isinstance(self._coordinates, _ParticleCoordinates)
+                          and self.own is None else None)
         #: A 2D particle can pass through another body's convex corner between a step's event
         #: checks, however short the step (:meth:`corner_cuts`).
         self.corners = self.dim == 2 and self.n_primary > 0
@@ -379,6 +384,16 @@ class BodyContactModel(Model):
             return self.margin
         gap = float(contact.gap[0])
         return gap if abs(gap) <= self.margin else self.margin
+
+    def gap_root(self, output, c: int, floor: float, ta: float, tb: float, xtol: float) -> float | None:
+        """As :meth:`flexbody.model.Model.gap_root`: a primary slot's, in C
+        (:class:`flexbody.surface_contact.CompiledGapRoot`), where the particles are the
+        coordinates, without self-contact; None for the others (grounds, edge rows, rigid
+        frames), or where it does not apply."""
+        slot = c - self.n_ground_contacts
+        if self._gap_root is None or not 0 <= slot < self.n_primary:
+            return None
+        return self._gap_root(output, self.slot_particle[slot], self.slot_body[slot], floor, self.margin, ta, tb, xtol)
 
     def gaps_of(self, q, p, contacts: IntArray) -> FloatArray:
         """Gaps of ``contacts (k,)`` alone, equal to ``gaps(q, p)[contacts]``: a slot's from its

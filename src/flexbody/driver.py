@@ -209,6 +209,7 @@ def _remembered(dense: Callable[[float], np.ndarray]) -> Callable[[float], np.nd
             states[key].flags.writeable = False
         return states[key]
 
+    at.output = dense  # the stepper's own, for a model that evaluates a few coordinates of it (Model.gap_root)
     return at
 
 

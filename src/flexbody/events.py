@@ -32,6 +32,8 @@ from .constants import FREE, GROUP_TIME, HELD, SLIDING
 from .contact import Phases
 from .model import Model
 
+#: The tolerance (s) of a root's time, besides the rounding of t (:func:`first_fired`).
+ROOT_TIME = 1e-15
 
 
 class EventFunctions:
@@ -332,13 +334,13 @@ def _corner_cut(events: EventFunctions, dense: Callable[[float], np.ndarray], t_
 
             if t_end < tb and lines(t_end)[j] > 0.0:  # not in before the step's event: nothing to miss
                 continue
-            t_in = first_fired(lambda t: lines(t)[j], ta, tb, lines_a[k, j], lines_b[k, j], xtol=1e-15)
-            t_out = first_fired(lambda t: -lines(t)[1 - j], ta, tb, -lines_a[k, 1 - j], -lines_b[k, 1 - j], xtol=1e-15)
+            t_in = first_fired(lambda t: lines(t)[j], ta, tb, lines_a[k, j], lines_b[k, j], xtol=ROOT_TIME)
+            t_out = first_fired(lambda t: -lines(t)[1 - j], ta, tb, -lines_a[k, 1 - j], -lines_b[k, 1 - j], xtol=ROOT_TIME)
             if t_in >= t_out:  # round the vertex outside
                 continue
             d_in, d_out = (float(g[j] - g[1 - j]) for g in (lines(t_in), lines(t_out)))
             t_deep = (first_fired(lambda t: float(np.subtract(*lines(t)[[j, 1 - j]])), t_in, t_out, d_in, d_out,
-                                  xtol=1e-15) if d_in > 0.0 >= d_out else 0.5 * (t_in + t_out))
+                                  xtol=ROOT_TIME) if d_in > 0.0 >= d_out else 0.5 * (t_in + t_out))
             if events.one(dense(t_deep), c) < -events.gap_tolerance:
                 roots[c] = _root(events, dense, c, ta, t_deep, float(g_a[c]))
         if roots:
@@ -485,7 +487,16 @@ def _root(events: EventFunctions, dense: Callable[[float], np.ndarray], c: int, 
 
     The bracket is evaluated on the dense output itself: an interpolant need not pass
     exactly through the step's end state (LSODA's does not), so its sign there decides.
+    A free contact's search runs in the model where it has its own (contacts between
+    bodies on SciPy's Runge-Kutta output: :meth:`flexbody.model.Model.gap_root`, the same
+    steps in C on the few coordinates the gap reads, not the whole state at each try).
     """
+    output = getattr(dense, "output", None)  # the stepper's own (flexbody.driver._remembered)
+    if output is not None and events.free[c]:  # the model's own search on it, where it has one
+        root = events.model.gap_root(output, c, float(events.phases.floor[c]), ta, tb, ROOT_TIME)
+        if root is not None:
+            return root
+
     def g(t: float) -> float:
         return events.one(dense(t), c)
 
@@ -505,7 +516,7 @@ def _root(events: EventFunctions, dense: Callable[[float], np.ndarray], c: int, 
         return tb
     # a free contact's gap reads exactly 0 on a plateau where a particle lies in a coplanar
     # face's plane; a held one's function is 0 at its root only
-    return first_fired(g, ta, tb, fa, fb, xtol=1e-15, plateaus=bool(events.free[c]))
+    return first_fired(g, ta, tb, fa, fb, xtol=ROOT_TIME, plateaus=bool(events.free[c]))
 
 
 def first_fired(g: Callable[[float], float], lo: float, hi: float, g_lo: float, g_hi: float,

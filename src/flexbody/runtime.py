@@ -58,6 +58,8 @@ SIGNATURES = {
     "fb_sys_settle": (_int, [_ptr, _ptr, _ptr]),
     "fb_closest_features": (_int, [_int, _int, _ptr, _ptr, _ptr, _ptr, _ptr, _ptr, _ptr, _double, _ptr, _ptr, _ptr,
                                    _ptr, _ptr, _ptr, _ptr]),
+    "fb_gap_root": (_int, [_int, _int, _int, _ptr, _ptr, _ptr, _ptr, _int, _ptr, _ptr, _ptr, _int, _double, _double,
+                           _double, _double, _double, _double, _double, _ptr, _ptr, _ptr]),
     "fb_held_rows": (_int, [_int, _int, _ptr, _ptr, _ptr, _int, _ptr, _ptr, _int, _ptr, _ptr, _ptr]),
     "fb_row_blocks": (_int, [_int, _int, _int, _ptr, _int, _ptr, _ptr]),
     "fb_held_slips": (_int, [_int, _ptr, _ptr, _int, _ptr, _ptr, _int, _ptr, _ptr, _ptr]),
