@@ -535,7 +535,9 @@ def test_compiled_closest_features_equal_the_numpy_twin(rng, surface):
     """fb_closest_features (C) gives closest_features' answer: the same particles, feature
     kinds and features (faces, edges and vertices all occur), the same element where the
     feature is a face (an edge or vertex is shared: either element is right), and gaps,
-    weights and normals to rounding; over all pairs, a random subset of them, and none."""
+    weights and normals to rounding; over all pairs, a random subset of them, and none
+    (grouped by particle, as the broad phase hands them, each group put in order alone), and
+    all of them shuffled (sorted whole)."""
     from flexbody.surface_contact import CompiledClosestFeatures
 
     body = None
@@ -554,7 +556,7 @@ def test_compiled_closest_features_equal_the_numpy_twin(rng, surface):
     compiled = CompiledClosestFeatures(elements, len(vertices), body)
     every = np.indices((len(points), len(elements))).reshape(2, -1).T
     some = every[rng.random(len(every)) < 0.3]
-    for pairs in (every, some, every[:0]):
+    for pairs in (every, some, every[:0], every[rng.permutation(len(every))]):
         reference = closest_features(points, vertices, elements, pairs, body)
         found = compiled(points, vertices, pairs)
         for field in ("particle", "kind", "feature"):

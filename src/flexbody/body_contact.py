@@ -1935,7 +1935,10 @@ class BodyContactModel(Model):
                 offset += len(w)
         coefficients = np.concatenate(coefficients)
         J = np.zeros((len(directions) * k, len(layout.particles), d))
-        np.add.at(J, (layout.rows, layout.at), coefficients)
+        if layout.distinct:  # each term its own entry (np.add.at costs ~0.1 ms a call)
+            J[layout.rows, layout.at] = coefficients
+        else:
+            np.add.at(J, (layout.rows, layout.at), coefficients)
         bias = np.concatenate([bias, *slip_bias.T]) if tangents else bias
         columns, J, scaled, bias = self._coordinates.rows(layout.particles, J.reshape(len(J), -1), bias, q, u, p)
         if isinstance(self._coordinates, _ParticleCoordinates) and J.shape[1] > DENSE_WIDTH:
@@ -1981,7 +1984,8 @@ class BodyContactModel(Model):
             index += [a * m + b] + ([b * m + a] if offset else [])
         masses = self.masses[particles[sorted_at]][:, None] if isinstance(self._coordinates, _ParticleCoordinates) \
             else None
-        return _Layout(particles, rows, at, order, masses, pairs, np.concatenate(index))
+        distinct = len(np.unique(rows * len(particles) + at)) == len(rows)
+        return _Layout(particles, rows, at, order, masses, pairs, np.concatenate(index), distinct)
 
     @staticmethod
     def _sparse_gram(layout: _Layout, coefficients: FloatArray, m: int) -> FloatArray:
@@ -2034,7 +2038,8 @@ class _Layout(NamedTuple):
     For the sparse ``J M^-1 J^T``: ``order`` sorts the terms by particle, ``masses`` (t, 1)
     are the sorted terms' particles' masses, ``pairs`` the index pairs (first, second,
     mirrored) of sorted terms on the same particle, and ``index`` their entries' flat
-    positions in W (a pair's, then its mirror's)."""
+    positions in W (a pair's, then its mirror's).  ``distinct``: no two terms share a row
+    and a particle (a row's particle and its element's vertices are different particles)."""
 
     particles: IntArray
     rows: IntArray
@@ -2043,6 +2048,7 @@ class _Layout(NamedTuple):
     masses: FloatArray | None
     pairs: list
     index: IntArray
+    distinct: bool
 
 
 class _Rows(NamedTuple):
