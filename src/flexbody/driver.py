@@ -611,13 +611,20 @@ class _Run:
                     solver = stepper(rhs, t_start, y_start, t_bound, **options)
                     renew_slips()
                     continue
-                g_new = events(solver.y)
-                hit = locate(events, dense, solver.t_old, solver.t, g_old, g_new)
+                at_end: list[np.ndarray] = []  # the step end's event functions, once asked for
+
+                def end_functions() -> np.ndarray:
+                    if not at_end:
+                        at_end.append(events(solver.y))
+                    return at_end[0]
+
+                hit = locate(events, dense, solver.t_old, solver.t, g_old, end_functions)
                 t_stop = hit.t if hit else solver.t
                 self.y[:] = dense(t_stop) if hit else solver.y
                 self.record(dense, t_stop, solver.t_old)
                 if hit:
                     return _Stop(t_stop, hit.contacts & events.free, hit.contacts & events.held_mask, True)
+                g_new = end_functions()  # (a step without an event has them: locate asked)
                 if events.friction:  # the next step's slip directions
                     renew_slips()
                     g_new = events(solver.y)

@@ -260,7 +260,7 @@ def locate(
     t_old: float,
     t_new: float,
     g_old: np.ndarray,
-    g_new: np.ndarray,
+    g_new: np.ndarray | Callable[[], np.ndarray],
 ) -> Crossing | None:
     """Find the earliest sign change (positive to non-positive) in ``[t_old, t_new]``.
 
@@ -274,10 +274,12 @@ def locate(
         The step's dense output, ``t -> y (ny,)``.
     g_old, g_new : ndarray, shape (nc,)
         Event functions at the step's ends (``g_new`` follows a contact armed at the ground
-        at the midpoint, see :meth:`EventFunctions.rearm`).
+        at the midpoint, see :meth:`EventFunctions.rearm`); ``g_new`` may be a function that
+        evaluates them, called only where needed (a dip found first ends the step before).
     """
     dip = _first_dip(events, dense, t_old, t_new, g_old)
     if dip is None:
+        g_new = g_new() if callable(g_new) else g_new
         crossing = _unmissed(events, dense, t_old, g_old, _sign_change(events, dense, t_old, t_new, g_old, g_new))
         return _corner_cut(events, dense, t_old, t_new, g_old, crossing)
     # the step as if it ended at the dip: an earlier crossing of another contact wins
