@@ -1,5 +1,5 @@
 """A free contact's impact instant between bodies, searched in C on the step's dense output
-(``fb_gap_root``, :class:`flexbody.surface_contact.CompiledGapRoot`).
+(``fb_gap_root``, ``fb_dense_gaps``: :class:`flexbody.surface_contact.CompiledDenseGaps`).
 
 References: the closed-form instant of a particle moving straight along a face's normal
 onto it, and the Python search (:func:`flexbody.events._root` on the whole state,
@@ -81,8 +81,7 @@ def test_another_steppers_dense_output_or_a_large_surface_is_left_to_python(monk
 
     assert model.gap_root(OtherOutput(), c, 0.0, 0.0, 1.0, located.ROOT_TIME) is None
     assert model.gap_root(None, c, 0.0, 0.0, 1.0, located.ROOT_TIME) is None
-    monkeypatch.setattr(type(model._gap_root), "MAX_ELEMENTS", 3)
-    model._gap_root._bodies.clear()
+    monkeypatch.setattr(model._dense_gaps, "searched", np.zeros_like(model._dense_gaps.searched))
     y0 = np.zeros(model.ny)
     assert model.gap_root(RkDenseOutput(0.0, 1.0, y0, np.zeros((model.ny, 4))), c, 0.0, 0.0, 1.0,
                           located.ROOT_TIME) is None
@@ -105,11 +104,11 @@ def test_every_root_in_c_equals_the_python_search_along_a_pile(monkeypatch, tabl
         root = search(events, dense, c, ta, tb, start)
         if events.free[c] and model.gap_root(getattr(dense, "output", None), c, float(events.phases.floor[c]), ta, tb,
                                              located.ROOT_TIME) is not None:
-            kept, model._gap_root = model._gap_root, None  # the Python search, on the whole state
+            kept, model._dense_gaps = model._dense_gaps, None  # the Python search, on the whole state
             try:
                 compared.append((root, search(events, dense, c, ta, tb, start)))
             finally:
-                model._gap_root = kept
+                model._dense_gaps = kept
         return root
 
     monkeypatch.setattr(located, "_root", both)
@@ -119,3 +118,32 @@ def test_every_root_in_c_equals_the_python_search_along_a_pile(monkeypatch, tabl
     assert len(roots) >= 20  # impacts between bodies were searched in C
     misses = np.abs(roots[:, 0] - roots[:, 1]) - _tolerance(roots[:, 1])
     assert misses.max() <= 0.0, f"C and Python roots apart by {np.abs(roots[:, 0] - roots[:, 1]).max():.3g} s"
+
+
+@pytest.mark.parametrize("table", [
+    pytest.param(lambda: bodies_scene(4, 23, 0.3, True, stiffness=6000.0), id="2d discs"),
+    pytest.param(lambda: load_scene(sphere_pile(0.16, count=60)), id="3d spheres"),
+])
+def test_every_sample_in_c_equals_the_whole_states_gaps_along_a_pile(monkeypatch, table):
+    """The event functions event location samples a step with (a just-released contact's
+    dips, a crossing's contacts), in C, equal those of the whole interpolated state."""
+    scene = table()
+    model = load_model(scene)
+    sample = located._free_gaps_at
+    compared = []
+
+    def both(events, dense, t, only):
+        g = sample(events, dense, t, only)
+        watched = np.flatnonzero(events.free & only)
+        if getattr(dense, "output", None) is not None and model.dense_gaps(
+                dense.output, watched, events.phases.floor[watched], t) is not None:
+            compared.append((g[watched], events.free_gaps(dense(t), only)[watched]))
+            assert np.isinf(np.delete(g, watched)).all()
+        return g
+
+    monkeypatch.setattr(located, "_free_gaps_at", both)
+    result = flexbody.simulate(scene, model=model)
+    assert result.status == "success", result.message
+    assert len(compared) >= 20
+    c, python = (np.concatenate(z) for z in zip(*compared))
+    np.testing.assert_allclose(c, python, rtol=0.0, atol=1e-15)

@@ -405,28 +405,66 @@ static double first_fired(const DenseGap *g, double lo, double hi, double g_lo, 
     return g_a > 0.0 ? b : a;
 }
 
-/* The impact instant of one particle on one body's surface in [ta, tb] of a step, as
+/* Each body's surface as CSR: body b's elements are elements_of[element_start[b] ..
+ * element_start[b + 1]) (indices into elements (m, dim)), their vertices
+ * vertices_of[vertex_start[b] .. vertex_start[b + 1]), with each vertex's elements
+ * (incident_start, incident) for the pseudo-normals. */
+typedef struct {
+    const int *elements, *incident_start, *incident, *element_start, *elements_of, *vertex_start, *vertices_of;
+} Surfaces;
+
+/* The gap of particle against body b's surface on the dense output (DenseGap). */
+static DenseGap body_gap(int dim, const Surfaces *s, int particle, int b, const double *y_old, const double *Q,
+                         int powers, double t_old, double h, double floor, double margin, double *x)
+{
+    const DenseGap g = {dim, particle, s->element_start[b + 1] - s->element_start[b],
+                        s->vertex_start[b + 1] - s->vertex_start[b], powers, s->elements_of + s->element_start[b],
+                        s->vertices_of + s->vertex_start[b], s->elements, s->incident_start, s->incident, y_old, Q,
+                        t_old, h, floor, margin, x};
+    return g;
+}
+
+/* The impact instant of a particle on body b's surface in [ta, tb] of a step, as
  * flexbody.events._root finds a free contact's: the first time its gap (dense_gap) fires.
- * in: dim; the particle; the body's elements (n_candidates, their indices into elements
- * (m, dim)) with each vertex's elements as CSR (incident_start, incident); the listed
- * vertices (n_listed: every vertex of those elements); the step's dense output (y_old (ny),
- * Q (ny, powers <= FB_DENSE_POWERS) row-major, t_old, h); the contact's floor, margin,
- * ta, tb, xtol; x (n, dim): scratch, only the listed rows are written.
- * out: *root, and the gap at ta.  Returns 0 with *root the instant (tb where the gap stays
- * above 0 at tb, as _root), 1 where the gap at ta is not above 0 (the caller decides), or
- * -1 for more powers than FB_DENSE_POWERS. */
-int fb_gap_root(int dim, int particle, int n_candidates, const int *candidates, const int *elements,
-                const int *incident_start, const int *incident, int n_listed, const int *listed, const double *y_old,
-                const double *Q, int powers, double t_old, double h, double floor, double margin, double ta, double tb,
-                double xtol, double *x, double *root, double *g_ta)
+ * in: dim; the surfaces (elements (m, dim), incident_start, incident, element_start,
+ * elements_of, vertex_start, vertices_of: see Surfaces); the particle and b; the step's
+ * dense output (y_old (ny), Q (ny, powers <= FB_DENSE_POWERS) row-major, t_old, h); the
+ * contact's floor, margin, ta, tb, xtol; x (n, dim): scratch, only the rows read are
+ * written.  out: *root, and the gap at ta.  Returns 0 with *root the instant (tb where the
+ * gap stays above 0 at tb, as _root), 1 where the gap at ta is not above 0 (the caller
+ * decides), or -1 for more powers than FB_DENSE_POWERS. */
+int fb_gap_root(int dim, const int *elements, const int *incident_start, const int *incident,
+                const int *element_start, const int *elements_of, const int *vertex_start, const int *vertices_of,
+                int particle, int b, const double *y_old, const double *Q, int powers, double t_old, double h,
+                double floor, double margin, double ta, double tb, double xtol, double *x, double *root,
+                double *g_ta)
 {
     if (powers < 1 || powers > FB_DENSE_POWERS) return -1;
-    const DenseGap g = {dim, particle, n_candidates, n_listed, powers, candidates, listed, elements, incident_start,
-                        incident, y_old, Q, t_old, h, floor, margin, x};
+    const Surfaces s = {elements, incident_start, incident, element_start, elements_of, vertex_start, vertices_of};
+    const DenseGap g = body_gap(dim, &s, particle, b, y_old, Q, powers, t_old, h, floor, margin, x);
     const double fa = dense_gap(&g, ta);
     *g_ta = fa;
     if (!(fa > 0.0)) return 1;
     const double fb = dense_gap(&g, tb);
     *root = fb > 0.0 ? tb : first_fired(&g, ta, tb, fa, fb, xtol);
+    return 0;
+}
+
+/* The event functions of k free contacts at time t of a step (each its particle's gap to
+ * its body's surface, less its floor: dense_gap), out (k): what event location samples a
+ * step with.  in as fb_gap_root, with particle (k), body (k) and floor (k).  Returns 0, or
+ * -1 for more powers than FB_DENSE_POWERS. */
+int fb_dense_gaps(int dim, const int *elements, const int *incident_start, const int *incident,
+                  const int *element_start, const int *elements_of, const int *vertex_start, const int *vertices_of,
+                  int k, const int *particle, const int *body, const double *floor, const double *y_old,
+                  const double *Q, int powers, double t_old, double h, double margin, double t, double *x,
+                  double *out)
+{
+    if (powers < 1 || powers > FB_DENSE_POWERS) return -1;
+    const Surfaces s = {elements, incident_start, incident, element_start, elements_of, vertex_start, vertices_of};
+    for (int i = 0; i < k; i++) {
+        const DenseGap g = body_gap(dim, &s, particle[i], body[i], y_old, Q, powers, t_old, h, floor[i], margin, x);
+        out[i] = dense_gap(&g, t);
+    }
     return 0;
 }

@@ -108,7 +108,7 @@ from .own_surface import OwnSurface
 from .scene import Scene
 from .surface import (STRICT, closure_problem, cross, crossings, edges, edges_through, piercings, segments_across,
                       signed_measure, winding_numbers)
-from .surface_contact import (FACE, CompiledClosestFeatures, CompiledGapRoot, SurfaceContact, closest_features,
+from .surface_contact import (FACE, CompiledClosestFeatures, CompiledDenseGaps, SurfaceContact, closest_features,
                               segment_normals, thinnest_width, triangle_normals, vertex_elements)
 
 FloatArray = np.ndarray
@@ -266,11 +266,12 @@ class BodyContactModel(Model):
         # each slot's element while constrained; an edge row's edge and side (EdgeSlots.encode):
         # so held_on and the driver's samples restore an edge row's side with its edge
         self.element_of = np.full(self.n_slots, -1, np.intp)
-        # A free slot's impact instant in C: on the particles' own coordinates (no rigid
-        # frame), where its gap is its body's surface's nearest element (no self-contact).
-        self._gap_root = (CompiledGapRoot(self._narrow, self.element_body, self.n_particles)
-                          if self._narrow is not None and isinstance(self._coordinates, _ParticleCoordinates)
-                          and self.own is None else None)
+        # Free slots' gaps on a step's dense output in C (an impact's instant, a step's
+        # samples): on the particles' own coordinates (no rigid frame), where a slot's gap
+        # is its body's surface's nearest element (no self-contact).
+        self._dense_gaps = (CompiledDenseGaps(self._narrow, self.element_body, self.n_particles)
+                            if self._narrow is not None and isinstance(self._coordinates, _ParticleCoordinates)
+                            and self.own is None else None)
         #: A 2D particle can pass through another body's convex corner between a step's event
         #: checks, however short the step (:meth:`corner_cuts`).
         self.corners = self.dim == 2 and self.n_primary > 0
@@ -387,13 +388,22 @@ class BodyContactModel(Model):
 
     def gap_root(self, output, c: int, floor: float, ta: float, tb: float, xtol: float) -> float | None:
         """As :meth:`flexbody.model.Model.gap_root`: a primary slot's, in C
-        (:class:`flexbody.surface_contact.CompiledGapRoot`), where the particles are the
-        coordinates, without self-contact; None for the others (grounds, edge rows, rigid
-        frames), or where it does not apply."""
+        (:class:`flexbody.surface_contact.CompiledDenseGaps`), where the particles are the
+        coordinates, without self-contact; None for the others (grounds, twins, edge rows,
+        rigid frames), or where it does not apply."""
         slot = c - self.n_ground_contacts
-        if self._gap_root is None or not 0 <= slot < self.n_primary:
+        if self._dense_gaps is None or not 0 <= slot < self.n_primary:
             return None
-        return self._gap_root(output, self.slot_particle[slot], self.slot_body[slot], floor, self.margin, ta, tb, xtol)
+        return self._dense_gaps.root(output, self.slot_particle[slot], self.slot_body[slot], floor, self.margin, ta,
+                                     tb, xtol)
+
+    def dense_gaps(self, output, contacts: IntArray, floors: FloatArray, t: float) -> FloatArray | None:
+        """As :meth:`flexbody.model.Model.dense_gaps`: of primary slots, in C, as
+        :meth:`gap_root`; None if any of ``contacts`` is another contact."""
+        slots = np.asarray(contacts, np.intp) - self.n_ground_contacts
+        if self._dense_gaps is None or not ((slots >= 0) & (slots < self.n_primary)).all():
+            return None
+        return self._dense_gaps.at(output, self.slot_particle[slots], self.slot_body[slots], floors, self.margin, t)
 
     def gaps_of(self, q, p, contacts: IntArray) -> FloatArray:
         """Gaps of ``contacts (k,)`` alone, equal to ``gaps(q, p)[contacts]``: a slot's from its

@@ -375,7 +375,7 @@ def _unmissed(events: EventFunctions, dense: Callable[[float], np.ndarray], t_ol
         # re-armed at 0, in through that face and out through the box's bottom within 5.5e-6 s
         # of a 6.6e-4 s step, 3.3e-9 m deep at the instant another contact ended the step,
         # dropped here as starting below its floor).
-        g_start = events.free_gaps(dense(t_old), missed)
+        g_start = _free_gaps_at(events, dense, t_old, missed)
         # the first of DIP_SAMPLES points where one is inside brackets its first crossing
         earlier = _sampled(events, dense, missed, t_old, crossing.t, g_start, g_at)
         if earlier is None:
@@ -418,12 +418,28 @@ def _sampled(events: EventFunctions, dense: Callable[[float], np.ndarray], watch
         if k == DIP_SAMPLES and g_b is None:
             return None
         t = ta + (tb - ta) * k / DIP_SAMPLES
-        g = g_b if k == DIP_SAMPLES else events.free_gaps(dense(t), watched)
+        g = g_b if k == DIP_SAMPLES else _free_gaps_at(events, dense, t, watched)
         fired = np.flatnonzero(watched & (g_prev > 0.0) & (g <= 0.0))
         if fired.size:
             return _earliest(events, dense, fired, t_prev, t, g_prev, g)
         t_prev, g_prev = t, g
     return None
+
+
+def _free_gaps_at(events: EventFunctions, dense: Callable[[float], np.ndarray], t: float,
+                  only: np.ndarray) -> np.ndarray:
+    """``events.free_gaps(dense(t), only)``, from the model's own evaluation on the
+    stepper's dense output where it has one (:meth:`flexbody.model.Model.dense_gaps`: a few
+    contacts' gaps without interpolating the whole state)."""
+    output = getattr(dense, "output", None)  # the stepper's own (flexbody.driver._remembered)
+    if output is not None:
+        watched = np.flatnonzero(events.free & only)
+        gaps = events.model.dense_gaps(output, watched, events.phases.floor[watched], t)
+        if gaps is not None:
+            g = np.full(len(only), np.inf)
+            g[watched] = gaps
+            return g
+    return events.free_gaps(dense(t), only)
 
 
 def _sign_change(events: EventFunctions, dense: Callable[[float], np.ndarray], t_old: float, t_new: float,
@@ -458,10 +474,13 @@ def _earliest(events: EventFunctions, dense: Callable[[float], np.ndarray], fire
         among = np.zeros(len(ga), bool)
         among[fired] = True
 
-        def evaluate(y: np.ndarray) -> np.ndarray:
-            return events.free_gaps(y, among)
+        def evaluate(t: float) -> np.ndarray:
+            return _free_gaps_at(events, dense, t, among)
     else:
-        evaluate = events.held_functions if not events.free[fired].any() else events
+        functions = events.held_functions if not events.free[fired].any() else events
+
+        def evaluate(t: float) -> np.ndarray:
+            return functions(dense(t))
     hi, g_hi = tb, gb
     rooted = np.zeros(len(ga), bool)
     candidates = fired
@@ -472,11 +491,11 @@ def _earliest(events: EventFunctions, dense: Callable[[float], np.ndarray], fire
         rooted[earliest] = True
         if fired.size == 1:  # nothing else fired: the instant is its root (no function evaluated again)
             return Crossing(hi, rooted)
-        g_hi = evaluate(dense(hi))
+        g_hi = evaluate(hi)
         candidates = fired[(g_hi[fired] <= 0.0) & ~rooted[fired]]  # fired by then: their roots are not later
     group = np.zeros(len(ga), bool)
     t_group = min(hi + GROUP_TIME, tb)
-    g_group = gb if t_group == tb else evaluate(dense(t_group))
+    g_group = gb if t_group == tb else evaluate(t_group)
     group[fired[g_group[fired] <= 0.0]] = True
     group[earliest] = True
     return Crossing(hi, group)

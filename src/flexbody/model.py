@@ -139,6 +139,13 @@ class Model:
         state at each try; None where the model has no such search (this one has none)."""
         return None
 
+    def dense_gaps(self, output, contacts: IntArray, floors: FloatArray, t: float) -> FloatArray | None:
+        """The gaps of free ``contacts (k,)`` less their ``floors (k,)`` at time ``t`` on
+        ``output``, a step's dense output, shape (k,): their event functions there, without
+        evaluating the whole state; None where the model has no such evaluation for them
+        (this one has none)."""
+        return None
+
     def gaps_of(self, q, p, contacts: IntArray) -> FloatArray:
         """Gaps of ``contacts (k,)`` alone, equal to ``gaps(q, p)[contacts]``, shape (k,)."""
         return self.gaps(q, p)[contacts]

@@ -443,11 +443,12 @@ class CompiledClosestFeatures:
                               weights=weights.copy(), gap=gap.copy(), normal=normal.copy())
 
 
-class CompiledGapRoot:
-    """A free particle's impact instant on another body's surface within a step, in C
-    (``fb_gap_root`` of the runtime library): the root search of
-    :func:`flexbody.events._root` for a free contact between bodies, with its gap evaluated
-    in C on the step's dense output, at the particle and the surface's vertices only.
+class CompiledDenseGaps:
+    """Free particles' gaps to other bodies' surfaces on a step's dense output, in C
+    (``fb_gap_root`` and ``fb_dense_gaps`` of the runtime library): an impact's instant, the
+    root search of :func:`flexbody.events._root` step for step, and a few contacts' event
+    functions at one time (event location's samples of a step), each evaluated at the
+    particle and its body's surface vertices only.
 
     Locating an impact between bodies evaluates one contact's gap about ten times a root;
     in Python each evaluation interpolates the whole state (every body's coordinates) and
@@ -466,60 +467,77 @@ class CompiledGapRoot:
         The particles' count (the positions are the state's first ``n_particles * dim``).
     """
 
-    #: SciPy's dense output whose formula ``fb_gap_root`` evaluates: its explicit
-    #: Runge-Kutta steppers' (RK23, RK45), ``y_old + h Q (s, s^2, ...)``, s = (t - t_old) / h.
+    #: SciPy's dense output whose formula the C evaluates: its explicit Runge-Kutta
+    #: steppers' (RK23, RK45), ``y_old + h Q (s, s^2, ...)``, s = (t - t_old) / h.
     DENSE_OUTPUT = ("scipy.integrate._ivp.rk", "RkDenseOutput")
-    #: A surface of more elements is left to the broad phase's pairs (each evaluation here
-    #: visits every element of the body).
+    #: A body of more surface elements is left to the broad phase's pairs (each evaluation
+    #: here visits every element of the body).
     MAX_ELEMENTS = 512
 
     def __init__(self, narrow: CompiledClosestFeatures, element_body: IntArray, n_particles: int) -> None:
-        self.narrow, self.lib, self.dim = narrow, narrow.lib, narrow.dim
-        self.element_body = np.asarray(element_body)
-        self._bodies: dict[int, tuple[int, int, int, int] | None] = {}
-        self._kept: list[np.ndarray] = []  # the arrays whose addresses _bodies holds
+        self.lib, self.dim = narrow.lib, narrow.dim
+        element_body = np.asarray(element_body, np.intp)
+        n_bodies = int(element_body.max(initial=-1)) + 1
+        #: Whether each body's surface is searched here (at most MAX_ELEMENTS elements), bool (n_bodies,).
+        self.searched = np.bincount(element_body, minlength=n_bodies) <= self.MAX_ELEMENTS
+        # each body's elements and their vertices, as CSR (C's Surfaces)
+        order = np.argsort(element_body, kind="stable")
+        element_start = np.searchsorted(element_body[order], np.arange(n_bodies + 1))
+        vertices = [np.unique(narrow.elements[order[a:b]]) for a, b in zip(element_start[:-1], element_start[1:])]
+        vertex_start = np.concatenate([[0], np.cumsum([len(v) for v in vertices])])
+        self._arrays = [np.ascontiguousarray(a, np.intc) for a in
+                        (element_start, order, vertex_start, np.concatenate(vertices + [np.zeros(0, np.intp)]))]
+        self._narrow = narrow  # its arrays, whose addresses are held below
         self._x = np.empty(n_particles * self.dim)  # scratch: the rows evaluated
         self._out = np.empty(2)  # the root, the gap at ta
         # addresses taken once (each costs microseconds; a pile asks thousands of roots)
-        self._addresses = (narrow.elements.ctypes.data, narrow.incident_start.ctypes.data, narrow.incident.ctypes.data,
-                           self._x.ctypes.data, self._out.ctypes.data, self._out[1:].ctypes.data)
+        self._surfaces = (narrow.elements.ctypes.data, narrow.incident_start.ctypes.data, narrow.incident.ctypes.data,
+                          *(a.ctypes.data for a in self._arrays))
+        self._scratch = (self._x.ctypes.data, self._out.ctypes.data, self._out[1:].ctypes.data)
         self._dense: tuple | None = None  # the last step's output, its arrays and their addresses
 
-    def _surface(self, body: int) -> tuple[int, int, int, int] | None:
-        """The body's elements and their vertices, as counts and addresses of C ints; None
-        if it has more than :data:`MAX_ELEMENTS` elements."""
-        if body not in self._bodies:
-            elements = np.flatnonzero(self.element_body == body)
-            if len(elements) > self.MAX_ELEMENTS:
-                self._bodies[body] = None
-            else:
-                vertices = np.ascontiguousarray(np.unique(self.narrow.elements[elements]), np.intc)
-                elements = np.ascontiguousarray(elements, np.intc)
-                self._kept += [elements, vertices]
-                self._bodies[body] = (len(elements), elements.ctypes.data, len(vertices), vertices.ctypes.data)
-        return self._bodies[body]
+    def _step(self, output) -> tuple[int, int, int] | None:
+        """The addresses of ``output``'s y_old and Q and Q's column count, or None if it is
+        not :data:`DENSE_OUTPUT` (one step's output serves many calls: kept)."""
+        if self._dense is None or self._dense[0] is not output:
+            kind = type(output)
+            if (kind.__module__, kind.__name__) != self.DENSE_OUTPUT:
+                return None
+            Q, y_old = (np.ascontiguousarray(a, dtype=float) for a in (output.Q, output.y_old))
+            self._dense = (output, Q, y_old, (y_old.ctypes.data, Q.ctypes.data, Q.shape[1]))
+        return self._dense[3]
 
-    def __call__(self, output, particle: int, body: int, floor: float, margin: float, ta: float, tb: float,
-                 xtol: float) -> float | None:
+    def root(self, output, particle: int, body: int, floor: float, margin: float, ta: float, tb: float,
+             xtol: float) -> float | None:
         """The first time in [ta, tb] where ``particle``'s gap to ``body``'s surface (``margin``
         where farther) less ``floor`` is not above 0, on ``output``, a step's dense output;
         ``tb`` if it stays above 0 there.  None where this does not apply: another dense
         output, a surface of more than :data:`MAX_ELEMENTS` elements, or a gap at ``ta`` not
         above 0 (:func:`flexbody.events._root` decides that case itself)."""
-        kind = type(output)
-        if (kind.__module__, kind.__name__) != self.DENSE_OUTPUT:
+        step = self._step(output)
+        if step is None or not self.searched[body]:
             return None
-        surface = self._surface(body)
-        if surface is None:
-            return None
-        if self._dense is None or self._dense[0] is not output:  # one step's output serves many roots
-            Q, y_old = (np.ascontiguousarray(a, dtype=float) for a in (output.Q, output.y_old))
-            self._dense = (output, Q, y_old, Q.ctypes.data, y_old.ctypes.data, Q.shape[1])
-        _, _, _, Q, y_old, powers = self._dense
-        n_elements, elements, n_listed, listed = surface
-        corners, incident_start, incident, x, root, g_ta = self._addresses
-        status = self.lib.fb_gap_root(self.dim, int(particle), n_elements, elements, corners, incident_start, incident,
-                                      n_listed, listed, y_old, Q, powers,
+        y_old, Q, powers = step
+        x, root, g_ta = self._scratch
+        status = self.lib.fb_gap_root(self.dim, *self._surfaces, int(particle), int(body), y_old, Q, powers,
                                       float(output.t_old), float(output.h), float(floor), float(margin), float(ta),
                                       float(tb), float(xtol), x, root, g_ta)
         return float(self._out[0]) if status == 0 else None
+
+    def at(self, output, particles: IntArray, bodies: IntArray, floors: FloatArray, margin: float,
+           t: float) -> FloatArray | None:
+        """Each of k particles' gap to its body's surface (``margin`` where farther) less its
+        floor at time ``t`` on ``output``, shape (k,); None where this does not apply (another
+        dense output, or a surface of more than :data:`MAX_ELEMENTS` elements)."""
+        step = self._step(output)
+        bodies = np.ascontiguousarray(bodies, np.intc)
+        if step is None or not self.searched[bodies].all():
+            return None
+        particles = np.ascontiguousarray(particles, np.intc)
+        floors = np.ascontiguousarray(floors, dtype=float)
+        out = np.empty(len(particles))
+        y_old, Q, powers = step
+        self.lib.fb_dense_gaps(self.dim, *self._surfaces, len(particles), particles.ctypes.data, bodies.ctypes.data,
+                               floors.ctypes.data, y_old, Q, powers, float(output.t_old), float(output.h),
+                               float(margin), float(t), self._scratch[0], out.ctypes.data)
+        return out
