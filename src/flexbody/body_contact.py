@@ -146,7 +146,7 @@ STEP_REACH = 0.5
 #: elements of every slot within ``margin`` cost a pile of discs 15 % of its run.
 RATED_REACH = 1e-6
 #: Whole surface sweeps kept, by the positions they were made at (:meth:`BodyContactModel._surface_contacts`).
-SWEEPS_KEPT = 4
+SWEEPS_KEPT = 8
 #: Layouts of held rows kept (:meth:`BodyContactModel._layout`).
 LAYOUTS_KEPT = 8
 #: A vertex within this fraction of its face's size of the line where two held faces' planes
@@ -1177,7 +1177,8 @@ class BodyContactModel(Model):
             x, v = self._state(np.asarray(y, float), p)
         if len(slots):
             self._constrain_elements(slots, x)
-            margins[0] = self._margins(slots, x, v, held)[1] - self.margin_floor[slots]
+            weights = self._along_edge(slots, self._element.weights(x, self._slot_points(slots).T), x, held)
+            margins[0] = weights.min(axis=1) * self._sizes(slots, x) - self.margin_floor[slots]
         if len(edges):  # an edge contact's closest points reaching an end of either edge
             self._constrain_edges(edges, x)
             margins[1] = self._edge_terms(edges, x, v).margin - self.margin_floor[edges]
@@ -2359,11 +2360,25 @@ class ElementKernels:
     def gaps(self, x: FloatArray, points: IntArray) -> FloatArray:
         """The gaps (k,) alone of :meth:`__call__`'s contacts: the position kernel only (the
         held rows' drift is asked at every step, their velocities need not be gathered)."""
+        return self._positions(x, points)[0]
+
+    def weights(self, x: FloatArray, points: IntArray) -> FloatArray:
+        """The weights (k, dim) alone of :meth:`__call__`'s contacts (the particle's closest
+        point on the element's line or plane): the position kernel only (a held row's
+        event function asks where its particle is on its element, not how fast)."""
+        weight = self._positions(x, points)[1]
+        return np.column_stack([1.0 - weight[:, 0], weight[:, 0]]) if self.dim == 2 else weight
+
+    def _positions(self, x: FloatArray, points: IntArray) -> tuple[FloatArray, FloatArray]:
+        """The position kernel's gap (k,) and s (k, 1; 2D) or barycentrics (k, 3; 3D) of
+        :meth:`__call__`'s contacts, copies."""
         if self.c is not None:
+            k = points.shape[1]
             inputs, outputs = self._gathered(x, None, points)
-            self.c[0](points.shape[1], *inputs[: self.dim + 1], *outputs[:4])
-            return self._outputs[0][: points.shape[1], 0].copy()
-        return getattr(self.numpy, self.name)(*(z.T for z in x[points]))[0][0]
+            self.c[0](k, *inputs[: self.dim + 1], *outputs[:4])
+            return self._outputs[0][:k, 0].copy(), self._outputs[1][:k].copy()
+        gap, weight, _, _ = getattr(self.numpy, self.name)(*(z.T for z in x[points]))
+        return gap[0], weight.T
 
     def _gathered(self, x: FloatArray, v: FloatArray | None, points: IntArray) -> tuple[list[int], list[int]]:
         """Rows ``points`` (1 + dim, k) of ``x`` (and ``v`` if given) copied into the input
