@@ -282,20 +282,23 @@ def locate(
         g_new = g_new() if callable(g_new) else g_new
         crossing = _unmissed(events, dense, t_old, g_old, _sign_change(events, dense, t_old, t_new, g_old, g_new))
         return _corner_cut(events, dense, t_old, t_new, g_old, crossing)
-    # the step as if it ended at the dip: an earlier crossing of another contact wins
+    # the step as if it ended at the dip: an earlier crossing of another contact wins, and
+    # the corners are checked between its checks (start, midpoint, dip), whose gaps are known
     crossing = _sign_change(events, dense, t_old, dip.t, g_old, events(dense(dip.t)))
     if crossing is not None and crossing.t < dip.t - GROUP_TIME:
-        return _corner_cut(events, dense, t_old, t_new, g_old, _unmissed(events, dense, t_old, g_old, crossing))
+        return _corner_cut(events, dense, t_old, dip.t, g_old, _unmissed(events, dense, t_old, g_old, crossing))
     if crossing is not None:
         dip.contacts |= crossing.contacts
-    return _corner_cut(events, dense, t_old, t_new, g_old, _unmissed(events, dense, t_old, g_old, dip))
+    return _corner_cut(events, dense, t_old, dip.t, g_old, _unmissed(events, dense, t_old, g_old, dip))
 
 
 def _corner_cut(events: EventFunctions, dense: Callable[[float], np.ndarray], t_old: float, t_new: float,
                 g_old: np.ndarray, crossing: Crossing | None) -> Crossing | None:
     """``crossing``, or an earlier one of a free contact between bodies that went into
     another body's convex corner and out again between two of the step's checks (its
-    start, midpoint and end), positive at both (2D, :meth:`flexbody.model.Model.corner_cuts`).
+    start, midpoint and end ``t_new``: where a dip shortened the step, its end is the dip's,
+    as :func:`_sign_change` checks it), positive at both (2D,
+    :meth:`flexbody.model.Model.corner_cuts`).
 
     Each such contact's two lines are rooted on the dense output: where it crossed the
     second's inward before the first's outward, it was inside both in between, deepest
