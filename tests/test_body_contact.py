@@ -811,6 +811,55 @@ def test_a_contact_against_a_surface_folded_over_itself_is_refused():
     assert not any(len(crossings(x[:6], ring)) for x in braced.positions)
 
 
+def test_a_contact_reading_deep_inside_at_its_instant_is_a_surface_turning_back_on_itself():
+    """A particle's gap to a closed surface is continuous while the surface does not fold, so
+    a contact of an instant reading deeper than the fold depth inside its surface is one
+    folding there (its feature's pseudo-normal flipped): ``fold`` names it for the instant's
+    contacts; a hair inside, or deeper than a looser depth allows, it is no fold."""
+    from flexbody.bench_bodies import bodies_scene
+    from flexbody.state import initial_coordinates
+
+    scene = bodies_scene(2, 23, 0.1, True, stiffness=6000.0, row=True)
+    model = load_model(scene)
+    p = model.parameters(scene)
+    q, u = initial_coordinates(scene, model)
+    n, d = model.n_particles, model.dim
+    # the left disc's particle nearest the right disc, and its slot against that disc
+    x = q.reshape(n, d)
+    left, right = np.flatnonzero(model.particle_body == 0), np.flatnonzero(model.element_body == 1)
+    contact = model._closest_features(x, np.array([[i, e] for i in left for e in right]))
+    row = int(np.argmin(contact.gap))
+    particle = int(contact.particle[row])
+    c = model.n_ground_contacts + int(np.flatnonzero((model.slot_particle == particle) & (model.slot_body == 1))[0])
+    depth = 1e3 * 1e-12
+    for inside, folded in ((1e-2, True), (1e-11, False)):
+        moved = x.copy()  # moved along its normal to that depth inside the right disc
+        moved[particle] -= (float(contact.gap[row]) + inside) * contact.normal[row]
+        y = np.concatenate([moved.ravel(), u, [0.0, 0.0]])
+        gap = model.gap(y[: model.nq], p, c)  # (past a vertex the nearest feature inside is a side)
+        assert -inside <= gap <= -inside / 2
+        answer = model.fold(y, p, [c], depth)
+        assert (answer is not None) == folded
+        if folded:
+            assert answer[0] == 1 and f"the gap of particle {particle} against it changed sign {-gap:.2g} m" in answer[1]
+        assert model.fold(y, p, [c], 2e-2) is None  # no deeper than a depth that allows it
+        assert model.fold(y, p, [], depth) is None  # not one of the instant's contacts
+
+
+def test_a_soft_disc_folding_at_a_particle_of_another_body_stops_the_run_there():
+    """A fuzzed 2D pile (polygon, ring, soft disc; friction and restitution): the disc's
+    boundary folds over at a vertex 2.8 cm from a particle of the polygon.  That particle's
+    gap changed sign there, its event fired and it read 2.8 cm inside; the run went on
+    0.001 s to the sample where the segments crossed, warning of a missed impact 2.8 cm
+    deep.  Now it stops at that instant (or at the crossing, where the trajectory's last
+    bits differ): unsupported, the disc folded, no particle inside another body."""
+    result = flexbody.simulate(flexbody.load_scene(reference_table("folding_disc_pile")))
+    assert result.status == "unsupported"
+    assert "body 'b2' has folded over" in result.message
+    assert result.stats["max_penetration_m"] < 1e-9
+    assert not result.stats["warnings"], result.stats["warnings"]
+
+
 def _unbraced_ring_beside(other: dict, ring: dict, pair: dict, ground_e: float) -> dict:
     """An unbraced ring (perimeter links only: a mechanism) and another body that may touch it."""
     return {"name": "unbraced", "gravity": [0.0, -9.81],

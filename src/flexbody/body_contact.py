@@ -949,7 +949,15 @@ class BodyContactModel(Model):
         can read "inside" far from any contact.  With self-contact, two segments of a body
         crossing beyond each other's neighbourhoods by at most ``depth`` (m) are two parts
         touching (a vertex held on a vertex crosses the other's flank by rounding), as two
-        bodies' would be; deeper they are a contact missed, a fold too."""
+        bodies' would be; deeper they are a contact missed, a fold too.
+
+        An instant's contact (``contacts`` given) reading deeper than ``depth`` inside its
+        surface is that surface folding too, an instant before its segments cross: the
+        contact's event fired where its gap changed sign at a distance from the surface,
+        which only a surface turning back on itself does (its feature's pseudo-normal
+        flipping: a soft disc's boundary folding at a vertex 2.8 cm from a particle of
+        another body, which then read 2.8 cm inside at its impact; the segments crossed
+        1e-6 s later)."""
         x = self._state(y, p)[0]
         slots = (np.asarray(contacts, np.intp) - self.n_ground_contacts if contacts is not None
                  else np.flatnonzero(self._surface_gaps(x)[1]))
@@ -978,7 +986,24 @@ class BodyContactModel(Model):
                 return int(body), f"it encloses no positive {'area' if self.dim == 2 else 'volume'} (turned inside out)"
         if contacts is None:
             return self._inside_through(x, slots)
-        return None
+        return self._turned_at(x, slots, depth)
+
+    def _turned_at(self, x: FloatArray, slots: IntArray, depth: float) -> tuple[int, str] | None:
+        """The body and how it folded where one of ``slots`` (slot numbering, the instant's
+        contacts; its particles' against surfaces) reads deeper than ``depth`` (m) inside its
+        surface at positions ``x``; None if none does (see :meth:`fold`)."""
+        # a particle's gap to a closed surface is continuous while the surface does not fold
+        # (a corner twin reads margin; an edge row's gap is another's)
+        slots = slots[slots < self.n_primary]
+        if not len(slots):
+            return None
+        gaps = self._surface_gaps(x, slots)[0][slots]
+        if not (gaps < -depth).any():
+            return None
+        k = int(np.argmin(gaps))
+        return int(self.slot_body[slots[k]]), (
+            f"the gap of particle {int(self.slot_particle[slots[k]])} against it changed sign {-gaps[k]:.2g} m from "
+            "its surface at this instant's event: its boundary turned back on itself there")
 
     def _is_closed(self, body: int) -> bool:
         """Whether ``body``'s surface is closed (has an inside), found on first use."""

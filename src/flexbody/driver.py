@@ -1024,7 +1024,7 @@ class _Run:
                     touching = (phases.phase == PUSHED) & (phases.push_until <= stop.t * (1 + 1e-15) + 1e-300)
                 self.stalled = self.stalled + 1 if stop.t - t < PROGRESS_TIME else 0
                 t = stop.t
-                self.check_guards(t, self.resolve_at(t, touching, leaving))
+                self.check_guards(t, self.resolve_at(t, touching, leaving), touching)
         except SimulationFailed as failure:
             return failure.status, failure.message
         except FloatingPointError as exc:  # a singular mass or contact matrix at an event instant
@@ -1048,7 +1048,9 @@ class _Run:
                             "scene is very stiff (tiny steps), try an implicit method (--method Radau or BDF) or a "
                             "softer body.")
 
-    def check_guards(self, t: float, new_events: list[Event]) -> None:
+    def check_guards(self, t: float, new_events: list[Event], fired: np.ndarray | None = None) -> None:
+        """Stop the run where an instant at ``t`` (its ``new_events``; ``fired``: bool (nc,),
+        the contacts whose gap events fired there) went past a bound or a surface folded."""
         self.check_deadline(t)
         if len(self.events) >= self.max_events:
             raise SimulationFailed("max_events", f"{len(self.events)} events by t = {t:.9g} s (max_events = "
@@ -1060,7 +1062,7 @@ class _Run:
         if self.friction:
             self.check_corners(t)
         if self.model.n_slots:
-            self.check_folds(t, new_events)
+            self.check_folds(t, new_events, fired)
         # An impact's friction impulse can stop a sliding contact of its body that the forces
         # set sliding again at once: such switches end with the impacts, whose own bound
         # watches them (a rigid ring sliding while the corners of its body rattled: 26 in 1 ms)
@@ -1095,10 +1097,13 @@ class _Run:
                     f"chatter_impacts (--chatter-impacts), now {bound}.",
                 )
 
-    def check_folds(self, t: float, new_events: list[Event]) -> None:
-        """Refuse to go on where a contact decided at this instant is against a surface that
-        crosses itself (a body folded over: its particles passed through its boundary)."""
-        touched = [e.contact for e in new_events if e.contact >= self.model.n_ground_contacts]
+    def check_folds(self, t: float, new_events: list[Event], fired: np.ndarray | None = None) -> None:
+        """Refuse to go on where a contact decided at this instant, or whose event fired there
+        (``fired``, bool (nc,)), is against a surface that crosses itself or reads deep inside
+        it (a body folded over, or folding: :meth:`flexbody.body_contact.BodyContactModel.fold`)."""
+        ng = self.model.n_ground_contacts
+        touched = sorted({e.contact for e in new_events if e.contact >= ng}
+                         | (set() if fired is None else set((ng + np.flatnonzero(fired[ng:])).tolist())))
         self.refuse_fold(t, self.model.fold(self.y, self.p, touched, EDGE_DEPTH * self.gap_tolerance) if touched else None)
 
     def check_surfaces(self, t: float) -> None:
