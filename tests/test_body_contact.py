@@ -811,11 +811,12 @@ def test_a_contact_against_a_surface_folded_over_itself_is_refused():
     assert not any(len(crossings(x[:6], ring)) for x in braced.positions)
 
 
-def test_a_contact_reading_deep_inside_at_its_instant_is_a_surface_turning_back_on_itself():
-    """A particle's gap to a closed surface is continuous while the surface does not fold, so
-    a contact of an instant reading deeper than the fold depth inside its surface is one
-    folding there (its feature's pseudo-normal flipped): ``fold`` names it for the instant's
-    contacts; a hair inside, or deeper than a looser depth allows, it is no fold."""
+def test_a_fired_contact_reading_deep_below_its_floor_is_a_surface_turning_back_on_itself():
+    """A particle's gap to a closed surface is continuous until the surface folds, so a free
+    contact whose event fired reads its floor there: one reading deeper than the fold depth
+    below its floor is that surface folding (its feature's pseudo-normal flipped), named by
+    ``fold_onset``; a hair below, one armed as deep (released inside), or deeper than a
+    looser depth allows, is not."""
     from flexbody.bench_bodies import bodies_scene
     from flexbody.state import initial_coordinates
 
@@ -838,12 +839,13 @@ def test_a_contact_reading_deep_inside_at_its_instant_is_a_surface_turning_back_
         y = np.concatenate([moved.ravel(), u, [0.0, 0.0]])
         gap = model.gap(y[: model.nq], p, c)  # (past a vertex the nearest feature inside is a side)
         assert -inside <= gap <= -inside / 2
-        answer = model.fold(y, p, [c], depth)
+        answer = model.fold_onset(y, p, [c], [0.0], depth)
         assert (answer is not None) == folded
         if folded:
             assert answer[0] == 1 and f"the gap of particle {particle} against it changed sign {-gap:.2g} m" in answer[1]
-        assert model.fold(y, p, [c], 2e-2) is None  # no deeper than a depth that allows it
-        assert model.fold(y, p, [], depth) is None  # not one of the instant's contacts
+        assert model.fold_onset(y, p, [c], [gap - 1e-12], depth) is None  # armed there: it fired at its floor
+        assert model.fold_onset(y, p, [c], [0.0], 2e-2) is None  # no deeper than a depth that allows it
+        assert model.fold_onset(y, p, [0], [0.0], depth) is None  # a ground contact's is the inner model's
 
 
 def test_a_soft_disc_folding_at_a_particle_of_another_body_stops_the_run_there():

@@ -146,4 +146,6 @@ def test_every_sample_in_c_equals_the_whole_states_gaps_along_a_pile(monkeypatch
     assert result.status == "success", result.message
     assert len(compared) >= 20
     c, python = (np.concatenate(z) for z in zip(*compared))
-    np.testing.assert_allclose(c, python, rtol=0.0, atol=1e-15)
+    # C sums the interpolation in order, NumPy through BLAS: positions can differ by an ulp
+    size = float(np.abs(result.positions).max())
+    np.testing.assert_allclose(c, python, rtol=0.0, atol=8 * np.finfo(float).eps * size)

@@ -152,10 +152,14 @@ static void pseudo_normal(int dim, const double *vertices, const int *elements, 
     }
 }
 
+/* Groups of candidates longer than this are sorted by qsort, not by insertion. */
+#define FB_INSERTION_GROUP 32
+
 /* The candidates in by_particle_surface_distance's order.  The broad phase hands its pairs
- * grouped by particle, ascending, a few elements each: then each group is put in order by
- * insertion, not the whole list by qsort (a pile's sweep of thousands of pairs spent a
- * third of its time there); otherwise qsort. */
+ * grouped by particle, ascending, a few elements each: then each group is put in order
+ * alone (by insertion, or by qsort if long: a fine mesh beside coarse ones), not the whole
+ * list by qsort (a pile's sweep of thousands of pairs spent a third of its time there);
+ * otherwise qsort.  The order is a total one: either way the same. */
 static void sort_candidates(Candidate *candidates, int n)
 {
     for (int r = 1; r < n; r++)
@@ -163,14 +167,21 @@ static void sort_candidates(Candidate *candidates, int n)
             qsort(candidates, (size_t)n, sizeof *candidates, by_particle_surface_distance);
             return;
         }
-    for (int r = 1; r < n; r++) {
-        const Candidate c = candidates[r];
-        int at = r;
-        while (at > 0 && by_particle_surface_distance(&c, candidates + at - 1) < 0) {
-            candidates[at] = candidates[at - 1];
-            at--;
+    for (int start = 0, end; start < n; start = end) {
+        for (end = start + 1; end < n && candidates[end].particle == candidates[start].particle; end++) {}
+        if (end - start > FB_INSERTION_GROUP) {
+            qsort(candidates + start, (size_t)(end - start), sizeof *candidates, by_particle_surface_distance);
+            continue;
         }
-        candidates[at] = c;
+        for (int r = start + 1; r < end; r++) {
+            const Candidate c = candidates[r];
+            int at = r;
+            while (at > start && by_particle_surface_distance(&c, candidates + at - 1) < 0) {
+                candidates[at] = candidates[at - 1];
+                at--;
+            }
+            candidates[at] = c;
+        }
     }
 }
 

@@ -269,7 +269,7 @@ class BodyContactModel(Model):
         # Free slots' gaps on a step's dense output in C (an impact's instant, a step's
         # samples): on the particles' own coordinates (no rigid frame), where a slot's gap
         # is its body's surface's nearest element (no self-contact).
-        self._dense_gaps = (CompiledDenseGaps(self._narrow, self.element_body, self.n_particles)
+        self._dense_gaps = (CompiledDenseGaps(self._narrow, self.element_body, self.n_particles, self._body_count)
                             if self._narrow is not None and isinstance(self._coordinates, _ParticleCoordinates)
                             and self.own is None else None)
         #: A 2D particle can pass through another body's convex corner between a step's event
@@ -369,7 +369,8 @@ class BodyContactModel(Model):
         """Gap of contact ``c`` alone, equal to ``gaps(q, p)[c]``: a slot's is its particle's
         closest feature over the broad phase's kept pairs with the slot's body (a superset
         of the candidates holding its closest element within ``margin``; farther reads
-        ``margin``), what locating an impact between bodies evaluates again and again; an
+        ``margin``), what locating an impact between bodies evaluates again and again where
+        the model has no search of its own on the step's output (:meth:`gap_root`); an
         edge row's, its edge's against the other body's candidate edges (NumPy, the
         triangles' normals of every edge: not O(1))."""
         slot = c - self.n_ground_contacts
@@ -386,7 +387,7 @@ class BodyContactModel(Model):
         gap = float(contact.gap[0])
         return gap if abs(gap) <= self.margin else self.margin
 
-    def gap_root(self, output, c: int, floor: float, ta: float, tb: float, xtol: float) -> float | None:
+    def gap_root(self, output: object, c: int, floor: float, ta: float, tb: float, xtol: float) -> float | None:
         """As :meth:`flexbody.model.Model.gap_root`: a primary slot's, in C
         (:class:`flexbody.surface_contact.CompiledDenseGaps`), where the particles are the
         coordinates, without self-contact; None for the others (grounds, twins, edge rows,
@@ -397,7 +398,7 @@ class BodyContactModel(Model):
         return self._dense_gaps.root(output, self.slot_particle[slot], self.slot_body[slot], floor, self.margin, ta,
                                      tb, xtol)
 
-    def dense_gaps(self, output, contacts: IntArray, floors: FloatArray, t: float) -> FloatArray | None:
+    def dense_gaps(self, output: object, contacts: IntArray, floors: FloatArray, t: float) -> FloatArray | None:
         """As :meth:`flexbody.model.Model.dense_gaps`: of primary slots, in C, as
         :meth:`gap_root`; None if any of ``contacts`` is another contact."""
         slots = np.asarray(contacts, np.intp) - self.n_ground_contacts
@@ -949,15 +950,8 @@ class BodyContactModel(Model):
         can read "inside" far from any contact.  With self-contact, two segments of a body
         crossing beyond each other's neighbourhoods by at most ``depth`` (m) are two parts
         touching (a vertex held on a vertex crosses the other's flank by rounding), as two
-        bodies' would be; deeper they are a contact missed, a fold too.
-
-        An instant's contact (``contacts`` given) reading deeper than ``depth`` inside its
-        surface is that surface folding too, an instant before its segments cross: the
-        contact's event fired where its gap changed sign at a distance from the surface,
-        which only a surface turning back on itself does (its feature's pseudo-normal
-        flipping: a soft disc's boundary folding at a vertex 2.8 cm from a particle of
-        another body, which then read 2.8 cm inside at its impact; the segments crossed
-        1e-6 s later)."""
+        bodies' would be; deeper they are a contact missed, a fold too.  (A fold's onset,
+        before anything crosses: :meth:`fold_onset`.)"""
         x = self._state(y, p)[0]
         slots = (np.asarray(contacts, np.intp) - self.n_ground_contacts if contacts is not None
                  else np.flatnonzero(self._surface_gaps(x)[1]))
@@ -986,24 +980,43 @@ class BodyContactModel(Model):
                 return int(body), f"it encloses no positive {'area' if self.dim == 2 else 'volume'} (turned inside out)"
         if contacts is None:
             return self._inside_through(x, slots)
-        return self._turned_at(x, slots, depth)
+        return None
 
-    def _turned_at(self, x: FloatArray, slots: IntArray, depth: float) -> tuple[int, str] | None:
-        """The body and how it folded where one of ``slots`` (slot numbering, the instant's
-        contacts; its particles' against surfaces) reads deeper than ``depth`` (m) inside its
-        surface at positions ``x``; None if none does (see :meth:`fold`)."""
-        # a particle's gap to a closed surface is continuous while the surface does not fold
-        # (a corner twin reads margin; an edge row's gap is another's)
-        slots = slots[slots < self.n_primary]
+    def fold_onset(self, y, p, fired: IntArray, floors: FloatArray, depth: float) -> tuple[int, str] | None:
+        """A body folding where a free contact's event fired: the body and how, or None.
+
+        A particle's gap to a closed surface is continuous until the surface turns back on
+        itself, so a free contact whose event fired reads its floor at its instant, to the
+        root's tolerance.  Reading deeper than ``depth`` (m) below its floor, its gap changed
+        sign at a distance from the surface: the feature's pseudo-normal flipped as the
+        surface folded there, an instant before its segments cross (a soft disc folding at a
+        vertex 2.8 cm from a particle of another body, which then read 2.8 cm inside at its
+        impact; the segments crossed 1e-6 s later).
+
+        Parameters
+        ----------
+        y : ndarray, shape (ny,)
+            The state at the instant.
+        fired : ndarray of int, shape (k,)
+            The contacts whose gap events fired there (free just before it).
+        floors : ndarray, shape (k,)
+            Their floors then (m).
+        depth : float
+        """
+        fired, floors = np.asarray(fired, np.intp), np.asarray(floors, float)
+        slot = fired - self.n_ground_contacts
+        # a particle's against a surface (a corner twin reads margin; an edge row's gap is an edge's)
+        primary = (slot >= 0) & (slot < self.n_primary)
+        slots, floors = slot[primary], floors[primary]
         if not len(slots):
             return None
-        gaps = self._surface_gaps(x, slots)[0][slots]
-        if not (gaps < -depth).any():
+        below = self._surface_gaps(self._state(np.asarray(y, float), p)[0], slots)[0][slots] - floors
+        if not (below < -depth).any():
             return None
-        k = int(np.argmin(gaps))
+        k = int(np.argmin(below))
         return int(self.slot_body[slots[k]]), (
-            f"the gap of particle {int(self.slot_particle[slots[k]])} against it changed sign {-gaps[k]:.2g} m from "
-            "its surface at this instant's event: its boundary turned back on itself there")
+            f"the gap of particle {int(self.slot_particle[slots[k]])} against it changed sign {-below[k]:.2g} m "
+            "from its surface at this instant's event: its boundary turned back on itself there")
 
     def _is_closed(self, body: int) -> bool:
         """Whether ``body``'s surface is closed (has an inside), found on first use."""

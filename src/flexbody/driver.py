@@ -199,7 +199,9 @@ def _remembered(dense: Callable[[float], np.ndarray]) -> Callable[[float], np.nd
     """A step's dense output ``t -> y (ny,)`` that evaluates each time once: event location
     asks for the same points again (a root's bracket ends, the instant found, the step's
     midpoint), each a pass over the whole state.  The states are handed out read-only: each
-    is kept for whoever asks for that time next."""
+    is kept for whoever asks for that time next.  ``at.output`` is ``dense`` itself, for a
+    model that evaluates a few coordinates of it (:meth:`flexbody.model.Model.gap_root`,
+    :meth:`flexbody.model.Model.dense_gaps`)."""
     states: dict[float, np.ndarray] = {}
 
     def at(t: float) -> np.ndarray:
@@ -209,7 +211,7 @@ def _remembered(dense: Callable[[float], np.ndarray]) -> Callable[[float], np.nd
             states[key].flags.writeable = False
         return states[key]
 
-    at.output = dense  # the stepper's own, for a model that evaluates a few coordinates of it (Model.gap_root)
+    at.output = dense
     return at
 
 
@@ -1024,7 +1026,9 @@ class _Run:
                     touching = (phases.phase == PUSHED) & (phases.push_until <= stop.t * (1 + 1e-15) + 1e-300)
                 self.stalled = self.stalled + 1 if stop.t - t < PROGRESS_TIME else 0
                 t = stop.t
-                self.check_guards(t, self.resolve_at(t, touching, leaving), touching)
+                fired = np.flatnonzero(touching)
+                armed = phases.floor[fired]  # where they fired: the instant re-arms or holds them
+                self.check_guards(t, self.resolve_at(t, touching, leaving), (fired, armed))
         except SimulationFailed as failure:
             return failure.status, failure.message
         except FloatingPointError as exc:  # a singular mass or contact matrix at an event instant
@@ -1048,9 +1052,11 @@ class _Run:
                             "scene is very stiff (tiny steps), try an implicit method (--method Radau or BDF) or a "
                             "softer body.")
 
-    def check_guards(self, t: float, new_events: list[Event], fired: np.ndarray | None = None) -> None:
-        """Stop the run where an instant at ``t`` (its ``new_events``; ``fired``: bool (nc,),
-        the contacts whose gap events fired there) went past a bound or a surface folded."""
+    def check_guards(self, t: float, new_events: list[Event],
+                     fired: tuple[np.ndarray, np.ndarray] | None = None) -> None:
+        """Stop the run where an instant at ``t`` (its ``new_events``; ``fired``: the contacts
+        whose gap events fired there (k,) and their floors then (k,)) went past a bound or a
+        surface folded."""
         self.check_deadline(t)
         if len(self.events) >= self.max_events:
             raise SimulationFailed("max_events", f"{len(self.events)} events by t = {t:.9g} s (max_events = "
@@ -1097,14 +1103,19 @@ class _Run:
                     f"chatter_impacts (--chatter-impacts), now {bound}.",
                 )
 
-    def check_folds(self, t: float, new_events: list[Event], fired: np.ndarray | None = None) -> None:
-        """Refuse to go on where a contact decided at this instant, or whose event fired there
-        (``fired``, bool (nc,)), is against a surface that crosses itself or reads deep inside
-        it (a body folded over, or folding: :meth:`flexbody.body_contact.BodyContactModel.fold`)."""
-        ng = self.model.n_ground_contacts
-        touched = sorted({e.contact for e in new_events if e.contact >= ng}
-                         | (set() if fired is None else set((ng + np.flatnonzero(fired[ng:])).tolist())))
-        self.refuse_fold(t, self.model.fold(self.y, self.p, touched, EDGE_DEPTH * self.gap_tolerance) if touched else None)
+    def check_folds(self, t: float, new_events: list[Event],
+                    fired: tuple[np.ndarray, np.ndarray] | None = None) -> None:
+        """Refuse to go on where a contact decided at this instant, or whose gap event fired
+        there (``fired``: those contacts and their floors then), is against a surface that
+        crosses itself, or where a fired one reads deep below its floor (a body folded over,
+        or folding: :meth:`flexbody.body_contact.BodyContactModel.fold`, ``fold_onset``)."""
+        ng, depth = self.model.n_ground_contacts, EDGE_DEPTH * self.gap_tolerance
+        contacts, floors = fired if fired is not None else (np.zeros(0, np.intp), np.zeros(0))
+        touched = sorted({e.contact for e in new_events if e.contact >= ng} | set(contacts[contacts >= ng].tolist()))
+        fold = self.model.fold(self.y, self.p, touched, depth) if touched else None
+        if fold is None and (contacts >= ng).any():
+            fold = self.model.fold_onset(self.y, self.p, contacts, floors, depth)
+        self.refuse_fold(t, fold)
 
     def check_surfaces(self, t: float) -> None:
         """:meth:`check_folds` for every surface a free contact is within reach of at the

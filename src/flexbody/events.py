@@ -272,7 +272,8 @@ def locate(
     ----------
     dense : callable
         The step's dense output, ``t -> y (ny,)``.
-    g_old, g_new : ndarray, shape (nc,)
+    g_old : ndarray, shape (nc,)
+    g_new : ndarray, shape (nc,), or callable () -> ndarray
         Event functions at the step's ends (``g_new`` follows a contact armed at the ground
         at the midpoint, see :meth:`EventFunctions.rearm`); ``g_new`` may be a function that
         evaluates them, called only where needed (a dip found first ends the step before).

@@ -132,14 +132,14 @@ class Model:
         """Gap of contact ``c`` alone, equal to ``gaps(q, p)[c]`` (locating an impact needs no other)."""
         return float(self.gaps_of(q, p, np.array([c]))[0])
 
-    def gap_root(self, output, c: int, floor: float, ta: float, tb: float, xtol: float) -> float | None:
+    def gap_root(self, output: object, c: int, floor: float, ta: float, tb: float, xtol: float) -> float | None:
         """The instant free contact ``c`` hits in ``[ta, tb]`` on ``output``, a step's dense
         output: the first time its gap less ``floor`` is not above 0 (``tb`` if it stays above
         0 there), as :func:`flexbody.events._root` finds it, without evaluating the whole
         state at each try; None where the model has no such search (this one has none)."""
         return None
 
-    def dense_gaps(self, output, contacts: IntArray, floors: FloatArray, t: float) -> FloatArray | None:
+    def dense_gaps(self, output: object, contacts: IntArray, floors: FloatArray, t: float) -> FloatArray | None:
         """The gaps of free ``contacts (k,)`` less their ``floors (k,)`` at time ``t`` on
         ``output``, a step's dense output, shape (k,): their event functions there, without
         evaluating the whole state; None where the model has no such evaluation for them

@@ -465,6 +465,8 @@ class CompiledDenseGaps:
         The body of each element.
     n_particles : int
         The particles' count (the positions are the state's first ``n_particles * dim``).
+    n_bodies : int
+        The bodies' count (a body without surface elements has none to search).
     """
 
     #: SciPy's dense output whose formula the C evaluates: its explicit Runge-Kutta
@@ -474,10 +476,10 @@ class CompiledDenseGaps:
     #: here visits every element of the body).
     MAX_ELEMENTS = 512
 
-    def __init__(self, narrow: CompiledClosestFeatures, element_body: IntArray, n_particles: int) -> None:
+    def __init__(self, narrow: CompiledClosestFeatures, element_body: IntArray, n_particles: int,
+                 n_bodies: int) -> None:
         self.lib, self.dim = narrow.lib, narrow.dim
         element_body = np.asarray(element_body, np.intp)
-        n_bodies = int(element_body.max(initial=-1)) + 1
         #: Whether each body's surface is searched here (at most MAX_ELEMENTS elements), bool (n_bodies,).
         self.searched = np.bincount(element_body, minlength=n_bodies) <= self.MAX_ELEMENTS
         # each body's elements and their vertices, as CSR (C's Surfaces)
@@ -496,7 +498,7 @@ class CompiledDenseGaps:
         self._scratch = (self._x.ctypes.data, self._out.ctypes.data, self._out[1:].ctypes.data)
         self._dense: tuple | None = None  # the last step's output, its arrays and their addresses
 
-    def _step(self, output) -> tuple[int, int, int] | None:
+    def _step(self, output: object) -> tuple[int, int, int] | None:
         """The addresses of ``output``'s y_old and Q and Q's column count, or None if it is
         not :data:`DENSE_OUTPUT` (one step's output serves many calls: kept)."""
         if self._dense is None or self._dense[0] is not output:
@@ -507,7 +509,7 @@ class CompiledDenseGaps:
             self._dense = (output, Q, y_old, (y_old.ctypes.data, Q.ctypes.data, Q.shape[1]))
         return self._dense[3]
 
-    def root(self, output, particle: int, body: int, floor: float, margin: float, ta: float, tb: float,
+    def root(self, output: object, particle: int, body: int, floor: float, margin: float, ta: float, tb: float,
              xtol: float) -> float | None:
         """The first time in [ta, tb] where ``particle``'s gap to ``body``'s surface (``margin``
         where farther) less ``floor`` is not above 0, on ``output``, a step's dense output;
@@ -524,7 +526,7 @@ class CompiledDenseGaps:
                                       float(tb), float(xtol), x, root, g_ta)
         return float(self._out[0]) if status == 0 else None
 
-    def at(self, output, particles: IntArray, bodies: IntArray, floors: FloatArray, margin: float,
+    def at(self, output: object, particles: IntArray, bodies: IntArray, floors: FloatArray, margin: float,
            t: float) -> FloatArray | None:
         """Each of k particles' gap to its body's surface (``margin`` where farther) less its
         floor at time ``t`` on ``output``, shape (k,); None where this does not apply (another
@@ -537,7 +539,8 @@ class CompiledDenseGaps:
         floors = np.ascontiguousarray(floors, dtype=float)
         out = np.empty(len(particles))
         y_old, Q, powers = step
-        self.lib.fb_dense_gaps(self.dim, *self._surfaces, len(particles), particles.ctypes.data, bodies.ctypes.data,
-                               floors.ctypes.data, y_old, Q, powers, float(output.t_old), float(output.h),
-                               float(margin), float(t), self._scratch[0], out.ctypes.data)
-        return out
+        status = self.lib.fb_dense_gaps(self.dim, *self._surfaces, len(particles), particles.ctypes.data,
+                                        bodies.ctypes.data, floors.ctypes.data, y_old, Q, powers,
+                                        float(output.t_old), float(output.h), float(margin), float(t),
+                                        self._scratch[0], out.ctypes.data)
+        return out if status == 0 else None
