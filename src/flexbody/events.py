@@ -341,7 +341,8 @@ def _corner_cut(events: EventFunctions, dense: Callable[[float], np.ndarray], t_
             if t_end < tb and lines(t_end)[j] > 0.0:  # not in before the step's event: nothing to miss
                 continue
             t_in = first_fired(lambda t: lines(t)[j], ta, tb, lines_a[k, j], lines_b[k, j], xtol=ROOT_TIME)
-            t_out = first_fired(lambda t: -lines(t)[1 - j], ta, tb, -lines_a[k, 1 - j], -lines_b[k, 1 - j], xtol=ROOT_TIME)
+            t_out = first_fired(lambda t: -lines(t)[1 - j], ta, tb, -lines_a[k, 1 - j], -lines_b[k, 1 - j],
+                                xtol=ROOT_TIME)
             if t_in >= t_out:  # round the vertex outside
                 continue
             d_in, d_out = (float(g[j] - g[1 - j]) for g in (lines(t_in), lines(t_out)))
