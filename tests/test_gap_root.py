@@ -3,7 +3,7 @@
 
 References: the closed-form instant of a particle moving straight along a face's normal
 onto it, and the Python search (:func:`flexbody.events._root` on the whole state,
-``events.one``) at every root of piles in 2D and 3D.
+``events.one``) and the whole state's gaps at every root and sample of piles in 2D and 3D.
 """
 
 from __future__ import annotations
