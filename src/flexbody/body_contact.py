@@ -1947,11 +1947,9 @@ class BodyContactModel(Model):
         x, v = self._coordinates.particles(q, u, p)
         k_g, k = len(ground_rows), len(ground_rows) + len(slots)
         layout = self._layout(ground_rows, slots, tangents)
-        normals = self._coordinates.ground_normals(p)[self.inner.contacts[ground_rows, 1]]
-        axes = np.zeros((k_g, 2, d))
-        if tangents and d == 3:  # the derived ground kernel's orthonormal pair (a ground's normal is constant)
-            zeros = np.zeros((d, k_g))
-            axes = self._element.numpy.ground_3d(zeros, zeros, normals.T)[3].transpose(2, 0, 1)
+        frames = self._ground_frames(p, ground_rows)  # each ground row's normal, then its tangents
+        normals = frames[:, 0]
+        axes = frames[:, 1:] if tangents and d == 3 else np.zeros((k_g, 2, d))
         weights = [np.ones((k_g, 1))]
         bias, slip_bias = np.zeros(k), np.zeros((k, d - 1))
         if len(slots):
