@@ -441,20 +441,18 @@ static DenseGap body_gap(int dim, const Surfaces *s, int particle, int b, const 
  * elements_of, vertex_start, vertices_of: see Surfaces); the particle and b; the step's
  * dense output (y_old (ny), Q (ny, powers <= FB_DENSE_POWERS) row-major, t_old, h); the
  * contact's floor, margin, ta, tb, xtol; x (n, dim): scratch, only the rows read are
- * written.  out: *root, and the gap at ta.  Returns 0 with *root the instant (tb where the
- * gap stays above 0 at tb, as _root), 1 where the gap at ta is not above 0 (the caller
- * decides), or -1 for more powers than FB_DENSE_POWERS. */
+ * written.  out: *root.  Returns 0 with *root the instant (tb where the gap stays above 0
+ * at tb, as _root), 1 where the gap at ta is not above 0 (the caller decides), or -1 for
+ * more powers than FB_DENSE_POWERS. */
 int fb_gap_root(int dim, const int *elements, const int *incident_start, const int *incident,
                 const int *element_start, const int *elements_of, const int *vertex_start, const int *vertices_of,
                 int particle, int b, const double *y_old, const double *Q, int powers, double t_old, double h,
-                double floor, double margin, double ta, double tb, double xtol, double *x, double *root,
-                double *g_ta)
+                double floor, double margin, double ta, double tb, double xtol, double *x, double *root)
 {
     if (powers < 1 || powers > FB_DENSE_POWERS) return -1;
     const Surfaces s = {elements, incident_start, incident, element_start, elements_of, vertex_start, vertices_of};
     const DenseGap g = body_gap(dim, &s, particle, b, y_old, Q, powers, t_old, h, floor, margin, x);
     const double fa = dense_gap(&g, ta);
-    *g_ta = fa;
     if (!(fa > 0.0)) return 1;
     const double fb = dense_gap(&g, tb);
     *root = fb > 0.0 ? tb : first_fired(&g, ta, tb, fa, fb, xtol);

@@ -1010,7 +1010,8 @@ class BodyContactModel(Model):
         slots, floors = slot[primary], floors[primary]
         if not len(slots):
             return None
-        below = self._surface_gaps(self._state(np.asarray(y, float), p)[0], slots)[0][slots] - floors
+        # the whole sweep at y: the instant's resolve left it kept (a few slots' own would be a new one)
+        below = self._surface_gaps(self._state(np.asarray(y, float), p)[0])[0][slots] - floors
         if not (below < -depth).any():
             return None
         k = int(np.argmin(below))
@@ -1162,8 +1163,13 @@ class BodyContactModel(Model):
         their particles project (m, (k,): the smallest bounding weight times the element's
         size) and the bounding weights (k, dim; ``inf`` for the others, see :meth:`_along_edge`)."""
         terms = self._element_terms(slots, x, v)
-        weights = self._along_edge(slots, terms.weights, x, held)
-        return terms, weights.min(axis=1) * self._sizes(slots, x), weights
+        return terms, *self._bounding(slots, terms.weights, x, held)
+
+    def _bounding(self, slots, weights, x, held) -> tuple[FloatArray, FloatArray]:
+        """How far inside their elements held ``slots`` project (m, (k,)), from their
+        particles' ``weights`` (k, dim) on them, and the bounding weights (see :meth:`_margins`)."""
+        weights = self._along_edge(slots, weights, x, held)
+        return weights.min(axis=1) * self._sizes(slots, x), weights
 
     def _along_edge(self, slots, weights, x, held) -> FloatArray:
         """``weights`` (k, dim) of held ``slots`` with ``inf`` where they bound nothing: a 3D
@@ -1215,8 +1221,9 @@ class BodyContactModel(Model):
             x, v = self._state(np.asarray(y, float), p)
         if len(slots):
             self._constrain_elements(slots, x)
-            weights = self._along_edge(slots, self._element.weights(x, self._slot_points(slots).T), x, held)
-            margins[0] = weights.min(axis=1) * self._sizes(slots, x) - self.margin_floor[slots]
+            # where the particles are on their elements, not how fast: the position kernel alone
+            weights = self._element.weights(x, self._slot_points(slots).T)
+            margins[0] = self._bounding(slots, weights, x, held)[0] - self.margin_floor[slots]
         if len(edges):  # an edge contact's closest points reaching an end of either edge
             self._constrain_edges(edges, x)
             margins[1] = self._edge_terms(edges, x, v).margin - self.margin_floor[edges]
@@ -2382,14 +2389,14 @@ class ElementKernels:
             self.c[0](k, *inputs[: d + 1], *outputs[:4])
             self.c[1](k, *inputs, *outputs[4:])
             gap, weight, normal, _, rate, _, bias, *slip = (z[:k] for z in self._outputs)
-            weights = np.column_stack([1.0 - weight[:, 0], weight[:, 0]]) if d == 2 else weight.copy()
+            weights = self._as_weights(weight.copy())
             slip_terms = (slip[0][:, 0].copy(), slip[1][:, 0].copy()) if d == 2 else (None, None)
             return ElementTerms(gap[:, 0].copy(), weights, normal.copy(), rate[:, 0].copy(), bias[:, 0].copy(),
                                 *slip_terms)
         at, rates = x[points], v[points]
         gap, weight, normal, _ = getattr(self.numpy, self.name)(*(z.T for z in at))
         rate, _, bias, *slip = getattr(self.numpy, f"{self.name}_velocity")(*(z.T for z in (*at, *rates)))
-        weights = np.column_stack([1.0 - weight[0], weight[0]]) if d == 2 else weight.T
+        weights = self._as_weights(weight.T)
         slip_terms = (slip[0][0], slip[1][0]) if d == 2 else (None, None)
         return ElementTerms(gap[0], weights, normal.T, rate[0], bias[0], *slip_terms)
 
@@ -2402,7 +2409,11 @@ class ElementKernels:
         """The weights (k, dim) alone of :meth:`__call__`'s contacts (the particle's closest
         point on the element's line or plane): the position kernel only (a held row's
         event function asks where its particle is on its element, not how fast)."""
-        weight = self._positions(x, points)[1]
+        return self._as_weights(self._positions(x, points)[1])
+
+    def _as_weights(self, weight: FloatArray) -> FloatArray:
+        """The kernel's s (k, 1; 2D) or barycentrics (k, 3; 3D) as the weights (k, dim) of the
+        element's vertices: 2D (1 - s, s)."""
         return np.column_stack([1.0 - weight[:, 0], weight[:, 0]]) if self.dim == 2 else weight
 
     def _positions(self, x: FloatArray, points: IntArray) -> tuple[FloatArray, FloatArray]:

@@ -59,7 +59,7 @@ SIGNATURES = {
     "fb_closest_features": (_int, [_int, _int, _ptr, _ptr, _ptr, _ptr, _ptr, _ptr, _ptr, _double, _ptr, _ptr, _ptr,
                                    _ptr, _ptr, _ptr, _ptr]),
     "fb_gap_root": (_int, [_int, _ptr, _ptr, _ptr, _ptr, _ptr, _ptr, _ptr, _int, _int, _ptr, _ptr, _int, _double,
-                           _double, _double, _double, _double, _double, _double, _ptr, _ptr, _ptr]),
+                           _double, _double, _double, _double, _double, _double, _ptr, _ptr]),
     "fb_dense_gaps": (_int, [_int, _ptr, _ptr, _ptr, _ptr, _ptr, _ptr, _ptr, _int, _ptr, _ptr, _ptr, _ptr, _ptr, _int,
                              _double, _double, _double, _double, _ptr, _ptr]),
     "fb_held_rows": (_int, [_int, _int, _ptr, _ptr, _ptr, _int, _ptr, _ptr, _int, _ptr, _ptr, _ptr]),

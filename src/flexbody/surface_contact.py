@@ -491,11 +491,11 @@ class CompiledDenseGaps:
                         (element_start, order, vertex_start, np.concatenate(vertices + [np.zeros(0, np.intp)]))]
         self._narrow = narrow  # its arrays, whose addresses are held below
         self._x = np.empty(n_particles * self.dim)  # scratch: the rows evaluated
-        self._out = np.empty(2)  # the root, the gap at ta
+        self._root = np.empty(1)
         # addresses taken once (each costs microseconds; a pile asks thousands of roots)
         self._surfaces = (narrow.elements.ctypes.data, narrow.incident_start.ctypes.data, narrow.incident.ctypes.data,
                           *(a.ctypes.data for a in self._arrays))
-        self._scratch = (self._x.ctypes.data, self._out.ctypes.data, self._out[1:].ctypes.data)
+        self._scratch = (self._x.ctypes.data, self._root.ctypes.data)
         self._dense: tuple | None = None  # the last step's output, its arrays and their addresses
 
     def _step(self, output: object) -> tuple[int, int, int] | None:
@@ -520,11 +520,10 @@ class CompiledDenseGaps:
         if step is None or not self.searched[body]:
             return None
         y_old, Q, powers = step
-        x, root, g_ta = self._scratch
         status = self.lib.fb_gap_root(self.dim, *self._surfaces, int(particle), int(body), y_old, Q, powers,
                                       float(output.t_old), float(output.h), float(floor), float(margin), float(ta),
-                                      float(tb), float(xtol), x, root, g_ta)
-        return float(self._out[0]) if status == 0 else None
+                                      float(tb), float(xtol), *self._scratch)
+        return float(self._root[0]) if status == 0 else None
 
     def at(self, output: object, particles: IntArray, bodies: IntArray, floors: FloatArray, margin: float,
            t: float) -> FloatArray | None:
