@@ -272,9 +272,9 @@ class BodyContactModel(Model):
         self._dense_gaps = (CompiledDenseGaps(self._narrow, self.element_body, self.n_particles, self._body_count)
                             if self._narrow is not None and isinstance(self._coordinates, _ParticleCoordinates)
                             and self.own is None else None)
-        #: A 2D particle can pass through another body's convex corner between a step's event
-        #: checks, however short the step (:meth:`corner_cuts`).
-        self.corners = self.dim == 2 and self.n_primary > 0
+        #: A particle can pass through another body's convex corner (2D) or edge (3D)
+        #: between a step's event checks, however short the step (:meth:`corner_cuts`).
+        self.corners = self.n_primary > 0
         # A held slot's element-boundary event fires where its margin falls below this floor
         # (m, <= 0): below 0 where a hand-over left it already past the boundary (a particle
         # a hair inside a concave corner), so that passing back over it is still found.
@@ -1601,32 +1601,36 @@ class BodyContactModel(Model):
         return out
 
     def corner_cuts(self, ya, yb, p, watched: np.ndarray) -> tuple[IntArray, IntArray, IntArray]:
-        """The free contacts of ``watched`` (bool (nc,)) whose particle went round a vertex
-        ``w`` of the other body between the states ``ya`` and ``yb`` (2D), each with ``w`` and
-        the one of ``w``'s two segments (0 or 1, as :meth:`corner_lines`) whose line it
-        crossed inward, shape (k,) each.
+        """The free contacts of ``watched`` (bool (nc,)) whose particle went round a convex
+        corner of the other body between the states ``ya`` and ``yb``, shape (k,); each
+        with the corner, (k, 3): a vertex ``w`` and two of its elements (:meth:`corner_lines`),
+        and the one of those two (0 or 1) whose line or plane it crossed inward, (k,).
 
-        Near a convex vertex the body is the wedge inside both of its segments' lines, whose
-        tip is as thin as one likes: a particle passing ``w`` by 1e-5 m can go into the tip
-        through one segment and out through the other within a step, its signed distance
-        positive at each of the step's checks (two flexible squares whose corners had met
-        passed each other's, the impact missed; the bodies then overlapped along a whole
-        side).  Each line's gap is smooth, as a ground's: a particle within ``margin`` at both
-        states, its closest feature holding ``w`` at both, inside the first line and outside
-        the second at ``ya`` and the other way round at ``yb``, went round ``w`` outside or
-        through the tip, as the second line's crossing comes before or after the first's
-        (:func:`flexbody.events.locate` roots them).  None in 3D.
+        Near a convex vertex (2D) or edge (3D) the body is the wedge inside both of its
+        elements' lines or planes, whose tip is as thin as one likes: a particle passing
+        ``w`` by 1e-5 m can go into the tip through one element and out through the other
+        within a step, its signed distance positive at each of the step's checks (two
+        flexible squares whose corners had met passed each other's, the impact missed; the
+        bodies then overlapped along a whole side; in 3D a box's corner through another's
+        edge, 7e-6 m deep).  Each line's or plane's gap is smooth, as a ground's: a particle
+        within ``margin`` at both states, its closest feature holding ``w`` at both, inside
+        the first and outside the second at ``ya`` and the other way round at ``yb``, went
+        round the corner outside or through the tip, as the second's crossing comes before
+        or after the first's (:func:`flexbody.events.locate` roots them).  Every pair of
+        ``w``'s elements is a candidate (2D: its two segments; 3D: its triangles, among them
+        the two at each of its edges); the event location keeps those whose particle was
+        inside the body where the two gaps are equal.
         """
         none = np.zeros(0, np.intp)
         ng = self.n_ground_contacts
         slots = np.flatnonzero(np.asarray(watched)[ng : ng + self.n_primary]) if self.corners else none
         if not len(slots):
-            return none, none, none
+            return none, np.zeros((0, 3), np.intp), none
         found = []
         for y in (ya, yb):  # each state's closest features (the whole sweep, kept from its gaps)
             swept = self._surface_contacts(self._state(np.asarray(y, float), p)[0])[2]
             if swept is None:
-                return none, none, none
+                return none, np.zeros((0, 3), np.intp), none
             contact, slot_rows = swept
             found.append((contact, self._rows_of(slot_rows, slot_rows >= 0)[slots]))
         (ca, ra), (cb, rb) = found
@@ -1637,24 +1641,44 @@ class BodyContactModel(Model):
         slots, fa, fb = slots[moved], fa[moved], fb[moved]
         # each (slot, w) with w a vertex of both features
         row, col = np.nonzero((fa >= 0) & (fa[:, :, None] == fb[:, None, :]).any(axis=2))
-        if not len(row):
-            return none, none, none
-        contacts, w = ng + slots[row], fa[row, col]
-        ends = self._incident_start[w + 1] - self._incident_start[w]
-        contacts, w = contacts[ends == 2], w[ends == 2]  # a closed outline's vertex: two segments
-        a, b = self.corner_lines(ya, p, contacts, w), self.corner_lines(yb, p, contacts, w)
+        contacts, corners = self._corner_pairs(ng + slots[row], fa[row, col])
+        if not len(contacts):
+            return none, np.zeros((0, 3), np.intp), none
+        a, b = self.corner_lines(ya, p, contacts, corners), self.corner_lines(yb, p, contacts, corners)
         inward = [(a[:, j] > 0.0) & (b[:, j] <= 0.0) & (a[:, 1 - j] < 0.0) & (b[:, 1 - j] > 0.0) for j in (0, 1)]
         cut = inward[0] | inward[1]
-        return contacts[cut], w[cut], np.where(inward[0], 0, 1)[cut]
+        return contacts[cut], corners[cut], np.where(inward[0], 0, 1)[cut]
 
-    def corner_lines(self, y, p, contacts: IntArray, w: IntArray) -> FloatArray:
-        """Each contact's particle's gap to the lines of the two segments at vertex ``w`` of
-        the other body (2D; in the order of :meth:`_elements_at`), shape (k, 2) (m, negative
-        on the body's side of the line)."""
+    def _corner_pairs(self, contacts: IntArray, w: IntArray) -> tuple[IntArray, IntArray]:
+        """Each of ``contacts`` (k,) with each pair of the elements at its vertex ``w`` (k,)
+        (a closed surface's vertex: two or more), as rows (contact) and (w, element,
+        element), shapes (r,) and (r, 3); a contact's pair found at two of its vertices (the
+        two triangles at an edge) once."""
+        start, count = self._incident_start[w], self._incident_start[w + 1] - self._incident_start[w]
+        rows = []
+        for m in np.unique(count[count >= 2]).tolist():  # vertices of m elements: m (m - 1) / 2 pairs each
+            at = np.flatnonzero(count == m)
+            i, j = np.triu_indices(m, 1)
+            first = self._incident_flat[start[at][:, None] + i].ravel()
+            second = self._incident_flat[start[at][:, None] + j].ravel()
+            rows.append(np.column_stack([np.repeat(contacts[at], len(i)), np.repeat(w[at], len(i)), first, second]))
+        if not rows:
+            return np.zeros(0, np.intp), np.zeros((0, 3), np.intp)
+        rows = np.concatenate(rows)
+        # one row per (contact, pair): the pair's lowest shared vertex stands for it
+        rows = rows[np.lexsort((rows[:, 1], rows[:, 3], rows[:, 2], rows[:, 0]))]
+        first = np.ones(len(rows), bool)
+        first[1:] = (rows[1:, [0, 2, 3]] != rows[:-1, [0, 2, 3]]).any(axis=1)
+        return rows[first, 0], rows[first, 1:]
+
+    def corner_lines(self, y, p, contacts: IntArray, corners: IntArray) -> FloatArray:
+        """Each contact's particle's gap to the lines (2D) or planes (3D) of its corner's two
+        elements, through its vertex ``w`` (``corners`` (k, 3): w and the elements, as
+        :meth:`corner_cuts`), shape (k, 2) (m, negative on the body's side)."""
         x = self._state(np.asarray(y, float), p)[0]
-        w = np.asarray(w, np.intp)
-        segments = self._incident_flat[self._incident_start[w][:, None] + np.arange(2)]  # (k, 2)
-        normals = segment_normals(x, self.elements[segments.ravel()]).reshape(len(w), 2, 2)
+        corners = np.asarray(corners, np.intp).reshape(-1, 3)
+        w, elements = corners[:, 0], self.elements[corners[:, 1:].ravel()]
+        normals = (segment_normals if self.dim == 2 else triangle_normals)(x, elements).reshape(len(w), 2, self.dim)
         particle = self.slot_particle[np.asarray(contacts, np.intp) - self.n_ground_contacts]
         return np.einsum("kjd,kd->kj", normals, x[particle] - x[w])
 

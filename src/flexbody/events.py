@@ -296,12 +296,12 @@ def locate(
 def _corner_cut(events: EventFunctions, dense: Callable[[float], np.ndarray], t_old: float, t_new: float,
                 g_old: np.ndarray, crossing: Crossing | None) -> Crossing | None:
     """``crossing``, or an earlier one of a free contact between bodies that went into
-    another body's convex corner and out again between two of the step's checks (its
-    start, midpoint and end ``t_new``: where a dip shortened the step, its end is the dip's,
-    as :func:`_sign_change` checks it), positive at both (2D,
-    :meth:`flexbody.model.Model.corner_cuts`).
+    another body's convex corner (2D) or edge (3D) and out again between two of the step's
+    checks (its start, midpoint and end ``t_new``: where a dip shortened the step, its end
+    is the dip's, as :func:`_sign_change` checks it), positive at both
+    (:meth:`flexbody.model.Model.corner_cuts`).
 
-    Each such contact's two lines are rooted on the dense output: where it crossed the
+    Each such contact's two lines (3D: planes) are rooted on the dense output: where it crossed the
     second's inward before the first's outward, it was inside both in between, deepest
     (for a straight passage) where their gaps are equal.  Its event function there, below
     minus the gap tolerance (a graze, two corners meeting to a rounding, is no dip, as in
@@ -325,19 +325,21 @@ def _corner_cut(events: EventFunctions, dense: Callable[[float], np.ndarray], t_
             break
         y_a, y_b = dense(ta), dense(tb)
         # each contact is judged alone, so those above their floors at both checks are picked after
-        contacts, vertices, inward = model.corner_cuts(y_a, y_b, events.p, watched)
+        contacts, corners, inward = model.corner_cuts(y_a, y_b, events.p, watched)
         roots = {}
         if len(contacts):
             g_a, g_b = free_gaps(ta), free_gaps(tb)
             positive = (g_a[contacts] > 0.0) & (g_b[contacts] > 0.0)
-            contacts, vertices, inward = contacts[positive], vertices[positive], inward[positive]
+            contacts, corners, inward = contacts[positive], corners[positive], inward[positive]
         if len(contacts):
-            lines_a = model.corner_lines(y_a, events.p, contacts, vertices)
-            lines_b = model.corner_lines(y_b, events.p, contacts, vertices)
-        for k, (c, w, j) in enumerate(zip(contacts.tolist(), vertices.tolist(), inward.tolist())):
-            def lines(t: float, c: int = c, w: int = w) -> np.ndarray:
-                return model.corner_lines(dense(t), events.p, np.array([c]), np.array([w]))[0]
+            lines_a = model.corner_lines(y_a, events.p, contacts, corners)
+            lines_b = model.corner_lines(y_b, events.p, contacts, corners)
+        for k, (c, corner, j) in enumerate(zip(contacts.tolist(), corners.tolist(), inward.tolist())):
+            def lines(t: float, c: int = c, corner: list = corner) -> np.ndarray:
+                return model.corner_lines(dense(t), events.p, np.array([c]), np.array([corner]))[0]
 
+            if c in roots:  # found at another pair of the same corner's elements
+                continue
             if t_end < tb and lines(t_end)[j] > 0.0:  # not in before the step's event: nothing to miss
                 continue
             t_in = first_fired(lambda t: lines(t)[j], ta, tb, lines_a[k, j], lines_b[k, j], xtol=ROOT_TIME)

@@ -120,7 +120,7 @@ class Model:
         the states ``ya`` and ``yb`` (:meth:`flexbody.body_contact.BodyContactModel.corner_cuts`):
         none for particles against grounds."""
         none = np.zeros(0, np.intp)
-        return none, none, none
+        return none, np.zeros((0, 3), np.intp), none
 
     def gap_rates(self, y, p, held) -> tuple[FloatArray, FloatArray]:
         """Gaps and normal velocities, shape (nc,) each: :meth:`contact_state` without the
