@@ -169,18 +169,22 @@ def test_a_corner_passing_through_another_corners_tip_within_a_step_is_an_impact
         assert kinetic[-1] == pytest.approx(kinetic[0], rel=1e-9)
 
 
-def _corner_past_edge(restitution: float, rigid: bool) -> dict:
+def _corner_past_edge(restitution: float, rigid: bool, vertex: bool = False) -> dict:
     """The 3D analog of :func:`_corner_past_corner`: two 10 cm cubes, the left one also
     2 cm along y, so that its bottom-right corner at y = -0.03 m meets the right one's left
     face 1e-5 m above its bottom edge, and the right one's top-left corner at y = 0.05 m
-    the left one's right face 1e-5 m below its top edge (flexible: 8 particles, 3000 N/m,
-    undamped)."""
+    the left one's right face 1e-5 m below its top edge.  With ``vertex`` the left one
+    moves at (1, -0.3, -0.3) m/s and its corner meets the other's face 1e-5 m from its
+    front and bottom edges, next to their vertex (and the other's corner the same).
+    Flexible: 8 particles, 3000 N/m, undamped."""
     box = {"shape": "box", "count": [2, 2, 2], "size": [0.1] * 3, "mass": 0.03}
     box.update({"rigid": True} if rigid else {"stiffness": 3000.0, "damping": 0.0, "damper": "axial"})
+    position, velocity = ([-0.001, 3.1e-4, 3.1e-4], [1.0, -0.3, -0.3]) if vertex else \
+        ([-0.001, 0.02, 3.1e-4], [1.0, 0.0, -0.3])
     return {
         "name": "corner_past_edge", "gravity": [0.0, 0.0, 0.0],
         "grounds": [{"point": [0.0, 0.0, -10.0], "normal": [0.0, 0.0, 1.0]}],
-        "bodies": [{**box, "name": "a", "position": [-0.001, 0.02, 3.1e-4], "velocity": [1.0, 0.0, -0.3]},
+        "bodies": [{**box, "name": "a", "position": position, "velocity": velocity},
                    {**box, "name": "b", "position": [0.1, 0.0, 0.0]}],
         "contacts": [{"bodies": ["a", "b"], "restitution": restitution}],
         "simulation": {"t_end": 0.003, "output_dt": 1e-5},
@@ -194,7 +198,7 @@ def _check_corners_past_edges(scene, result) -> None:
     assert not [w for w in result.stats["warnings"] if "into another body" in w]
     first = np.abs(result.events_time - 1e-3) < 1e-12
     assert list(result.events_kind[first]) == ["impact", "impact"]
-    assert sorted(result.events_particle[first]) == [1, 14]  # a's corner at y = -0.03, b's at y = 0.05
+    assert sorted(result.events_particle[first]) == [1, 14]  # a's bottom-right corner in front, b's top-left behind
     corners = [(particle, 1) for particle in range(8)] + [(particle, 0) for particle in range(8, 16)]
     assert _deepest(scene, result, corners) >= -1e-9  # -7e-6 m before
     m, v = result.masses, result.velocities
@@ -202,27 +206,50 @@ def _check_corners_past_edges(scene, result) -> None:
     np.testing.assert_allclose(momentum[-1], momentum[0], rtol=0, atol=1e-12)
 
 
+@pytest.mark.parametrize("vertex", [False, True])
 @pytest.mark.parametrize("restitution", [1.0, 0.5])
-def test_a_corner_passing_through_another_bodys_edge_within_a_step_is_an_impact(restitution):
-    """3D: a corner reaching another cube's face 1e-5 m from its edge, moving down at
-    0.3 m/s, would be through that edge's wedge and out through the bottom face in 3.3e-5
-    s, positive at each of the step's checks.  Before, the flexible cubes' corners went
-    7e-6 m inside unseen (the first impacts at 1.033 ms, of corners already past).  The
-    passage is now found from the edge's two triangles' planes (the cubes' edges then still
-    cross edge on edge: no edge contacts here, warned)."""
-    scene = flexbody.load_scene(_corner_past_edge(restitution, rigid=False))
+def test_a_corner_passing_through_another_bodys_edge_within_a_step_is_an_impact(restitution, vertex):
+    """3D: a corner reaching another cube's face 1e-5 m from its edge (or from two edges,
+    by their vertex), moving down at 0.3 m/s, would be through that edge's wedge (the
+    vertex's tip) and out in 3.3e-5 s, positive at each of the step's checks.  Before, the
+    flexible cubes' corners went 7e-6 m inside unseen (the first impacts at 1.033 ms, of
+    corners already past).  The passage is now found from the planes of two triangles at
+    the vertex (the cubes' edges then still cross edge on edge: no edge contacts here,
+    warned)."""
+    scene = flexbody.load_scene(_corner_past_edge(restitution, rigid=False, vertex=vertex))
     result = flexbody.simulate(scene, max_wall_time=60.0)
     _check_corners_past_edges(scene, result)
     assert result.stats["energy_drift_relative"] < 1e-7  # measured 1.7e-8 (e = 1)
 
 
+@pytest.mark.parametrize("vertex", [False, True])
+def test_a_corner_passing_just_outside_another_bodys_edge_is_no_impact(vertex):
+    """A 5 cm cube whose top-right edge (corner) passes 1e-5 m outside the other cube's
+    bottom-left edge (its vertex) at 1 ms, moving as above: within a step its corners
+    cross the other's bottom plane outward, then its left plane inward (round the edge
+    outside, not through it).  No impact, no event at all, nothing inside."""
+    table = _corner_past_edge(1.0, rigid=False, vertex=vertex)
+    small = 0.05
+    y = -0.05 - 1e-5 + 3e-4 + small / 2 if vertex else 0.0  # its right top corner in front of the other's
+    table["bodies"][0].update({"size": [small] * 3, "position": [0.049 - small / 2, y, -0.05 - 1e-5 + 3e-4 - small / 2]})
+    scene = flexbody.load_scene(table)
+    result = flexbody.simulate(scene, max_wall_time=60.0)
+    assert result.status == "success", result.message
+    assert len(result.events_time) == 0 and not result.stats["warnings"]
+    corners = [(particle, 1) for particle in range(8)] + [(particle, 0) for particle in range(8, 16)]
+    assert _deepest(scene, result, corners) >= 0.0
+    # free flight: nothing touched (the springs at rest to round-off)
+    np.testing.assert_allclose(result.velocities[-1], result.velocities[0], rtol=0, atol=1e-12)
+
+
 @pytest.mark.slow  # the rigid cubes are derived whole (~20 s with a cold cache)
+@pytest.mark.parametrize("vertex", [False, True])
 @pytest.mark.parametrize("restitution", [1.0, 0.5])
-def test_a_rigid_corner_passing_through_another_rigid_bodys_edge_is_an_impact(restitution):
+def test_a_rigid_corner_passing_through_another_rigid_bodys_edge_is_an_impact(restitution, vertex):
     """The same with rigid cubes: the two impacts at 1 ms and no other event, no warning,
     and with e = 1 the kinetic energy kept.  Before: e = 1 `chattering` at 1.03 ms (26
     impacts, 1e-6 m inside), e = 0.5 7e-6 m inside and the edges crossed."""
-    scene = flexbody.load_scene(_corner_past_edge(restitution, rigid=True))
+    scene = flexbody.load_scene(_corner_past_edge(restitution, rigid=True, vertex=vertex))
     result = flexbody.simulate(scene, max_wall_time=120.0)
     _check_corners_past_edges(scene, result)
     assert list(result.events_kind) == ["impact", "impact"] and not result.stats["warnings"]
