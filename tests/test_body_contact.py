@@ -537,6 +537,30 @@ def test_the_kept_whole_sweep_follows_the_positions_and_cannot_be_changed():
     assert model.gaps(q, p).tolist() == fresh.gaps(q, p).tolist()
 
 
+def test_a_kept_sweep_is_found_by_every_coordinate_not_only_those_its_lookup_reads_first():
+    """The kept sweeps are looked up by a fingerprint of a few coordinates (the first,
+    middle and last) before a whole comparison: positions changed everywhere else, in
+    place, must still give a fresh model's answer, not the kept one."""
+    from flexbody.body_contact import _fingerprint, _kept_at
+
+    model, q, p = _squeezed_discs(0.7)
+    fresh = _squeezed_discs(0.7)[0]
+    before = model.gaps(q, p).copy()
+    flat = q.reshape(-1)
+    key = _fingerprint((flat,))
+    middle = len(flat) // 2
+    flat[1:middle] += 0.004
+    flat[middle + 1 : -1] += 0.004
+    assert _fingerprint((flat,)) == key  # the lookup's first reading cannot tell them apart
+    after = model.gaps(q, p)
+    assert after.tolist() != before.tolist() and after.tolist() == fresh.gaps(q, p).tolist()
+    made = []  # arrays of no items: one answer, kept
+    store: list = []
+    for _ in range(2):
+        assert _kept_at(store, (np.zeros((0, 3)), np.zeros(0, np.intp)), lambda: made.append(1) or "answer", 2) == "answer"
+    assert made == [1]
+
+
 def test_held_rows_kept_layout_gives_the_rows_of_a_fresh_model_and_W_is_J_M_inv_J_T():
     """The layout of held rows (where their terms go, the sparse ``J M^-1 J^T``'s pairs) is
     kept per set of rows and elements: at a second state it must give exactly the rows a

@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 import flexbody
+from flexbody.body_contact import BodyContactModel
 
 from .conftest import reference_table
 
@@ -223,7 +224,7 @@ def test_a_corner_passing_through_another_bodys_edge_within_a_step_is_an_impact(
 
 
 @pytest.mark.parametrize("vertex", [False, True])
-def test_a_corner_passing_just_outside_another_bodys_edge_is_no_impact(vertex):
+def test_a_corner_passing_just_outside_another_bodys_edge_is_no_impact(vertex, monkeypatch):
     """A 5 cm cube whose top-right edge (corner) passes 1e-5 m outside the other cube's
     bottom-left edge (its vertex) at 1 ms, moving as above: within a step its corners
     cross the other's bottom plane outward, then its left plane inward (round the edge
@@ -233,13 +234,46 @@ def test_a_corner_passing_just_outside_another_bodys_edge_is_no_impact(vertex):
     y = -0.05 - 1e-5 + 3e-4 + small / 2 if vertex else 0.0  # its right top corner in front of the other's
     table["bodies"][0].update({"size": [small] * 3, "position": [0.049 - small / 2, y, -0.05 - 1e-5 + 3e-4 - small / 2]})
     scene = flexbody.load_scene(table)
+    candidates = []  # the passages corner_cuts hands the event location: some, each rejected
+
+    def recorded(self, *args):
+        found = corner_cuts(self, *args)
+        candidates.extend(found[0].tolist())
+        return found
+
+    corner_cuts = BodyContactModel.corner_cuts
+    monkeypatch.setattr(BodyContactModel, "corner_cuts", recorded)
     result = flexbody.simulate(scene, max_wall_time=60.0)
     assert result.status == "success", result.message
+    assert candidates  # measured: 13 (edge) and 23 (vertex) pairs of planes, in one step
     assert len(result.events_time) == 0 and not result.stats["warnings"]
     corners = [(particle, 1) for particle in range(8)] + [(particle, 0) for particle in range(8, 16)]
     assert _deepest(scene, result, corners) >= 0.0
     # free flight: nothing touched (the springs at rest to round-off)
     np.testing.assert_allclose(result.velocities[-1], result.velocities[0], rtol=0, atol=1e-12)
+
+
+def test_the_pairs_of_planes_at_a_vertex_are_every_pair_of_its_triangles_once():
+    """A cube's vertex has its triangles' every pair as a candidate corner; asked at both
+    ends of one of its edges, the pairs the two vertices share (those at the edge) come
+    once, with the lower vertex.  In 2D a vertex has its two segments, in order."""
+    from flexbody.model import load_model
+
+    model = load_model(flexbody.load_scene(_corner_past_edge(1.0, rigid=False)))
+    u = int(model.elements[0, 0])
+    around_u = model._elements_at(u)
+    v = next(int(w) for w in model.elements[around_u].ravel() if w != u)  # an edge (u, v) of the surface
+    around_v = model._elements_at(v)
+    contacts, corners = model._corner_pairs(np.array([7, 7]), np.array([u, v]))
+    pairs = [tuple(row) for row in corners[:, 1:].tolist()]
+    expected = {(a, b) for around in (around_u, around_v) for a in around.tolist() for b in around.tolist() if a < b}
+    assert len(pairs) == len(set(pairs)) and set(pairs) == expected and contacts.tolist() == [7] * len(pairs)
+    shared = [w for w, pair in zip(corners[:, 0].tolist(), pairs) if set(pair) <= set(around_u) & set(around_v)]
+    assert shared and all(w == min(u, v) for w in shared)
+    flat = load_model(flexbody.load_scene(_corner_past_corner(1.0)))
+    w = int(flat.elements[0, 1])
+    contacts, corners = flat._corner_pairs(np.array([3]), np.array([w]))
+    assert corners.tolist() == [[w, *flat._elements_at(w).tolist()]]
 
 
 @pytest.mark.slow  # the rigid cubes are derived whole (~20 s with a cold cache)

@@ -272,7 +272,7 @@ class BodyContactModel(Model):
         self._dense_gaps = (CompiledDenseGaps(self._narrow, self.element_body, self.n_particles, self._body_count)
                             if self._narrow is not None and isinstance(self._coordinates, _ParticleCoordinates)
                             and self.own is None else None)
-        #: A particle can pass through another body's convex corner (2D) or edge (3D)
+        #: A particle can pass through another body's convex corner (2D; 3D: edge or vertex)
         #: between a step's event checks, however short the step (:meth:`corner_cuts`).
         self.corners = self.n_primary > 0
         # A held slot's element-boundary event fires where its margin falls below this floor
@@ -290,8 +290,8 @@ class BodyContactModel(Model):
         self._slip_held = np.zeros(self.n_contacts, np.intc)  # 3D: where a slip keeps its step start's direction
         self._frictional = bool((self.mu > 0.0).any())  # else the slip directions change no answer
         self._last: tuple[tuple[np.ndarray, ...], _Solved] | None = None  # the last state's answer (see _dynamics)
-        self._swept: list[tuple] = []  # ((positions,), the whole surface sweep; see _surface_contacts)
-        self._edges_swept: list[tuple] = []  # ((positions, edges held), every edge row's gap; the same)
+        self._swept: list[tuple] = []  # (fingerprint, (positions,), the whole surface sweep; see _kept_at)
+        self._edges_swept: list[tuple] = []  # (fingerprint, (positions, edges held), every edge row's gap; the same)
         self._layouts: dict[tuple, _Layout] = {}  # held rows -> where their terms go (see _rows)
         self._allowed_pairs: tuple[IntArray, IntArray] | None = None  # (kept pairs, the allowed ones; see _allowed_kept)
         self._element = ElementKernels(self.dim, self.backend)
@@ -1573,7 +1573,8 @@ class BodyContactModel(Model):
         groups = self._group_rows(mirror)
         row, member = np.nonzero(np.asarray(held)[self.n_ground_contacts + groups] != 0)
         element = self.element_of[groups[row, member]]
-        own = (self.elements[element] == contact.particle[rows][row, None]).any(axis=1)
+        # a held slot has its element; one without (-1) would read the last element
+        own = (element >= 0) & (self.elements[element] == contact.particle[rows][row, None]).any(axis=1)
         row, element = row[own], element[own]
         normals = (segment_normals if self.dim == 2 else triangle_normals)(x, self.elements[element])
         carried = np.zeros(len(rows), bool)
@@ -1609,7 +1610,8 @@ class BodyContactModel(Model):
         and the one of those two (0 or 1) whose line or plane it crossed inward, (k,).
 
         Near a convex vertex (2D) or edge (3D) the body is the wedge inside both of its
-        elements' lines or planes, whose tip is as thin as one likes: a particle passing
+        elements' lines or planes (near a 3D vertex, inside all of its triangles' planes),
+        whose tip is as thin as one likes: a particle passing
         ``w`` by 1e-5 m can go into the tip through one element and out through the other
         within a step, its signed distance positive at each of the step's checks (two
         flexible squares whose corners had met passed each other's, the impact missed; the

@@ -296,7 +296,7 @@ def locate(
 def _corner_cut(events: EventFunctions, dense: Callable[[float], np.ndarray], t_old: float, t_new: float,
                 g_old: np.ndarray, crossing: Crossing | None) -> Crossing | None:
     """``crossing``, or an earlier one of a free contact between bodies that went into
-    another body's convex corner (2D) or edge (3D) and out again between two of the step's
+    another body's convex corner (2D; 3D: edge or vertex) and out again between two of the step's
     checks (its start, midpoint and end ``t_new``: where a dip shortened the step, its end
     is the dip's, as :func:`_sign_change` checks it), positive at both
     (:meth:`flexbody.model.Model.corner_cuts`).

@@ -124,7 +124,9 @@ class Model:
 
     def gap_rates(self, y, p, held) -> tuple[FloatArray, FloatArray]:
         """Gaps and normal velocities, shape (nc,) each: :meth:`contact_state` without the
-        forces (an instant of coupled contacts solves for those itself)."""
+        forces (an instant of coupled contacts solves for those itself).  An instant reads
+        the rates of free contacts only: a model may leave held contacts' at 0
+        (:meth:`flexbody.body_contact.BodyContactModel.gap_rates`)."""
         gaps, vn, _ = self.contact_state(y, p, held, np.zeros(self.n_contacts))
         return gaps, vn
 
