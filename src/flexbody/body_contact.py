@@ -1515,10 +1515,7 @@ class BodyContactModel(Model):
             gaps, near, found = self._sweep(x, slots[slots < self.first_edge])
             rows = slots[slots >= self.first_edge] - self.first_edge
         else:
-            # The whole sweep depends on x alone, and an instant asks for it at the same state
-            # several times (the step's end, the instant's resolve, the next segment's start):
-            # the last few answers are kept, read-only.
-            gaps, near, found = _kept_at(self._swept, (x,), lambda: _read_only(self._sweep(x)), SWEEPS_KEPT)
+            gaps, near, found = self._whole_sweep(x)
             rows = np.arange(self.n_slots - self.first_edge)
         if len(rows):  # the edge contacts': an edge held against another reads that pair's gap
             gaps, near = gaps.copy(), near.copy()
@@ -1529,6 +1526,13 @@ class BodyContactModel(Model):
                 edge_gaps = self._edge_gaps(x, rows)
             gaps[self.first_edge + rows], near[self.first_edge + rows] = edge_gaps
         return gaps, near, found
+
+    def _whole_sweep(self, x) -> tuple[FloatArray, np.ndarray, tuple[SurfaceContact, IntArray] | None]:
+        """:meth:`_sweep` of every slot at positions ``x`` (n, dim), kept: it depends on x
+        alone, and an instant asks for it at the same state several times (the step's end,
+        the instant's resolve, the next segment's start); the last few answers are kept,
+        read-only."""
+        return _kept_at(self._swept, (x,), lambda: _read_only(self._sweep(x)), SWEEPS_KEPT)
 
     def _sweep(self, x, slots: IntArray | None = None) \
             -> tuple[FloatArray, np.ndarray, tuple[SurfaceContact, IntArray] | None]:
@@ -1631,8 +1635,8 @@ class BodyContactModel(Model):
         if not len(slots):
             return none, np.zeros((0, 3), np.intp), none
         found = []
-        for y in (ya, yb):  # each state's closest features (the whole sweep, kept from its gaps)
-            swept = self._surface_contacts(self._state(np.asarray(y, float), p)[0])[2]
+        for y in (ya, yb):  # each state's closest features (the whole sweep, kept from its gaps; no edge rows')
+            swept = self._whole_sweep(self._state(np.asarray(y, float), p)[0])[2]
             if swept is None:
                 return none, np.zeros((0, 3), np.intp), none
             contact, slot_rows = swept
@@ -1645,6 +1649,8 @@ class BodyContactModel(Model):
         slots, fa, fb = slots[moved], fa[moved], fb[moved]
         # each (slot, w) with w a vertex of both features
         row, col = np.nonzero((fa >= 0) & (fa[:, :, None] == fb[:, None, :]).any(axis=2))
+        if not len(row):
+            return none, np.zeros((0, 3), np.intp), none
         contacts, corners = self._corner_pairs(ng + slots[row], fa[row, col])
         if not len(contacts):
             return none, np.zeros((0, 3), np.intp), none
