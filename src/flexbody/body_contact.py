@@ -1615,9 +1615,9 @@ class BodyContactModel(Model):
 
         Near a convex vertex (2D) or edge (3D) the body is the wedge inside both of its
         elements' lines or planes (near a 3D vertex, inside all of its triangles' planes),
-        whose tip is as thin as one likes: a particle passing
-        ``w`` by 1e-5 m can go into the tip through one element and out through the other
-        within a step, its signed distance positive at each of the step's checks (two
+        whose tip is as thin as one likes: a particle passing ``w`` by 1e-5 m can go into
+        the tip through one element and out through the other within a step, its signed
+        distance positive at each of the step's checks (two
         flexible squares whose corners had met passed each other's, the impact missed; the
         bodies then overlapped along a whole side; in 3D a box's corner through another's
         edge, 7e-6 m deep).  Each line's or plane's gap is smooth, as a ground's: a particle
