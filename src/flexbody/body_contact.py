@@ -1629,16 +1629,16 @@ class BodyContactModel(Model):
         the two at each of its edges); the event location keeps those whose particle was
         inside the body where the two gaps are equal.
         """
-        none = np.zeros(0, np.intp)
+        none = (np.zeros(0, np.intp), np.zeros((0, 3), np.intp), np.zeros(0, np.intp))
         ng = self.n_ground_contacts
-        slots = np.flatnonzero(np.asarray(watched)[ng : ng + self.n_primary]) if self.corners else none
+        slots = np.flatnonzero(np.asarray(watched)[ng : ng + self.n_primary]) if self.corners else none[0]
         if not len(slots):
-            return none, np.zeros((0, 3), np.intp), none
+            return none
         found = []
         for y in (ya, yb):  # each state's closest features (the whole sweep, kept from its gaps; no edge rows')
             swept = self._whole_sweep(self._state(np.asarray(y, float), p)[0])[2]
             if swept is None:
-                return none, np.zeros((0, 3), np.intp), none
+                return none
             contact, slot_rows = swept
             found.append((contact, self._rows_of(slot_rows, slot_rows >= 0)[slots]))
         (ca, ra), (cb, rb) = found
@@ -1650,10 +1650,10 @@ class BodyContactModel(Model):
         # each (slot, w) with w a vertex of both features
         row, col = np.nonzero((fa >= 0) & (fa[:, :, None] == fb[:, None, :]).any(axis=2))
         if not len(row):
-            return none, np.zeros((0, 3), np.intp), none
+            return none
         contacts, corners = self._corner_pairs(ng + slots[row], fa[row, col])
         if not len(contacts):
-            return none, np.zeros((0, 3), np.intp), none
+            return none
         a, b = self.corner_lines(ya, p, contacts, corners), self.corner_lines(yb, p, contacts, corners)
         inward = [(a[:, j] > 0.0) & (b[:, j] <= 0.0) & (a[:, 1 - j] < 0.0) & (b[:, 1 - j] > 0.0) for j in (0, 1)]
         cut = inward[0] | inward[1]
