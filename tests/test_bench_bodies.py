@@ -90,7 +90,9 @@ def test_one_body_alone_is_where_it_is_in_the_row():
 def test_the_quick_study_saves_five_runs_a_set_and_the_stiff_row_touches_nothing(tmp_path):
     """``--quick`` (4 thesis-ball discs, 0.3 s): five runs per stiffness, each ratio against
     its own layout's separate drops; side by side the stiff discs make no contact between
-    bodies, so the row's run has exactly its separate drops' events."""
+    bodies, so the row's run has exactly its separate drops' events.  The stiff pile is also
+    run with 2 and 3 discs: 2 lie side by side (the drops' events exactly), 3 land on each
+    other; each row's broad-phase time lies within its run's."""
     import json
 
     from flexbody.bench_bodies import bodies_study
@@ -107,3 +109,12 @@ def test_the_quick_study_saves_five_runs_a_set_and_the_stiff_row_touches_nothing
     stiff = data["stiff"]["runs"]
     assert stiff["row_collide"]["events"] == stiff["row_separate"]["events"] > 0
     assert stiff["collide"]["events"] > stiff["separate"]["events"]  # the pile's discs land on each other
+    # the stiff pile by its bodies: 2 (one row, nothing lands on anything), 3, then the study's own 4
+    scaling = data["scaling"]
+    assert [row["bodies"] for row in scaling] == [2, 3, 4]
+    assert scaling[-1]["collide"] == stiff["collide"] and scaling[-1]["separate"] == stiff["separate"]
+    assert scaling[0]["collide"]["events"] == scaling[0]["separate"]["events"] > 0
+    assert scaling[1]["collide"]["events"] > scaling[1]["separate"]["events"]
+    for row in scaling:
+        assert row["ratio"] == pytest.approx(row["collide"]["wall_s"] / row["separate"]["wall_s"])
+        assert 0.0 < row["collide"]["broadphase_s"] < row["collide"]["wall_s"]

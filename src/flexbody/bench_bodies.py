@@ -43,9 +43,10 @@ import numpy as np
 from .scene import Scene, load_scene
 
 #: The full study: 20 discs of about 200 particles (radius 0.1 m x sqrt(200 / 23)), 0.5 s.
-FULL = {"bodies": 20, "count": 200, "t_end": 0.5}
+#: ``smaller``: the stiff pile's sizes (bodies) run beside it, for how its cost grows with them.
+FULL = {"bodies": 20, "count": 200, "t_end": 0.5, "smaller": (5, 10)}
 #: ``--quick``: four thesis-ball discs (about 23 particles, radius 0.1 m), 0.3 s.
-QUICK = {"bodies": 4, "count": 23, "t_end": 0.3}
+QUICK = {"bodies": 4, "count": 23, "t_end": 0.3, "smaller": (2, 3)}
 #: The thesis ball's link stiffness (N/m), and the stiff set's: 2000 N/m x sqrt(200 / 23)
 #: (a 2D lattice's modulus is its links' stiffness, while a disc's weight per unit width
 #: grows with its radius), rounded.
@@ -128,11 +129,14 @@ def _measure(scene: Scene, repeats: int) -> dict:
             break
     s = result.stats
     candidates = getattr(model, "_candidates", None)
-    return {"particles": scene.n_particles, "status": result.status, "message": result.message,
+    return {"particles": scene.n_particles, "contacts": int(model.n_contacts), "status": result.status,
+            "message": result.message,
             "t_reached_s": float(result.t[-1]), "wall_s": statistics.median(times), "repeats": len(times),
             "rhs_evaluations": s["rhs_evaluations"], "steps": s["steps"], "events": s["events"],
             "max_penetration_m": s["max_penetration_m"], "energy_drift_relative": s["energy_drift_relative"],
-            "broadphase_rebuilds": None if candidates is None else int(candidates.rebuilds)}
+            "broadphase_rebuilds": None if candidates is None else int(candidates.rebuilds),
+            # the last run's: its builds and filters, against its whole wall time
+            "broadphase_s": None if candidates is None else float(candidates.seconds)}
 
 
 def bodies_study(out: Path, quick: bool, repeats: int = 3) -> dict:
@@ -149,9 +153,11 @@ def bodies_study(out: Path, quick: bool, repeats: int = 3) -> dict:
     for label, stiffness in (("soft", STIFFNESS), ("stiff", STIFF)):
         print(f" links {stiffness:g} N/m ({label})")
         sets[label] = _five_runs(n, count, t_end, stiffness, repeats, contact_repeats)
+    print(f" the stiff pile by its number of bodies (links {STIFF:g} N/m)")
+    scaling = _scaling(case["smaller"], count, t_end, repeats, contact_repeats, n, sets["stiff"]["runs"])
     data = {"bodies": n, "count": count, "t_end_s": t_end, "method": "RK45", "rtol": 1e-6,
             "stiffness_N_per_m": STIFFNESS, **sets["soft"],
-            "stiff": {"stiffness_N_per_m": STIFF, **sets["stiff"]}, "environment": _environment()}
+            "stiff": {"stiffness_N_per_m": STIFF, **sets["stiff"]}, "scaling": scaling, "environment": _environment()}
     _save(out, "bodies", data, plot_bodies(data))
     return data
 
@@ -180,25 +186,53 @@ def _five_runs(n: int, count: int, t_end: float, stiffness: float, repeats: int,
     return {"runs": runs, "ratio_to_separate": ratios}
 
 
+def _scaling(smaller: tuple[int, ...], count: int, t_end: float, repeats: int, contact_repeats: int, n: int,
+             runs: dict) -> list[dict]:
+    """The stiff pile of each of ``smaller`` bodies and its separate drops, then the study's
+    own ``n`` (its ``runs``), printed: whether the cost of an event grows with the bodies
+    (the broad phase's and the instant's work over every contact) or only their events do.
+    Each row: ``bodies``, ``collide`` and ``separate`` (as :func:`_measure`), ``ratio``."""
+    rows = [{"bodies": k, "collide": _measure(bodies_scene(k, count, t_end, True, stiffness=STIFF), contact_repeats),
+             "separate": _separate(k, count, t_end, STIFF, repeats, row=False)} for k in smaller]
+    rows.append({"bodies": n, "collide": runs["collide"], "separate": runs["separate"]})
+    print(f"  {'bodies':>6s} {'contacts':>8s} {'pile s':>8s} {'events':>7s} {'ms/event':>8s} {'separate s':>10s} "
+          f"{'events':>7s} {'ms/event':>8s} {'x separate':>10s} {'broad phase s':>13s}")
+    for row in rows:
+        pile, alone = row["collide"], row["separate"]
+        row["ratio"] = pile["wall_s"] / alone["wall_s"]
+        share = f"{pile['broadphase_s']:.2f} ({100 * pile['broadphase_s'] / pile['wall_s']:.1f} %)"
+        print(f"  {row['bodies']:6d} {pile['contacts']:8d} {pile['wall_s']:8.2f} {pile['events']:7d} "
+              f"{_per_event(pile):8.2f} "
+              f"{alone['wall_s']:10.2f} {alone['events']:7d} {_per_event(alone):8.2f} {row['ratio']:10.2f} {share:>13s}"
+              + ("" if pile["status"] == "success" else f"  (pile {pile['status']} at {pile['t_reached_s']:.3f} s)"))
+    return rows
+
+
+def _per_event(run: dict) -> float:
+    """A run's wall time per event (ms)."""
+    return 1e3 * run["wall_s"] / max(run["events"], 1)
+
+
 def _separate(n: int, count: int, t_end: float, stiffness: float, repeats: int, row: bool) -> dict:
     """Each of the ``n`` bodies dropped alone where it is in the pile (or with ``row``, in the
     row), its numbers summed (maxima of the penetration and drift): the separate drops."""
     alone = [_measure(bodies_scene(n, count, t_end, False, only=k, stiffness=stiffness, row=row), repeats)
              for k in range(n)]
-    return {"particles": sum(r["particles"] for r in alone),
+    return {"particles": sum(r["particles"] for r in alone), "contacts": sum(r["contacts"] for r in alone),
             "status": "success" if all(r["status"] == "success" for r in alone) else "failed",
             "t_reached_s": min(r["t_reached_s"] for r in alone),
             "wall_s": sum(r["wall_s"] for r in alone), "repeats": repeats,
             **{k: sum(r[k] for r in alone) for k in ("rhs_evaluations", "steps", "events")},
             "max_penetration_m": max(r["max_penetration_m"] for r in alone),
             "energy_drift_relative": max(r["energy_drift_relative"] for r in alone),
-            "broadphase_rebuilds": None, "each_wall_s": [r["wall_s"] for r in alone]}
+            "broadphase_rebuilds": None, "broadphase_s": None, "each_wall_s": [r["wall_s"] for r in alone]}
 
 
 def plot_bodies(data: dict):
     """Wall time and RHS evaluations of the runs, side by side (log axes), for each link
     stiffness the JSON holds (the soft set; the stiff one where it was run); a study saved
-    before the row was added has the pile's three runs only."""
+    before the row was added has the pile's three runs only.  With the stiff pile's
+    ``scaling`` (:func:`_scaling`), a third panel: its wall time per event by its bodies."""
     from matplotlib.figure import Figure
 
     sets = [(f"{data.get('stiffness_N_per_m', STIFFNESS):g} N/m", data["runs"])]
@@ -209,8 +243,12 @@ def plot_bodies(data: dict):
               "row_collide": "row:\ncollide\ntrue"}
     order = ("separate", "pass_through", "collide", "row_separate", "row_collide")
     colours = {"separate": "C0", "pass_through": "C2", "collide": "C3", "row_separate": "C9", "row_collide": "C1"}
-    fig = Figure(figsize=(14, 5.5), layout="constrained")
-    for ax, key, title in zip(fig.subplots(1, 2), ("wall_s", "rhs_evaluations"),
+    scaling = data.get("scaling")  # a study saved before it was added has none
+    fig = Figure(figsize=(20 if scaling else 14, 5.5), layout="constrained")
+    axes = fig.subplots(1, 3 if scaling else 2, width_ratios=[3, 3, 2] if scaling else None)
+    if scaling:
+        _plot_scaling(axes[2], scaling)
+    for ax, key, title in zip(axes, ("wall_s", "rhs_evaluations"),
                               ("wall time of the integration (s)", "RHS evaluations")):
         ticks, names = [], []
         for s, (stiffness, runs) in enumerate(sets):
@@ -232,3 +270,22 @@ def plot_bodies(data: dict):
     fig.suptitle(f"{data['bodies']} discs x about {data['count']} particles dropped for {data['t_end_s']:g} s "
                  f"(SciPy RK45, rtol {data['rtol']:g}); links soft, then stiff", fontsize=10)
     return fig
+
+
+def _plot_scaling(ax, scaling: list[dict]) -> None:
+    """The stiff pile against its separate drops by the number of bodies: wall time per
+    event (ms, log), each pile point labelled with its events and its ratio to the drops."""
+    bodies = [row["bodies"] for row in scaling]
+    for key, colour, label in (("collide", "C3", "pile, collide = true"), ("separate", "C0", "alone (summed)")):
+        ax.plot(bodies, [_per_event(row[key]) for row in scaling], "o-", color=colour, label=label)
+    for row in scaling:
+        ax.annotate(f"{row['collide']['events']} events\n{row['ratio']:.1f}x the drops",
+                    (row["bodies"], _per_event(row["collide"])), textcoords="offset points", xytext=(0, 8),
+                    ha="center", fontsize=7)
+    ax.set_yscale("log")
+    ax.margins(x=0.12, y=0.2)  # room for the labels
+    ax.set_xticks(bodies)
+    ax.set_xlabel("bodies in the pile")
+    ax.set_title("stiff pile: wall time per event (ms)", fontsize=10)
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8)

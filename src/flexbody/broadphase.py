@@ -269,6 +269,9 @@ class CandidateList:
     ----------
     rebuilds : int
         Spatial-index builds so far.
+    seconds : float
+        Wall time (s) spent in the list's calls so far: its builds and filters (the bodies
+        study reports it against the whole run's).
     """
 
     def __init__(self, elements: IntArray, particle_body: IntArray, margin: float, skin: float,
@@ -280,6 +283,7 @@ class CandidateList:
         self.element_body = self.particle_body[self.elements[:, 0]] if element_body is None else element_body
         self.margin, self.skin, self.self_contact, self.method = margin, skin, self_contact, method
         self.rebuilds = 0
+        self.seconds = 0.0
         self._built_at: FloatArray | None = None
         self._pairs = np.zeros((0, 2), dtype=np.int64)
         self._first = np.zeros(1, dtype=np.intp)  # particle i's pairs: _pairs[_first[i] : _first[i + 1]]
@@ -287,6 +291,7 @@ class CandidateList:
     def pairs(self, x: FloatArray, particles: IntArray | int | None = None) -> IntArray:
         """The candidate pairs at positions x (n, d): equal to ``candidate_pairs(x, ..., margin)``;
         with ``particles`` (an index or distinct indices), theirs only."""
+        start = time.perf_counter()
         x = np.asarray(x, float)
         self._renew(x)
         if particles is None:
@@ -295,21 +300,27 @@ class CandidateList:
             kept = self._pairs[self._first[particles] : self._first[particles + 1]]
         else:  # the particles' slices, end to end
             kept = self._pairs[slices(self._first[particles], self._first[np.asarray(particles) + 1])]
-        return kept[self._inside(x, kept)]
+        inside = kept[self._inside(x, kept)]
+        self.seconds += time.perf_counter() - start
+        return inside
 
     def all_kept(self, x: FloatArray) -> IntArray:
         """Every kept pair at positions x (n, d), shape (k, 2), unfiltered: a superset of
         :meth:`pairs`, which are those whose particle lies in the element's box grown by
         ``margin`` (a filter the C narrow phase can apply itself); the same array until
         the next rebuild (:attr:`rebuilds`)."""
+        start = time.perf_counter()
         self._renew(np.asarray(x, float))
+        self.seconds += time.perf_counter() - start
         return self._pairs
 
     def kept(self, x: FloatArray, particle: int) -> IntArray:
         """Particle ``particle``'s kept pairs at positions x (n, d), shape (k, 2): a superset
         of its :meth:`pairs` (every element whose ``margin``-grown box holds it is among
         them), unfiltered; its closest element within ``margin`` is among them."""
+        start = time.perf_counter()
         self._renew(np.asarray(x, float))
+        self.seconds += time.perf_counter() - start
         return self._pairs[self._first[particle] : self._first[particle + 1]]
 
     def _renew(self, x: FloatArray) -> None:
