@@ -263,6 +263,36 @@ def test_threads_change_no_bit_of_a_large_bodys_equations(dim, rng):
 
 
 @pytest.mark.skipif(not HAS_CC, reason="no C compiler")
+def test_scipy_steppers_run_a_large_bodys_rhs_on_one_thread_and_restore_its_limit(monkeypatch):
+    """With SciPy's steppers the right-hand side is called from Python between other work, so
+    the run uses one thread (a sleeping second one costs more to wake than it saves); the
+    compiled loop keeps two where the compiler has OpenMP.  The same stepper on two threads
+    (the switch bypassed) gives the same samples bit for bit, and after each run the
+    model's thread limit is the caller's again."""
+    import contextlib
+
+    from flexbody import cbuild, driver
+    from flexbody.bench_scale import disc_scene_table
+
+    table = disc_scene_table(3000)
+    table["simulation"] = {"t_end": 2e-3, "output_dt": 1e-3}
+    scene = flexbody.load_scene(table)
+    model = assembled_model(scene, "c")
+    assert len(model.links) >= 2 * 4096
+    two = 2 if cbuild.OPENMP in cbuild.flags(cbuild.compiler()) else 1
+    model.use_threads(2)
+    scipy = flexbody.simulate(scene, model=model, method="RK45", rtol=1e-8)
+    assert scipy.success and scipy.stats["threads"] == 1
+    assert model.use_threads(2) == 2  # the limit it had before the run
+    compiled = flexbody.simulate(scene, model=model, method="dopri5", rtol=1e-8)
+    assert compiled.success and compiled.stats["threads"] == two
+    monkeypatch.setattr(driver, "_one_rhs_thread", lambda model, scipy_stepper: contextlib.nullcontext())
+    threaded = flexbody.simulate(scene, model=model, method="RK45", rtol=1e-8)
+    assert threaded.stats["threads"] == two
+    np.testing.assert_array_equal(threaded.positions, scipy.positions)
+    np.testing.assert_array_equal(threaded.velocities, scipy.velocities)
+
+@pytest.mark.skipif(not HAS_CC, reason="no C compiler")
 def test_whole_scene_models_have_no_per_contact_evaluation():
     """Contacts of the floating formulation couple through M: no per-contact shortcut."""
     scene = flexbody.load_scene("dumbbell")

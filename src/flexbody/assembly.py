@@ -220,12 +220,14 @@ class AssembledC(runtime.SystemModel, AssembledModel):
                                            particles.ctypes.data, acc.ctypes.data)
         return acc
 
-    def use_threads(self, threads: int) -> None:
+    def use_threads(self, threads: int) -> int:
         """Let the right-hand side use up to ``threads`` threads (0: OpenMP's default, the
         cores or OMP_NUM_THREADS), at most one per 4096 links; ``threads`` then says how many
-        it uses.  The values do not depend on it, bit for bit."""
-        self._threads_wanted = int(threads)
-        self._system_cache = None
+        it uses.  The values do not depend on it, bit for bit.  Returns the limit it replaces."""
+        before, self._threads_wanted = self._threads_wanted, int(threads)
+        if self._threads_wanted != before:
+            self._system_cache = None  # bound again, with the new limit, when next asked for
+        return before
 
     def slip_directions(self, p) -> FloatArray:
         return self._contact_vectors(self.system(p).slip)
