@@ -33,6 +33,7 @@ from .edge_contact import EdgeSlots
 from .events import EventFunctions, locate
 from .model import MADE_FOR, Model, couples_contacts, load_model, made_for, resolved_formulation
 from .result import STATUSES, SimulationResult
+from .samples import ContactSamples
 from .scene import (
     COMPILED_METHODS,
     IMPACT_MODES,
@@ -436,11 +437,9 @@ class _Run:
         self.grid = np.linspace(0.0, settings.t_end, int(round(settings.t_end / settings.output_dt)) + 1)
         n = len(self.grid)
         self.Y = np.empty((n, model.ny))  # samples at the grid times, the first n_samples of them taken
-        self.sample_held = np.zeros((n, model.n_contacts), np.intc)  # contact-law codes (Phases.held)
-        self.sample_push = np.zeros((n, model.n_contacts))
-        self.sample_tangential = np.zeros((n, model.n_contacts, model.dim)) if thesis_friction else None
-        # contacts between bodies: the element each slot was held on at each sample (its force's row)
-        self.sample_elements = np.full((n, model.n_slots), -1, np.intp) if model.n_slots else None
+        # each sample's contact-law codes (Phases.held), pushes, the windows' tangential pushes and,
+        # between bodies, the element each slot was held on (its force's row), kept sparse
+        self.samples = ContactSamples(n, model.n_contacts, model.n_slots, model.dim, thesis_friction)
         # with friction, the law each sample's step integrated (SciPy's steppers; see record)
         self.sample_slips: list[tuple[np.ndarray, np.ndarray, np.ndarray] | None] | None = \
             [None] * n if self.friction else None
@@ -486,12 +485,10 @@ class _Run:
         """Tag samples ``start:stop`` with the current contact set."""
         if stop == start:
             return
-        self.sample_held[start:stop] = self.phases.held
-        self.sample_push[start:stop] = self.phases.push
-        if self.sample_tangential is not None:
-            self.sample_tangential[start:stop] = self.model.tangential_pushes(self.p)
-        if self.sample_elements is not None:
-            self.sample_elements[start:stop] = self.model.element_of
+        samples = self.samples
+        samples.keep(start, stop, self.phases.held, self.phases.push,
+                     self.model.tangential_pushes(self.p) if samples.has_tangential else None,
+                     self.model.element_of if samples.n_slots else None)
         self.n_samples = stop
 
     # ------------------------------------------------------------------ one smooth segment
@@ -1253,7 +1250,7 @@ class _Run:
         its sliding contacts follow the law its step integrated (:meth:`record`);
         afterwards as before."""
         law = None if self.sample_slips is None else self.sample_slips[k]
-        with nullcontext() if self.sample_elements is None else self.model.held_on(self.sample_elements[k]):
+        with nullcontext() if not self.samples.n_slots else self.model.held_on(self.samples.one(k).elements):
             if law is None:
                 yield
                 return
@@ -1270,45 +1267,63 @@ class _Run:
         model, p, s = self.model, self.p, self.settings
         nq, nu = model.nq, model.nu
         k = self.n_samples
-        T, Y, held, push = self.grid[:k], self.Y[:k], self.sample_held[:k].astype(np.intc), self.sample_push[:k]
+        T, Y = self.grid[:k], self.Y[:k]
         n = model.n_particles
         if self.friction:  # outputs: the physical law, or the law a sample's step integrated (as_sampled)
             model.slip_directions(p)[:] = 0.0
             model.slips_held(p)[:] = 0
-        if self.sample_elements is not None:
-            X, V, E, lam = model.trajectory(Y, p, held, push, elements=self.sample_elements[:k])
-        else:
-            X, V, E, lam = model.trajectory(Y, p, held, push)
         # Sample 0 is the state as given, its contact set the instant at t = 0's outcome; where
         # that instant was an impact (the velocities jumped), its forces are those right after
         # it: read at the given velocities, under the laws set for the new ones, two rigid
         # boxes side by side, one pushed into the other, showed held forces of -1 N there
         forces_at = list(Y)
-        if k and self.y_started is not None and not np.array_equal(self.y_started, Y[0]):
+        jumped_at_start = bool(k and self.y_started is not None and not np.array_equal(self.y_started, Y[0]))
+        if jumped_at_start:
             forces_at[0] = self.y_started
-            with self.as_sampled(0):
-                lam[0] = model.held_forces(forces_at[0], p, held[0], push[0])
-        friction_force = np.zeros_like(V)
-        if self.friction:
-            for j in np.flatnonzero(held.any(axis=1)):
-                with self.as_sampled(j):
-                    law = self.sample_slips[j]
-                    if law is not None and len(law[0]):
-                        # a sliding contact whose step kept its direction (a coupled 2D slip, a
-                        # slow 3D one) pushed along that: measured, a rigid base's corner read
-                        # 0.11 N from the law at the sample's own slip where the step pushed 0.41 N
-                        lam[j] = model.held_forces(forces_at[j], p, held[j], push[j])
-                    ft = model.friction(forces_at[j], p, held[j], push[j])[1]
-                friction_force[j] = model.particle_forces(ft.T).T
-            if self.sample_tangential is not None:  # the windows' tangential forces
-                friction_force += self.sample_tangential[:k].reshape(len(T), n, model.n_contacts // n, -1).sum(axis=2)
-        force = model.particle_forces(lam + push, X, None if self.sample_elements is None else self.sample_elements[:k])
+        # a few samples at a time: their contact arrays are (samples, contacts), and a pile's
+        # contacts grow with the square of its bodies
+        outputs: dict[str, np.ndarray] = {}  # each made whole at the first chunk, then filled
+        lowest_free = lowest_held = np.inf
+        min_force = np.inf
+        for rows in self.samples.chunks(k):
+            contacts = self.samples.dense(rows)
+            held, push, elements = contacts.held, contacts.push, contacts.elements
+            if elements is None:
+                X, V, E, lam = model.trajectory(Y[rows], p, held, push)
+            else:
+                X, V, E, lam = model.trajectory(Y[rows], p, held, push, elements=elements)
+            if rows.start == 0 and jumped_at_start:
+                with self.as_sampled(0):
+                    lam[0] = model.held_forces(forces_at[0], p, held[0], push[0])
+            friction_force = np.zeros_like(V)
+            if self.friction:
+                for i in np.flatnonzero(held.any(axis=1)):
+                    j = rows.start + i
+                    with self.as_sampled(j):
+                        law = self.sample_slips[j]
+                        if law is not None and len(law[0]):
+                            # a sliding contact whose step kept its direction (a coupled 2D slip, a
+                            # slow 3D one) pushed along that: measured, a rigid base's corner read
+                            # 0.11 N from the law at the sample's own slip where the step pushed 0.41 N
+                            lam[i] = model.held_forces(forces_at[j], p, held[i], push[i])
+                        ft = model.friction(forces_at[j], p, held[i], push[i])[1]
+                    friction_force[i] = model.particle_forces(ft.T).T
+                if contacts.tangential is not None:  # the windows' tangential forces
+                    friction_force += contacts.tangential.reshape(len(X), n, model.n_contacts // n, -1).sum(axis=2)
+            force = model.particle_forces(lam + push, X, elements)
+            for name, value in (("X", X), ("V", V), ("E", E), ("force", force), ("friction", friction_force)):
+                outputs.setdefault(name, np.empty((k, *value.shape[1:]), value.dtype))[rows] = value
+            free_gap, held_gap = _lowest_gaps(X, self.scene.grounds, held[:, : model.n_ground_contacts])
+            lowest_free, lowest_held = min(lowest_free, free_gap), min(lowest_held, held_gap)
+            min_force = min(min_force, float(lam[held != 0].min(initial=np.inf)))
+        X, V, E, force, friction_force = (outputs[name] for name in ("X", "V", "E", "force", "friction"))
+        min_force = 0.0 if min_force == np.inf else min_force
         if len(Y) and T[-1] <= self.folded_from:
             # the last sample as it was: its contacts held and their elements then (a free
             # edge contact read against the edge it was held on at the stop is no crossing:
             # measured, 3e-4 m in a pile stopped `chattering`)
             with self.as_sampled(k - 1):
-                self.track_gaps(Y[-1], held[-1].astype(bool))
+                self.track_gaps(Y[-1], self.samples.one(k - 1).held.astype(bool))
         # Energy taken by instant impacts strictly before each sample time (losses come in time order).
         loss_t = np.array([x[0] for x in self.losses], dtype=float)
         lost = np.concatenate([[0.0], np.cumsum([x[1] for x in self.losses])])
@@ -1341,10 +1356,7 @@ class _Run:
         relative_drift = drift / max(abs(float(total[0])), float(result.kinetic.max()), 1e-300) if len(total) else 0.0
         # Penetration is also measured on the samples: between event checks a loose
         # tolerance can let a particle dip below a ground with no event.
-        lowest_free, lowest_held = _lowest_gaps(X, self.scene.grounds, held[:, : model.n_ground_contacts])
         self.min_gap, self.min_held_gap = min(self.min_gap, lowest_free), min(self.min_held_gap, lowest_held)
-        held_force = lam[held.astype(bool)]
-        min_force = float(held_force.min()) if held_force.size else 0.0
         impacts = [e for e in ev if e.kind == "impact"]
         warnings = self.untrustworthy(relative_drift, max(0.0, -self.min_gap), min_force, max(0.0, -self.min_held_gap))
         warnings += self.impact_gains(max(abs(float(total[0])), float(result.kinetic.max())) if len(total) else 0.0)

@@ -1,0 +1,115 @@
+"""The contact set at each output sample, kept sparse.
+
+The driver records, for every output sample, what its step integrated: each contact's law
+code (``Phases.held``), the thesis windows' pushes and tangential pushes, and the element
+each slot between bodies was held on.  Its outputs (contact forces, the held contacts'
+lowest gaps) are computed from them after the run.  Kept as dense (samples, contacts)
+arrays they grew with the square of the number of bodies (a slot per surface vertex and
+other body): a pile of 20 discs of 199 particles has 40 460 contacts, and its 1 001
+samples took 1.9 GB.  Here each call of :meth:`ContactSamples.keep` stores its arrays'
+entries that differ from their fill (the held contacts, the pushed ones, the slots with an
+element: a few hundred), once for all the samples it covers, and :meth:`ContactSamples.dense`
+rebuilds a few samples' arrays at a time.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from typing import NamedTuple
+
+import numpy as np
+
+#: Samples rebuilt at once hold at most about this many contact entries (4 M: 32 MB of float64).
+CHUNK_ENTRIES = 1 << 22
+
+
+class _Sparse(NamedTuple):
+    """The entries of one array (flattened to its first axis) that differ from ``fill``."""
+
+    at: np.ndarray  # (k,) indices along the first axis
+    values: np.ndarray  # (k, ...) their values
+
+    @classmethod
+    def of(cls, array: np.ndarray, fill: float) -> _Sparse:
+        array = np.asarray(array)
+        differs = array != fill
+        at = np.flatnonzero(differs if differs.ndim == 1 else differs.reshape(len(array), -1).any(axis=1))
+        return cls(at, array[at].copy())
+
+
+class SampleContacts(NamedTuple):
+    """One sample's contact set, dense: ``held`` (nc,) np.intc codes, ``push`` (nc,) N,
+    ``tangential`` (nc, dim) N or None, ``elements`` (ns,) or None."""
+
+    held: np.ndarray
+    push: np.ndarray
+    tangential: np.ndarray | None
+    elements: np.ndarray | None
+
+
+class ContactSamples:
+    """The contact set of each of ``n_samples`` output samples, kept sparse.
+
+    Parameters
+    ----------
+    n_samples : int
+    n_contacts : int
+        Contacts of the model (nc).
+    n_slots : int
+        Its slots between bodies (ns; 0: no elements are kept).
+    dim : int
+    tangential : bool
+        Whether the thesis windows' tangential pushes are kept (thesis mode with friction).
+    """
+
+    #: each kept array's fill: what every entry not stored reads
+    FILLS = {"held": 0, "push": 0.0, "tangential": 0.0, "elements": -1}
+
+    def __init__(self, n_samples: int, n_contacts: int, n_slots: int, dim: int, tangential: bool) -> None:
+        self.n_contacts, self.n_slots, self.dim = n_contacts, n_slots, dim
+        self.has_tangential = tangential
+        self._record_of = np.full(n_samples, -1, np.intp)  # each sample's record, -1 before it is kept
+        self._records: list[dict[str, _Sparse]] = []
+
+    def keep(self, start: int, stop: int, held: np.ndarray, push: np.ndarray, tangential: np.ndarray | None = None,
+             elements: np.ndarray | None = None) -> None:
+        """Samples ``start:stop`` integrated this contact set: ``held`` (nc,) codes, ``push``
+        (nc,), ``tangential`` (nc, dim) (kept where :attr:`has_tangential`) and ``elements``
+        (ns,) (kept where the model has slots)."""
+        if stop <= start:
+            return
+        record = {"held": _Sparse.of(held, 0), "push": _Sparse.of(push, 0.0)}
+        if self.has_tangential:
+            record["tangential"] = _Sparse.of(tangential, 0.0)
+        if self.n_slots:
+            record["elements"] = _Sparse.of(elements, -1)
+        self._records.append(record)
+        self._record_of[start:stop] = len(self._records) - 1
+
+    def dense(self, rows: slice) -> SampleContacts:
+        """The samples ``rows`` (a slice of kept samples) as dense arrays: ``held`` (m, nc)
+        np.intc, ``push`` (m, nc), ``tangential`` (m, nc, dim) or None, ``elements`` (m, ns)
+        np.intp or None."""
+        of = self._record_of[rows]
+        m = len(of)
+        out = {"held": np.zeros((m, self.n_contacts), np.intc), "push": np.zeros((m, self.n_contacts)),
+               "tangential": np.zeros((m, self.n_contacts, self.dim)) if self.has_tangential else None,
+               "elements": np.full((m, self.n_slots), -1, np.intp) if self.n_slots else None}
+        for record in np.unique(of):
+            samples = np.flatnonzero(of == record)
+            for name, kept in self._records[record].items():
+                out[name][np.ix_(samples, kept.at)] = kept.values  # (k,) or (k, dim): broadcast over the samples
+        return SampleContacts(**out)
+
+    def one(self, k: int) -> SampleContacts:
+        """Sample ``k``'s arrays, dense (each without the samples axis)."""
+        block = self.dense(slice(k, k + 1))
+        return SampleContacts(*(None if a is None else a[0] for a in block))
+
+    def chunks(self, n: int) -> Iterator[slice]:
+        """The first ``n`` samples in slices of at most :data:`CHUNK_ENTRIES` contact entries
+        each (at least one sample; one empty slice where ``n`` is 0, so that callers build
+        their empty outputs as for any other)."""
+        size = max(1, CHUNK_ENTRIES // max(1, self.n_contacts * (self.dim if self.has_tangential else 1)))
+        for start in range(0, max(n, 1), size):
+            yield slice(start, min(n, start + size))
