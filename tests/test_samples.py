@@ -43,6 +43,21 @@ def test_kept_contact_sets_read_back_as_the_dense_arrays_they_replace(rng):
     np.testing.assert_array_equal(one.elements, dense["elements"][17])
 
 
+def test_samples_kept_again_take_the_new_set():
+    """Sample 0 is kept as given, then again with the instant at t = 0's outcome: the later
+    set replaces the earlier for the samples it covers, partly or wholly, and the others keep
+    theirs; a set kept inside an earlier run, not reaching its end, is refused."""
+    store = ContactSamples(10, 4, 0, 2, tangential=False)
+    codes = [np.array([k, 0, 0, 0], np.intc) for k in range(5)]
+    store.keep(0, 1, codes[1], np.zeros(4))
+    store.keep(0, 1, codes[2], np.zeros(4))  # the same sample again
+    store.keep(1, 6, codes[3], np.zeros(4))
+    store.keep(4, 8, codes[4], np.zeros(4))  # the run's last two samples again, and two more
+    np.testing.assert_array_equal(store.dense(slice(0, 8)).held[:, 0], [2, 3, 3, 3, 4, 4, 4, 4])
+    with pytest.raises(ValueError, match="keep them in order"):
+        store.keep(5, 6, codes[1], np.zeros(4))
+
+
 def test_chunks_cover_every_sample_once_within_their_budget(monkeypatch):
     """The chunks are consecutive, cover the first n samples exactly once, hold at most the
     budget's entries (or one sample), and n = 0 gives one empty slice."""

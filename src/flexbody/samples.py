@@ -14,6 +14,7 @@ rebuilds a few samples' arrays at a time.
 
 from __future__ import annotations
 
+import bisect
 from collections.abc import Iterator
 from typing import NamedTuple
 
@@ -32,9 +33,9 @@ class _Sparse(NamedTuple):
     @classmethod
     def of(cls, array: np.ndarray, fill: float) -> _Sparse:
         array = np.asarray(array)
-        differs = array != fill
+        differs = array if fill == 0 and array.ndim == 1 else array != fill
         at = np.flatnonzero(differs if differs.ndim == 1 else differs.reshape(len(array), -1).any(axis=1))
-        return cls(at, array[at].copy())
+        return cls(at, array[at])  # a copy (fancy indexing)
 
 
 class SampleContacts(NamedTuple):
@@ -68,7 +69,10 @@ class ContactSamples:
     def __init__(self, n_samples: int, n_contacts: int, n_slots: int, dim: int, tangential: bool) -> None:
         self.n_contacts, self.n_slots, self.dim = n_contacts, n_slots, dim
         self.has_tangential = tangential
-        self._record_of = np.full(n_samples, -1, np.intp)  # each sample's record, -1 before it is kept
+        # each kept run of samples, [start, stop), and its arrays' entries: the driver keeps
+        # them in time order, so the runs' starts and stops both ascend
+        self._starts: list[int] = []
+        self._stops: list[int] = []
         self._records: list[dict[str, _Sparse]] = []
 
     def keep(self, start: int, stop: int, held: np.ndarray, push: np.ndarray, tangential: np.ndarray | None = None,
@@ -78,27 +82,37 @@ class ContactSamples:
         (ns,) (kept where the model has slots)."""
         if stop <= start:
             return
+        # kept again (sample 0: the given state, then the instant at t = 0's outcome): the
+        # new set replaces the old for these samples; runs stay disjoint and ascending
+        if self._stops and self._stops[-1] > stop:
+            raise ValueError(f"samples {start}:{stop} kept inside samples kept up to {self._stops[-1]}: "
+                             "keep them in order")
+        while self._starts and self._starts[-1] >= start:
+            self._starts.pop(), self._stops.pop(), self._records.pop()
+        if self._stops and self._stops[-1] > start:
+            self._stops[-1] = start
         record = {"held": _Sparse.of(held, 0), "push": _Sparse.of(push, 0.0)}
         if self.has_tangential:
             record["tangential"] = _Sparse.of(tangential, 0.0)
         if self.n_slots:
             record["elements"] = _Sparse.of(elements, -1)
         self._records.append(record)
-        self._record_of[start:stop] = len(self._records) - 1
+        self._starts.append(start)
+        self._stops.append(stop)
 
     def dense(self, rows: slice) -> SampleContacts:
-        """The samples ``rows`` (a slice of kept samples) as dense arrays: ``held`` (m, nc)
+        """The samples ``rows`` (a slice with start and stop, of kept samples) as dense arrays: ``held`` (m, nc)
         np.intc, ``push`` (m, nc), ``tangential`` (m, nc, dim) or None, ``elements`` (m, ns)
         np.intp or None."""
-        of = self._record_of[rows]
-        m = len(of)
+        m = rows.stop - rows.start
         out = {"held": np.zeros((m, self.n_contacts), np.intc), "push": np.zeros((m, self.n_contacts)),
                "tangential": np.zeros((m, self.n_contacts, self.dim)) if self.has_tangential else None,
                "elements": np.full((m, self.n_slots), -1, np.intp) if self.n_slots else None}
-        for record in np.unique(of):
-            samples = np.flatnonzero(of == record)
-            for name, kept in self._records[record].items():
-                out[name][np.ix_(samples, kept.at)] = kept.values  # (k,) or (k, dim): broadcast over the samples
+        first, last = bisect.bisect_right(self._stops, rows.start), bisect.bisect_left(self._starts, rows.stop)
+        for i in range(first, last):  # the runs that overlap rows
+            a, b = max(self._starts[i], rows.start) - rows.start, min(self._stops[i], rows.stop) - rows.start
+            for name, kept in self._records[i].items():
+                out[name][a:b, kept.at] = kept.values  # (k,) or (k, dim): broadcast over the samples
         return SampleContacts(**out)
 
     def one(self, k: int) -> SampleContacts:
