@@ -106,3 +106,15 @@ def friction_case(name: str):
                     "velocity": [1.5, 0.0]}],
         "simulation": {"t_end": 0.6, "output_dt": 1e-3},
     })
+
+
+def test_the_held_codes_are_the_held_phases_and_nothing_else():
+    """``Phases.held`` (the right-hand side's codes) is HELD or SLIDING where a contact is held
+    along the normal, 0 where it is free or pushed, as np.intc; ``on_ground`` marks the same."""
+    from flexbody.contact import FREE, HELD, SLIDING
+
+    phases = Phases.all_free(8)
+    phases.phase[:] = [FREE, HELD, PUSHED, SLIDING, SLIDING, PUSHED, HELD, FREE]
+    np.testing.assert_array_equal(phases.held, [0, HELD, 0, SLIDING, SLIDING, 0, HELD, 0])
+    assert phases.held.dtype == np.intc
+    np.testing.assert_array_equal(phases.on_ground, phases.held != 0)

@@ -231,10 +231,12 @@ class BodyContactModel(Model):
         self.n_contacts = self.n_ground_contacts + self.n_slots
         self.contacts = np.vstack([inner.contacts, np.column_stack([self.slot_particle,
                                                                     self.n_grounds + self.slot_body])])
-        self._key = (self.slot_particle * len(counts) + self.slot_body)[: self.n_primary]  # slots, not twins
-        self._order = np.argsort(self._key)
-        self._sorted_key = self._key[self._order]
         self._body_count = len(counts)
+        # each (particle, other body)'s slot (slots, not twins), -1 where it has none: a lookup
+        # per candidate pair, not a search (a pile's sweeps ask for thousands at each check)
+        self._slot_at = np.full(self.n_particles * self._body_count, -1, np.intp)
+        self._slot_at[(self.slot_particle * self._body_count + self.slot_body)[: self.n_primary]] = \
+            np.arange(self.n_primary)
         # particle i's elements: _incident_flat[_incident_start[i] : _incident_start[i + 1]]
         self._incident_start, self._incident_flat = vertex_elements(self.elements, self.n_particles)
         self._body_elements = [np.flatnonzero(self.element_body == b) for b in range(len(counts))]
@@ -1823,9 +1825,10 @@ class BodyContactModel(Model):
         return particle, int(self.particle_body[particle]), float(-contact.gap[deep[0]])
 
     def _slots_of(self, particle, body) -> tuple[IntArray, np.ndarray]:
-        key = np.asarray(particle) * self._body_count + np.asarray(body)
-        at = np.minimum(np.searchsorted(self._sorted_key, key), self.n_primary - 1)
-        return self._order[at], self._sorted_key[at] == key
+        """The slot of each particle against each body (k,) (-1 where there is none) and
+        whether there is one, bool (k,)."""
+        slot = self._slot_at[np.asarray(particle) * self._body_count + np.asarray(body)]
+        return slot, slot >= 0
 
     def _constrain_elements(self, slots, x, swept: tuple[SurfaceContact, IntArray] | None = None) -> None:
         """Pick an element for each of ``slots`` that has none (see the module docstring).

@@ -7,6 +7,7 @@ two paths.
 
 #: Contact phases (see :mod:`flexbody.contact`).  HELD sticks where the ground has friction;
 #: SLIDING is held along the normal and slips along the ground against Coulomb friction.
+#: The two held along the normal are the odd codes (:attr:`flexbody.contact.Phases.held`).
 FREE, HELD, PUSHED, SLIDING = 0, 1, 2, 3
 #: Event kinds as the compiled fixed point reports them.
 IMPACT, LIFTOFF, STICK, SLIP = 0, 1, 2, 3
