@@ -18,7 +18,7 @@ def test_kept_contact_sets_read_back_as_the_dense_arrays_they_replace(rng):
     pushes, slots' elements, some entries at their fill): every slice of samples reads back
     as the dense arrays a (samples, contacts) store would hold, and so does each sample."""
     n, nc, ns, dim = 57, 40, 24, 3
-    store = ContactSamples(n, nc, ns, dim, tangential=True)
+    store = ContactSamples(nc, ns, dim, tangential=True)
     dense = {"held": np.zeros((n, nc), np.intc), "push": np.zeros((n, nc)), "tangential": np.zeros((n, nc, dim)),
              "elements": np.full((n, ns), -1, np.intp)}
     bounds = np.unique(np.concatenate([[0, n], rng.integers(0, n, 12)]))
@@ -47,7 +47,7 @@ def test_samples_kept_again_take_the_new_set():
     """Sample 0 is kept as given, then again with the instant at t = 0's outcome: the later
     set replaces the earlier for the samples it covers, partly or wholly, and the others keep
     theirs; a set kept inside an earlier run, not reaching its end, is refused."""
-    store = ContactSamples(10, 4, 0, 2, tangential=False)
+    store = ContactSamples(4, 0, 2, tangential=False)
     codes = [np.array([k, 0, 0, 0], np.intc) for k in range(5)]
     store.keep(0, 1, codes[1], np.zeros(4))
     store.keep(0, 1, codes[2], np.zeros(4))  # the same sample again
@@ -62,13 +62,13 @@ def test_chunks_cover_every_sample_once_within_their_budget(monkeypatch):
     """The chunks are consecutive, cover the first n samples exactly once, hold at most the
     budget's entries (or one sample), and n = 0 gives one empty slice."""
     monkeypatch.setattr(samples, "CHUNK_ENTRIES", 100)
-    store = ContactSamples(50, 30, 0, 2, tangential=False)
+    store = ContactSamples(30, 0, 2, tangential=False)
     chunks = list(store.chunks(47))
     assert chunks[0].start == 0 and chunks[-1].stop == 47
     assert all(a.stop == b.start for a, b in zip(chunks, chunks[1:]))
     assert all(0 < (c.stop - c.start) * 30 <= 100 for c in chunks)
     assert [(c.start, c.stop) for c in store.chunks(0)] == [(0, 0)]
-    wide = ContactSamples(5, 1000, 0, 2, tangential=False)
+    wide = ContactSamples(1000, 0, 2, tangential=False)
     assert [(c.start, c.stop) for c in wide.chunks(3)] == [(0, 1), (1, 2), (2, 3)]  # one sample over budget
 
 

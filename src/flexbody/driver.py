@@ -439,7 +439,7 @@ class _Run:
         self.Y = np.empty((n, model.ny))  # samples at the grid times, the first n_samples of them taken
         # each sample's contact-law codes (Phases.held), pushes, the windows' tangential pushes and,
         # between bodies, the element each slot was held on (its force's row), kept sparse
-        self.samples = ContactSamples(n, model.n_contacts, model.n_slots, model.dim, thesis_friction)
+        self.samples = ContactSamples(model.n_contacts, model.n_slots, model.dim, thesis_friction)
         # with friction, the law each sample's step integrated (SciPy's steppers; see record)
         self.sample_slips: list[tuple[np.ndarray, np.ndarray, np.ndarray] | None] | None = \
             [None] * n if self.friction else None

@@ -49,11 +49,10 @@ class SampleContacts(NamedTuple):
 
 
 class ContactSamples:
-    """The contact set of each of ``n_samples`` output samples, kept sparse.
+    """The contact set of each output sample, kept sparse.
 
     Parameters
     ----------
-    n_samples : int
     n_contacts : int
         Contacts of the model (nc).
     n_slots : int
@@ -63,10 +62,7 @@ class ContactSamples:
         Whether the thesis windows' tangential pushes are kept (thesis mode with friction).
     """
 
-    #: each kept array's fill: what every entry not stored reads
-    FILLS = {"held": 0, "push": 0.0, "tangential": 0.0, "elements": -1}
-
-    def __init__(self, n_samples: int, n_contacts: int, n_slots: int, dim: int, tangential: bool) -> None:
+    def __init__(self, n_contacts: int, n_slots: int, dim: int, tangential: bool) -> None:
         self.n_contacts, self.n_slots, self.dim = n_contacts, n_slots, dim
         self.has_tangential = tangential
         # each kept run of samples, [start, stop), and its arrays' entries: the driver keeps
