@@ -78,3 +78,45 @@ def test_failed_simulation_exits_nonzero_says_why_and_writes_nothing(tmp_path, m
     out = tmp_path / "failed"
     assert main(["run", "thesis_ball", "--out", str(out), "--quiet", "--no-figures"]) == 1
     assert not out.exists()
+
+
+def _rings_scene(path, collide: bool, contacts: str = "") -> str:
+    """Three small rings side by side, ``collide`` as given, plus a ``[[contacts]]`` text."""
+    bodies = "".join(f"""
+[[bodies]]
+name = "ring{k}"
+shape = "ring"
+count = 6
+radius = 0.05
+mass = 0.05
+stiffness = 2000.0
+damping = 0.5
+position = [{0.2 * k}, 0.1]
+collide = {"true" if collide else "false"}
+""" for k in range(3))
+    path.write_text(f'name = "rings"\ngravity = [0.0, -9.81]\n{bodies}{contacts}\n[simulation]\nt_end = 0.01\n')
+    return str(path)
+
+
+def test_a_large_contact_table_of_colliding_bodies_is_noted(tmp_path, monkeypatch, capsys):
+    """Bodies with collide = true whose slots exceed the threshold get a note naming their
+    count and the way to fewer ([[contacts]]); listed pairs, fewer slots or --quiet do not."""
+    from flexbody import runner
+    from flexbody.model import load_model
+    from flexbody.scene import load_scene
+
+    scene = load_scene(_rings_scene(tmp_path / "rings.toml", True))
+    slots = load_model(scene).n_slots
+    assert slots == 3 * 6 * 2 * 2  # each ring's 6 vertices, against 2 others, and a corner twin each
+    monkeypatch.setattr(runner, "LARGE_CONTACT_TABLE", slots - 1)
+    assert main(["run", str(tmp_path / "rings.toml"), "--out", str(tmp_path / "a"), "--no-figures"]) == 0
+    err = capsys.readouterr().err
+    assert f"note: 3 bodies with collide = true make {slots} contact slots" in err and "[[contacts]]" in err
+    assert main(["run", str(tmp_path / "rings.toml"), "--out", str(tmp_path / "b"), "--no-figures", "--quiet"]) == 0
+    assert "note:" not in capsys.readouterr().err
+    monkeypatch.setattr(runner, "LARGE_CONTACT_TABLE", slots)  # not beyond it
+    assert runner.contact_table_note(scene, load_model(scene)) is None
+    monkeypatch.setattr(runner, "LARGE_CONTACT_TABLE", 0)
+    listed = load_scene(_rings_scene(tmp_path / "listed.toml", False,
+                                     '\n[[contacts]]\nbodies = ["ring0", "ring1"]\n'))
+    assert runner.contact_table_note(listed, load_model(listed)) is None
