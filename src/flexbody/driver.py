@@ -1244,13 +1244,13 @@ class _Run:
         return out
 
     @contextmanager
-    def as_sampled(self, k: int):
-        """A context in which the model's contacts between bodies are held on the elements
-        they were held on at sample ``k`` (each slot on its element then), and with friction
-        its sliding contacts follow the law its step integrated (:meth:`record`);
-        afterwards as before."""
+    def as_sampled(self, k: int, elements: np.ndarray | None):
+        """A context in which the model's contacts between bodies are held on ``elements``
+        (ns,), those they were held on at sample ``k`` (each slot on its element then; None
+        without slots), and with friction its sliding contacts follow the law its step
+        integrated (:meth:`record`); afterwards as before."""
         law = None if self.sample_slips is None else self.sample_slips[k]
-        with nullcontext() if not self.samples.n_slots else self.model.held_on(self.samples.one(k).elements):
+        with nullcontext() if elements is None else self.model.held_on(elements):
             if law is None:
                 yield
                 return
@@ -1293,13 +1293,13 @@ class _Run:
             else:
                 X, V, E, lam = model.trajectory(Y[rows], p, held, push, elements=elements)
             if rows.start == 0 and jumped_at_start:
-                with self.as_sampled(0):
+                with self.as_sampled(0, None if elements is None else elements[0]):
                     lam[0] = model.held_forces(forces_at[0], p, held[0], push[0])
             friction_force = np.zeros_like(V)
             if self.friction:
                 for i in np.flatnonzero(held.any(axis=1)):
                     j = rows.start + i
-                    with self.as_sampled(j):
+                    with self.as_sampled(j, None if elements is None else elements[i]):
                         law = self.sample_slips[j]
                         if law is not None and len(law[0]):
                             # a sliding contact whose step kept its direction (a coupled 2D slip, a
@@ -1319,11 +1319,11 @@ class _Run:
         X, V, E, force, friction_force = (outputs[name] for name in ("X", "V", "E", "force", "friction"))
         min_force = 0.0 if min_force == np.inf else min_force
         if len(Y) and T[-1] <= self.folded_from:
-            # the last sample as it was: its contacts held and their elements then (a free
-            # edge contact read against the edge it was held on at the stop is no crossing:
-            # measured, 3e-4 m in a pile stopped `chattering`)
-            with self.as_sampled(k - 1):
-                self.track_gaps(Y[-1], self.samples.one(k - 1).held.astype(bool))
+            # the last sample (the last chunk's last) as it was: its contacts held and their
+            # elements then (a free edge contact read against the edge it was held on at the
+            # stop is no crossing: measured, 3e-4 m in a pile stopped `chattering`)
+            with self.as_sampled(k - 1, None if elements is None else elements[-1]):
+                self.track_gaps(Y[-1], held[-1] != 0)
         # Energy taken by instant impacts strictly before each sample time (losses come in time order).
         loss_t = np.array([x[0] for x in self.losses], dtype=float)
         lost = np.concatenate([[0.0], np.cumsum([x[1] for x in self.losses])])
@@ -1460,7 +1460,8 @@ def _one_rhs_thread(model: Model, scipy_stepper: bool):
     pile of 20 discs, 10 920 links, 66 us a call on one thread against 86-120 us on two,
     its run 11 % slower; a 10 000-particle disc, 29 628 links, 170 against 155-215 us).
     The compiled loop calls it back to back and keeps both."""
-    assembly = getattr(getattr(model, "inner", model), "flexible", getattr(model, "inner", model))
+    inner = getattr(model, "inner", model)  # contacts between bodies wrap the scene's model
+    assembly = getattr(inner, "flexible", inner)  # rigid frames beside it: its flexible part
     if not scipy_stepper or not hasattr(assembly, "use_threads"):
         yield
         return

@@ -32,11 +32,11 @@ def contact_table_note(scene: Scene, model) -> str | None:
     :data:`LARGE_CONTACT_TABLE` slots (each surface vertex has one, and a corner twin, for
     each other body it may touch: they grow with the square of the bodies, and so does the
     work at each instant), or None."""
-    colliding = [b.name for b in scene.bodies if b.collide]
-    slots = getattr(model, "n_slots", 0)
-    if len(colliding) < 3 or slots <= LARGE_CONTACT_TABLE:
+    colliding = sum(body.collide for body in scene.bodies)
+    slots = model.n_slots
+    if colliding < 3 or slots <= LARGE_CONTACT_TABLE:
         return None
-    return (f"{len(colliding)} bodies with collide = true make {slots} contact slots (each surface vertex has one, "
+    return (f"{colliding} bodies with collide = true make {slots} contact slots (each surface vertex has one, "
             "and a corner twin, for each other body it may touch); where only some of them can meet, list those "
             "pairs in [[contacts]] (and leave collide false): fewer contacts run faster (README: \"Many bodies\")")
 

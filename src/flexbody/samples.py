@@ -39,8 +39,8 @@ class _Sparse(NamedTuple):
 
 
 class SampleContacts(NamedTuple):
-    """One sample's contact set, dense: ``held`` (nc,) np.intc codes, ``push`` (nc,) N,
-    ``tangential`` (nc, dim) N or None, ``elements`` (ns,) or None."""
+    """Some samples' contact sets, dense: ``held`` (m, nc) np.intc codes, ``push`` (m, nc) N,
+    ``tangential`` (m, nc, dim) N or None, ``elements`` (m, ns) or None."""
 
     held: np.ndarray
     push: np.ndarray
@@ -110,11 +110,6 @@ class ContactSamples:
             for name, kept in self._records[i].items():
                 out[name][a:b, kept.at] = kept.values  # (k,) or (k, dim): broadcast over the samples
         return SampleContacts(**out)
-
-    def one(self, k: int) -> SampleContacts:
-        """Sample ``k``'s arrays, dense (each without the samples axis)."""
-        block = self.dense(slice(k, k + 1))
-        return SampleContacts(*(None if a is None else a[0] for a in block))
 
     def chunks(self, n: int) -> Iterator[slice]:
         """The first ``n`` samples in slices of at most :data:`CHUNK_ENTRIES` contact entries
