@@ -1212,14 +1212,14 @@ class BodyContactModel(Model):
         out[contacts] = margins
         return out
 
-    def held_margins(self, y, p, held) -> tuple[IntArray, FloatArray]:
+    def held_margins(self, y, p, held, rows: tuple[IntArray, IntArray] | None = None
+                     ) -> tuple[IntArray, FloatArray]:
         """:meth:`element_margins` of the contacts that have one, shape (k,) each: those
         contacts and their margins (the others' are ``inf``).  Event location asks for them
-        thousands of times, a few contacts of many: no array of every contact."""
+        thousands of times, a few contacts of many: no array of every contact.  ``rows``:
+        :meth:`margin_rows` of ``held``, if kept (a segment's held codes are fixed)."""
         ng = self.n_ground_contacts
-        slots = np.flatnonzero(np.asarray(held)[ng:] != 0)
-        edges, slots = slots[slots >= self.first_edge], slots[slots < self.first_edge]
-        slots = slots[self._bounded(held, slots)]
+        slots, edges = self.margin_rows(held) if rows is None else rows
         margins = [np.zeros(0), np.zeros(0)]
         if len(slots) or len(edges):
             x, v = self._state(np.asarray(y, float), p)
@@ -1232,6 +1232,14 @@ class BodyContactModel(Model):
             self._constrain_edges(edges, x)
             margins[1] = self._edge_terms(edges, x, v).margin - self.margin_floor[edges]
         return ng + np.concatenate([slots, edges]), np.concatenate(margins)
+
+    def margin_rows(self, held) -> tuple[IntArray, IntArray]:
+        """The held slots of the held codes ``held`` (nc,) with an element-boundary event
+        (:meth:`_bounded`) and the held edge rows, slot indices, shape (k,) and (e,): the
+        rows :meth:`held_margins` reads (two passes over every contact to find)."""
+        slots = np.flatnonzero(np.asarray(held)[self.n_ground_contacts :] != 0)
+        edges, slots = slots[slots >= self.first_edge], slots[slots < self.first_edge]
+        return slots[self._bounded(held, slots)], edges
 
     def floor_margins(self, y, p, held: np.ndarray, changed: np.ndarray, gap_tolerance: float) -> None:
         """Held rows of the groups of the contacts ``changed`` at this instant (bool (nc,):

@@ -78,7 +78,7 @@ class Phases:
     @property
     def on_ground(self) -> np.ndarray:
         """Bool (nc,): held along the normal (sticking, frictionless or sliding)."""
-        return (self.phase == HELD) | (self.phase == SLIDING)
+        return (self.phase & 1) != 0  # HELD and SLIDING are the odd codes (as in held)
 
     def arm(self, gaps: np.ndarray, gap_tolerance: float) -> None:
         """Give each free contact too close to its floor to be armed (released on a surface,

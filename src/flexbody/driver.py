@@ -567,6 +567,7 @@ class _Run:
 
         renew_slips()
         g_old = events(self.y)
+        held_rows = self.held_rows()  # the segment's (its steps change no phase)
         reach = model.step_reach if model.n_slots and s.method != "LSODA" else None  # LSODA fixes it at its start
         retry = np.inf  # a step taken again after it moved particles too far: its bound
         try:
@@ -598,9 +599,9 @@ class _Run:
                         solver = stepper(rhs, t_start, y_start, t_bound, **dict(options, first_step=retry))
                         renew_slips()
                         continue
-                drift = self.held_drift(solver.y)
-                if model.coupled and phases.on_ground.any() and solver.t - t_start > STALL_TIME and self.sank(
-                        drift, dense, t_start, solver.t):
+                drift = self.held_drift(solver.y, held_rows)
+                if len(held_rows) and solver.t - t_start > STALL_TIME and self.sank(drift, dense, t_start, solver.t,
+                                                                                     held_rows):
                     # too long for the held contacts' constraints (at its end, or within it on
                     # the dense output, which is less accurate): again from its start, shorter,
                     # before event location changes anything (it re-arms floors)
@@ -679,17 +680,22 @@ class _Run:
         phases.arm(model.gaps(self.y[: model.nq], self.p), self.gap_tolerance)
         return True
 
-    def held_drift(self, y: np.ndarray) -> float:
+    def held_rows(self) -> np.ndarray:
+        """The held contacts of a coupled model, shape (k,) (none for one that is not):
+        those :meth:`held_drift` reads."""
+        return np.flatnonzero(self.phases.on_ground) if self.model.coupled else np.zeros(0, np.intp)
+
+    def held_drift(self, y: np.ndarray, rows: np.ndarray | None = None) -> float:
         """How far (m) the held contacts of a coupled model are off their surfaces at ``y``,
         the largest (0 where none is held): their gaps are kept on accelerations, and where
         they are not linear in the coordinates the integrator's error drifts them (see
-        :func:`flexbody.coupled.project_held`)."""
-        rows = np.flatnonzero(self.phases.on_ground) if self.model.coupled else ()
+        :func:`flexbody.coupled.project_held`).  ``rows``: :meth:`held_rows`, if known."""
+        rows = self.held_rows() if rows is None else rows
         if not len(rows):
             return 0.0
         return float(np.abs(self.model.held_gaps(y[: self.model.nq], self.p, rows)).max())
 
-    def sank(self, drift: float, dense, t_start: float, t_end: float) -> bool:
+    def sank(self, drift: float, dense, t_start: float, t_end: float, rows: np.ndarray | None = None) -> bool:
         """Whether a held contact of a coupled model is deeper than ``SINK_GAPS`` gap
         tolerances off its surface at the step's end (``drift``, :meth:`held_drift`) or at
         one of ``SINK_POINTS`` on its dense output ``dense`` over ``[t_start, t_end]``: inside
@@ -697,7 +703,8 @@ class _Run:
         the next segment from it (measured: 1.2e-9 m at 3/8 of a step whose ends and midpoint
         read 3e-11 m, in a fuzzed 3D pile)."""
         limit = SINK_GAPS * self.gap_tolerance
-        return drift > limit or any(self.held_drift(dense(t_start + f * (t_end - t_start))) > limit for f in SINK_POINTS)
+        return drift > limit or any(self.held_drift(dense(t_start + f * (t_end - t_start)), rows) > limit
+                                    for f in SINK_POINTS)
 
     def record(self, dense, t_stop: float, t_start: float) -> None:
         """Keep the output-grid samples up to ``t_stop`` and track penetration (of particles,

@@ -75,6 +75,7 @@ class EventFunctions:
             if self.hold_slips:
                 model.slips_held(p)[:] = 0
         self._coupled: dict[int, tuple] = {}  # each held contact's block (see one, _block)
+        self._margin_rows: dict[int, tuple] = {}  # by held codes' id: (those codes, the margins' rows)
         self._forces = model.forces_function(p, self.held, phases.push)  # the segment's contact set, laid out once
 
     def renew(self, y: np.ndarray, step: float = 0.0) -> bool:
@@ -183,7 +184,9 @@ class EventFunctions:
         return g
 
     def __call__(self, y: np.ndarray) -> np.ndarray:
-        return np.minimum(self.free_gaps(y), self.held_functions(y))
+        # the held contacts' functions written over the free gaps' inf (their minimum, without
+        # two more passes over every contact)
+        return self._held_functions(y, self.held_mask, self._held_rows, self.held, False, self.free_gaps(y))
 
     def held_functions(self, y: np.ndarray, among: np.ndarray | None = None) -> np.ndarray:
         """The held contacts' event functions at ``y``, ``inf`` for the others, shape (nc,):
@@ -203,18 +206,20 @@ class EventFunctions:
         return mask, np.flatnonzero(mask), held
 
     def _held_functions(self, y: np.ndarray, mask: np.ndarray, rows: np.ndarray, held: np.ndarray,
-                        block: bool) -> np.ndarray:
+                        block: bool, out: np.ndarray | None = None) -> np.ndarray:
         """:meth:`held_functions` of the held contacts ``mask`` (bool (nc,)), ``rows`` (their
         indices: a few of many contacts, indexed without passing over the mask again) with
-        the held codes ``held``; with ``block``, from their own rows' forces."""
+        the held codes ``held``; with ``block``, from their own rows' forces.  ``out``: an
+        array (nc,) that is ``inf`` at ``rows``, taken as the others' functions and written
+        (else they are ``inf``)."""
         m = self.model
-        g = np.full(m.n_contacts, np.inf)
+        g = np.full(m.n_contacts, np.inf) if out is None else out
         if len(rows):
             # a block's forces from its own rows (a lift-off's root evaluates nothing else)
             lam = m.held_forces(y, self.p, held, self.phases.push) if block else self._forces(y)
             g[rows] = lam[rows] + self.force_tolerance[rows]
             if self.margins is not None:  # a contact held on another body's element passes onto the next
-                bounded, margins = self.margins(y, self.p, held)  # held ones: among rows
+                bounded, margins = self.margins(y, self.p, held, self._rows_with_margins(held))  # among rows
                 g[bounded] = np.minimum(g[bounded], margins)
             if self.friction:
                 vt, _, slack = m.friction(y, self.p, held, self.phases.push)
@@ -224,6 +229,14 @@ class EventFunctions:
                 along = np.where(self.from_rest, np.inf if m.dim != 3 else along + self.speed_tolerance, along)
                 g[sliding] = np.minimum(g[sliding], along[sliding])
         return g
+
+    def _rows_with_margins(self, held: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`flexbody.body_contact.BodyContactModel.margin_rows` of ``held`` (the
+        segment's codes, or a block's: neither changes), found once per array."""
+        kept = self._margin_rows.get(id(held))
+        if kept is None or kept[0] is not held:  # (the array is kept with them: its id is not reused)
+            kept = self._margin_rows[id(held)] = (held, self.model.margin_rows(held))
+        return kept[1]
 
     def one(self, y: np.ndarray, c: int) -> float:
         """Event function ``c`` alone at ``y``, equal to ``self(y)[c]``: a free contact's needs
