@@ -118,3 +118,39 @@ def test_the_quick_study_saves_five_runs_a_set_and_the_stiff_row_touches_nothing
     for row in scaling:
         assert row["ratio"] == pytest.approx(row["collide"]["wall_s"] / row["separate"]["wall_s"])
         assert 0.0 < row["collide"]["broadphase_s"] < row["collide"]["wall_s"]
+
+
+def test_the_tolerance_sets_rtol_and_atol_and_nothing_else():
+    from flexbody.bench_bodies import RTOL, RTOL_TO_ATOL, bodies_scene_table
+
+    study, tight = bodies_scene_table(4, 23, 0.3, True), bodies_scene_table(4, 23, 0.3, True, rtol=1e-8)
+    assert (study["simulation"]["rtol"], study["simulation"]["atol"]) == (RTOL, RTOL * RTOL_TO_ATOL) == (1e-6, 1e-9)
+    assert (tight["simulation"]["rtol"], tight["simulation"]["atol"]) == (1e-8, 1e-8 * RTOL_TO_ATOL)
+    assert {k: v for k, v in tight["simulation"].items() if k not in ("rtol", "atol")} == \
+        {k: v for k, v in study["simulation"].items() if k not in ("rtol", "atol")}
+    assert tight["bodies"] == study["bodies"]
+
+
+def _run(wall: float, events: int) -> dict:
+    return {"wall_s": wall, "events": events, "rhs_evaluations": 10 * events, "status": "success",
+            "t_reached_s": 0.3, "max_penetration_m": 1e-12}
+
+
+@pytest.mark.parametrize("panels", [(), ("scaling",), ("scaling", "tolerance")])
+def test_the_chart_draws_a_panel_for_each_part_the_study_saved(panels):
+    """A study saved before its scaling or tolerance parts were added is drawn again
+    (`flexbody bench` re-plots a saved JSON) with the panels it has."""
+    from flexbody.bench_bodies import plot_bodies
+
+    runs = {k: _run(1.0, 10) for k in ("separate", "pass_through", "collide", "row_separate", "row_collide")}
+    data = {"bodies": 4, "count": 23, "t_end_s": 0.3, "rtol": 1e-6, "runs": runs}
+    rows = [{"collide": _run(2.0, 30), "separate": _run(1.0, 10), "ratio": 2.0}]
+    if "scaling" in panels:
+        data["scaling"] = [dict(rows[0], bodies=4)]
+    if "tolerance" in panels:
+        data["tolerance"] = [dict(rows[0], rtol=r) for r in (1e-6, 1e-7)]
+    axes = plot_bodies(data).axes
+    assert len(axes) == 2 + len(panels)
+    titles = [ax.get_title() for ax in axes]
+    assert any("per event" in t for t in titles) == ("scaling" in panels)
+    assert any("by tolerance" in t for t in titles) == ("tolerance" in panels)

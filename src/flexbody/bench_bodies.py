@@ -30,6 +30,10 @@ Each run records its wall time (median over ``repeats`` where affordable), RHS
 evaluations, events, maximum penetration, relative energy drift, the broad phase's
 rebuilds and, when it stops early, the time it reached and why.  ``--quick`` runs four
 discs of about 23 particles (the thesis ball's lattice) for 0.3 s.
+
+The stiff pile and its separate drops are also run at the tighter tolerances of
+``TOLERANCES`` (speed against accuracy): a pile's cost is its events, which do not depend
+on the tolerance once it resolves them, while its drops' cost is their steps, which do.
 """
 
 from __future__ import annotations
@@ -51,6 +55,9 @@ QUICK = {"bodies": 4, "count": 23, "t_end": 0.3, "smaller": (2, 3)}
 #: (a 2D lattice's modulus is its links' stiffness, while a disc's weight per unit width
 #: grows with its radius), rounded.
 STIFFNESS, STIFF = 2000.0, 6000.0
+#: The study's tolerance (rtol; atol is RTOL_TO_ATOL times it), and the tighter ones at
+#: which the stiff pile and its separate drops run again.
+RTOL, TOLERANCES, RTOL_TO_ATOL = 1e-6, (1e-7, 1e-8), 1e-3
 #: Gap between neighbouring discs and the height of the lowest point above the ground (m).
 GAP = 0.02
 LIFT = 0.05
@@ -85,12 +92,13 @@ def disc_positions(n_bodies: int, radius: float, gap: float = GAP, lift: float =
 
 
 def bodies_scene_table(n_bodies: int, count: int, t_end: float, collide: bool,
-                       only: int | None = None, stiffness: float = STIFFNESS, row: bool = False) -> dict:
+                       only: int | None = None, stiffness: float = STIFFNESS, row: bool = False,
+                       rtol: float = RTOL) -> dict:
     """The study's scene as a table: ``n_bodies`` discs of about ``count`` particles, 0.05 kg
     each, ``stiffness`` (N/m) and c = 0.5 N s/m per link (relative dampers), each turned by a
     different small angle so no two land alike, in a pile (:func:`disc_positions`) or with
     ``row`` side by side (:func:`row_positions`); ``only``: that body alone, where it is in
-    the full scene."""
+    the full scene; SciPy's RK45 at ``rtol`` (and atol ``RTOL_TO_ATOL`` times it)."""
     radius = disc_radius(count)
     centres = (row_positions if row else disc_positions)(n_bodies, radius)
     keep = range(n_bodies) if only is None else (only,)
@@ -100,13 +108,14 @@ def bodies_scene_table(n_bodies: int, count: int, t_end: float, collide: bool,
     # output every 10 ms: the study times the integration, not the sampling
     name = f"bodies_{n_bodies}x{count}" + ("_row" if row else "") + ("" if stiffness == STIFFNESS else f"_k{stiffness:g}")
     return {"name": name + ("" if only is None else f"_{only}"), "bodies": bodies,
-            "simulation": {"t_end": t_end, "output_dt": 1e-2, "method": "RK45", "rtol": 1e-6, "atol": 1e-9}}
+            "simulation": {"t_end": t_end, "output_dt": 1e-2, "method": "RK45", "rtol": rtol,
+                           "atol": rtol * RTOL_TO_ATOL}}
 
 
 def bodies_scene(n_bodies: int, count: int, t_end: float, collide: bool, only: int | None = None,
-                 stiffness: float = STIFFNESS, row: bool = False) -> Scene:
+                 stiffness: float = STIFFNESS, row: bool = False, rtol: float = RTOL) -> Scene:
     """:func:`bodies_scene_table`, loaded (validated)."""
-    return load_scene(bodies_scene_table(n_bodies, count, t_end, collide, only, stiffness, row))
+    return load_scene(bodies_scene_table(n_bodies, count, t_end, collide, only, stiffness, row, rtol))
 
 
 #: Wall-time cap of one run (s): a run stopped by it reports the time it reached.
@@ -148,16 +157,19 @@ def bodies_study(out: Path, quick: bool, repeats: int = 3) -> dict:
     case = QUICK if quick else FULL
     n, count, t_end = case["bodies"], case["count"], case["t_end"]
     contact_repeats = 1 if not quick else repeats  # the full drop takes minutes: once
-    print(f"bodies: {n} discs of about {count} particles dropped for {t_end:g} s, SciPy RK45 rtol 1e-6")
+    print(f"bodies: {n} discs of about {count} particles dropped for {t_end:g} s, SciPy RK45 rtol {RTOL:g}")
     sets = {}
     for label, stiffness in (("soft", STIFFNESS), ("stiff", STIFF)):
         print(f" links {stiffness:g} N/m ({label})")
         sets[label] = _five_runs(n, count, t_end, stiffness, repeats, contact_repeats)
     print(f" the stiff pile by its number of bodies (links {STIFF:g} N/m)")
     scaling = _scaling(case["smaller"], count, t_end, repeats, contact_repeats, n, sets["stiff"]["runs"])
-    data = {"bodies": n, "count": count, "t_end_s": t_end, "method": "RK45", "rtol": 1e-6,
+    print(f" the stiff pile by its tolerance (rtol; atol {RTOL_TO_ATOL:g} of it)")
+    tolerance = _tolerances(n, count, t_end, repeats, contact_repeats, sets["stiff"]["runs"])
+    data = {"bodies": n, "count": count, "t_end_s": t_end, "method": "RK45", "rtol": RTOL,
             "stiffness_N_per_m": STIFFNESS, **sets["soft"],
-            "stiff": {"stiffness_N_per_m": STIFF, **sets["stiff"]}, "scaling": scaling, "environment": _environment()}
+            "stiff": {"stiffness_N_per_m": STIFF, **sets["stiff"]}, "scaling": scaling, "tolerance": tolerance,
+            "environment": _environment()}
     _save(out, "bodies", data, plot_bodies(data))
     return data
 
@@ -208,15 +220,35 @@ def _scaling(smaller: tuple[int, ...], count: int, t_end: float, repeats: int, c
     return rows
 
 
+def _tolerances(n: int, count: int, t_end: float, repeats: int, contact_repeats: int, runs: dict) -> list[dict]:
+    """The stiff pile and its separate drops at the study's rtol (its ``runs``) and at each
+    of ``TOLERANCES``, printed: events, penetration and wall times, and the ratio.  Each row:
+    ``rtol``, ``collide`` and ``separate`` (as :func:`_measure`), ``ratio``."""
+    rows = [{"rtol": RTOL, "collide": runs["collide"], "separate": runs["separate"]}]
+    rows += [{"rtol": rtol,
+              "collide": _measure(bodies_scene(n, count, t_end, True, stiffness=STIFF, rtol=rtol), contact_repeats),
+              "separate": _separate(n, count, t_end, STIFF, repeats, row=False, rtol=rtol)} for rtol in TOLERANCES]
+    print(f"  {'rtol':>6s} {'pile s':>8s} {'events':>7s} {'penetration m':>13s} {'drift':>8s} {'separate s':>10s} "
+          f"{'events':>7s} {'x separate':>10s}")
+    for row in rows:
+        pile, alone = row["collide"], row["separate"]
+        row["ratio"] = pile["wall_s"] / alone["wall_s"]
+        print(f"  {row['rtol']:6.0e} {pile['wall_s']:8.2f} {pile['events']:7d} {pile['max_penetration_m']:13.2e} "
+              f"{pile['energy_drift_relative']:8.1e} {alone['wall_s']:10.2f} {alone['events']:7d} {row['ratio']:10.2f}"
+              + ("" if pile["status"] == "success" else f"  (pile {pile['status']} at {pile['t_reached_s']:.3f} s)"))
+    return rows
+
+
 def _per_event(run: dict) -> float:
     """A run's wall time per event (ms)."""
     return 1e3 * run["wall_s"] / max(run["events"], 1)
 
 
-def _separate(n: int, count: int, t_end: float, stiffness: float, repeats: int, row: bool) -> dict:
+def _separate(n: int, count: int, t_end: float, stiffness: float, repeats: int, row: bool,
+              rtol: float = RTOL) -> dict:
     """Each of the ``n`` bodies dropped alone where it is in the pile (or with ``row``, in the
     row), its numbers summed (maxima of the penetration and drift): the separate drops."""
-    alone = [_measure(bodies_scene(n, count, t_end, False, only=k, stiffness=stiffness, row=row), repeats)
+    alone = [_measure(bodies_scene(n, count, t_end, False, only=k, stiffness=stiffness, row=row, rtol=rtol), repeats)
              for k in range(n)]
     return {"particles": sum(r["particles"] for r in alone), "contacts": sum(r["contacts"] for r in alone),
             "status": "success" if all(r["status"] == "success" for r in alone) else "failed",
@@ -232,7 +264,8 @@ def plot_bodies(data: dict):
     """Wall time and RHS evaluations of the runs, side by side (log axes), for each link
     stiffness the JSON holds (the soft set; the stiff one where it was run); a study saved
     before the row was added has the pile's three runs only.  With the stiff pile's
-    ``scaling`` (:func:`_scaling`), a third panel: its wall time per event by its bodies."""
+    ``scaling`` (:func:`_scaling`), a panel of its wall time per event by its bodies; with
+    its ``tolerance`` (:func:`_tolerances`), one of its and its drops' wall times by rtol."""
     from matplotlib.figure import Figure
 
     sets = [(f"{data.get('stiffness_N_per_m', STIFFNESS):g} N/m", data["runs"])]
@@ -243,11 +276,13 @@ def plot_bodies(data: dict):
               "row_collide": "row:\ncollide\ntrue"}
     order = ("separate", "pass_through", "collide", "row_separate", "row_collide")
     colours = {"separate": "C0", "pass_through": "C2", "collide": "C3", "row_separate": "C9", "row_collide": "C1"}
-    scaling = data.get("scaling")  # a study saved before it was added has none
-    fig = Figure(figsize=(20 if scaling else 14, 5.5), layout="constrained")
-    axes = fig.subplots(1, 3 if scaling else 2, width_ratios=[3, 3, 2] if scaling else None)
-    if scaling:
-        _plot_scaling(axes[2], scaling)
+    # studies saved before these were added have neither
+    extra = [(plot, data[key]) for key, plot in (("scaling", _plot_scaling), ("tolerance", _plot_tolerance))
+             if data.get(key)]
+    fig = Figure(figsize=(14 + 6 * len(extra), 5.5), layout="constrained")
+    axes = fig.subplots(1, 2 + len(extra), width_ratios=[3, 3] + [2] * len(extra))
+    for ax, (plot, rows) in zip(axes[2:], extra):
+        plot(ax, rows)
     for ax, key, title in zip(axes, ("wall_s", "rhs_evaluations"),
                               ("wall time of the integration (s)", "RHS evaluations")):
         ticks, names = [], []
@@ -289,3 +324,23 @@ def _plot_scaling(ax, scaling: list[dict]) -> None:
     ax.set_title("stiff pile: wall time per event (ms)", fontsize=10)
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8)
+
+
+def _plot_tolerance(ax, rows: list[dict]) -> None:
+    """The stiff pile and its separate drops by rtol: wall time (s, log), each pile point
+    labelled with its events, its penetration and its ratio to the drops."""
+    rtols = [row["rtol"] for row in rows]
+    for key, colour, label in (("collide", "C3", "pile, collide = true"), ("separate", "C0", "alone (summed)")):
+        ax.plot(rtols, [row[key]["wall_s"] for row in rows], "o-", color=colour, label=label)
+    for row in rows:
+        pile = row["collide"]
+        ax.annotate(f"{pile['events']} events\n{pile['max_penetration_m']:.1e} m\n{row['ratio']:.1f}x the drops",
+                    (row["rtol"], pile["wall_s"]), textcoords="offset points", xytext=(0, 8), ha="center", fontsize=7)
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.invert_xaxis()  # tighter to the right
+    ax.margins(x=0.15, y=0.35)
+    ax.set_xlabel(f"rtol (atol {RTOL_TO_ATOL:g} of it)")
+    ax.set_title("stiff pile: wall time by tolerance (s)", fontsize=10)
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8, loc="center right")
