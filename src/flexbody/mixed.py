@@ -129,6 +129,7 @@ class MixedModel(Model):
         self._push_t = np.zeros((self.n_contacts, self.dim))
         # p: the flexible part's parameters first (their count is fixed by its topology), then the rigid part's
         self._n_p_f = len(flexible.parameters(self.flexible_part.scene))
+        self._parts_of: tuple[FloatArray, FloatArray, FloatArray] | None = None  # (p, its parts; see _p)
         text = f"{f.digest}|{r.digest}|{self.rigid_part.particles.tolist()}"
         self.digest = hashlib.sha256(f"mixed|{text}".encode()).hexdigest()[:16]
 
@@ -144,8 +145,20 @@ class MixedModel(Model):
         return np.concatenate([self.flexible.parameters(flexible.scene), self.rigid.parameters(rigid.scene)])
 
     def _p(self, p) -> tuple[FloatArray, FloatArray]:
+        """Each part's parameters from the whole ``p``.  For a read-only ``p`` (the driver's,
+        which nobody changes) they are read-only copies made once and handed out again: a
+        part's C model then knows them for the ones it is bound to without comparing them
+        (:meth:`flexbody.runtime.SystemModel.system`; a new slice at every call was compared
+        in full each time, ~3 % of a disc landing on a rigid block)."""
         p = np.asarray(p, float)
-        return p[: self._n_p_f], p[self._n_p_f :]
+        if p.flags.writeable or p.base is not None:  # (a read-only view may see its base change)
+            return p[: self._n_p_f], p[self._n_p_f :]
+        if self._parts_of is None or self._parts_of[0] is not p:
+            parts = [p[: self._n_p_f].copy(), p[self._n_p_f :].copy()]
+            for part in parts:
+                part.flags.writeable = False
+            self._parts_of = (p, *parts)
+        return self._parts_of[1], self._parts_of[2]
 
     def _parts(self, y, p) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
         """Each part's state and parameters from the whole state ``y (ny,)``."""
@@ -180,18 +193,23 @@ class MixedModel(Model):
     # ------------------------------------------------------------------ the model interface
     def particle_state(self, q, u, p) -> tuple[FloatArray, FloatArray | None]:
         """Particle positions and velocities (n, dim) each in N (velocities None without ``u``)."""
-        d = self.dim
+        return self.particle_positions(q, p), None if u is None else self.particle_velocities(q, u, p)
+
+    def particle_positions(self, q, p) -> FloatArray:
+        """Particle positions (n, dim) in N."""
         (q_f, q_r), (_, p_r) = self._q(q), self._p(p)
-        x = np.empty((self.n_particles, d))
-        x[self.flexible_part.particles] = q_f.reshape(-1, d)
+        x = np.empty((self.n_particles, self.dim))
+        x[self.flexible_part.particles] = q_f.reshape(-1, self.dim)
         x[self.rigid_part.particles] = self.rigid.positions(q_r, p_r)
-        if u is None:
-            return x, None
-        u_f, u_r = self._u(u)
-        v = np.empty((self.n_particles, d))
-        v[self.flexible_part.particles] = u_f.reshape(-1, d)
+        return x
+
+    def particle_velocities(self, q, u, p) -> FloatArray:
+        """Particle velocities (n, dim) in N."""
+        (_, q_r), (u_f, u_r), (_, p_r) = self._q(q), self._u(u), self._p(p)
+        v = np.empty((self.n_particles, self.dim))
+        v[self.flexible_part.particles] = u_f.reshape(-1, self.dim)
         v[self.rigid_part.particles] = self.rigid.velocities(q_r, u_r, p_r)
-        return x, v
+        return v
 
     def ground_normals(self, p) -> FloatArray:
         """Each ground's unit normal, shape (n_grounds, dim): the flexible part's."""
