@@ -2249,14 +2249,15 @@ class _MixedCoordinates:
         q = np.ascontiguousarray(np.asarray(q, float)[: inner.nq])
         p = np.ascontiguousarray(p, float)
         kept = self._positions
-        if kept is None or not (_same(kept[0], q) and _same(kept[1], p)):
-            kept = self._positions = (q.copy(), _kept_parameters(p), _read_only(inner.particle_positions(q, p)))
+        same = runtime.same_as_kept
+        if kept is None or not (same(kept[0], q) and same(kept[1], p)):
+            kept = self._positions = (q.copy(), runtime.kept_copy(p), _read_only(inner.particle_positions(q, p)))
         if u is None:
             return kept[2], None
         u = np.ascontiguousarray(np.asarray(u, float)[: inner.nu])
         known = self._velocities
-        if known is None or not (_same(known[1], u) and _same(known[0], q) and _same(known[2], p)):
-            known = self._velocities = (q.copy(), u.copy(), _kept_parameters(p),
+        if known is None or not (same(known[1], u) and same(known[0], q) and same(known[2], p)):
+            known = self._velocities = (q.copy(), u.copy(), runtime.kept_copy(p),
                                         _read_only(inner.particle_velocities(q, u, p)))
         return kept[2], known[3]
 
@@ -2654,13 +2655,3 @@ def _neighbours(elements: IntArray) -> IntArray:
             out[e, k] = sharing[0] if sharing else e
     return out
 
-
-def _same(kept: np.ndarray, a: np.ndarray) -> bool:
-    """Whether the kept array is ``a`` or holds its values bit for bit."""
-    return kept is a or runtime.same_bits(kept, a)
-
-
-def _kept_parameters(p: np.ndarray) -> np.ndarray:
-    """``p`` to keep for a later comparison: itself where nobody changes it (the driver's,
-    read-only, not a view), else a copy."""
-    return p if p.base is None and not p.flags.writeable else p.copy()

@@ -24,6 +24,7 @@ import re
 
 import numpy as np
 
+from . import runtime
 from .assembly import AssembledModel, assembled_model
 from .model import GeneratedModel, Model
 from .scene import Scene
@@ -151,7 +152,7 @@ class MixedModel(Model):
         (:meth:`flexbody.runtime.SystemModel.system`; a new slice at every call was compared
         in full each time, ~3 % of a disc landing on a rigid block)."""
         p = np.asarray(p, float)
-        if p.flags.writeable or p.base is not None:  # (a read-only view may see its base change)
+        if not runtime.fixed(p):
             return p[: self._n_p_f], p[self._n_p_f :]
         if self._parts_of is None or self._parts_of[0] is not p:
             parts = [p[: self._n_p_f].copy(), p[self._n_p_f :].copy()]

@@ -134,6 +134,23 @@ def same_bits(a: np.ndarray, b: np.ndarray) -> bool:
     return bool(np.array_equal(a.reshape(-1).view(np.int64), b.reshape(-1).view(np.int64)))
 
 
+def fixed(a: np.ndarray) -> bool:
+    """Whether nobody changes ``a``: read-only and not a view of another array (the driver's
+    parameters), so that it can be kept for a later comparison as it is."""
+    return a.base is None and not a.flags.writeable
+
+
+def kept_copy(a: np.ndarray) -> np.ndarray:
+    """``a`` to keep for a later comparison (:func:`same_as_kept`): itself where it is
+    :func:`fixed`, else a copy."""
+    return a if fixed(a) else a.copy()
+
+
+def same_as_kept(kept: np.ndarray, a: np.ndarray) -> bool:
+    """Whether ``a`` is the kept array or holds its values bit for bit (:func:`same_bits`)."""
+    return kept is a or same_bits(kept, a)
+
+
 def _ints(a) -> np.ndarray:
     return np.ascontiguousarray(a, dtype=np.intc)
 
@@ -157,9 +174,9 @@ class SystemModel:
         without looking: it is asked for at every C call."""
         p = _floats(p)
         cached = self._system_cache
-        if cached is not None and (p is cached[0] or same_bits(cached[0], p)):
+        if cached is not None and same_as_kept(cached[0], p):
             return cached[1]
-        kept = p if p.base is None and not p.flags.writeable else p.copy()  # nobody changes what is kept
+        kept = kept_copy(p)  # nobody changes what is kept
         system = self._bind(kept)
         self._system_cache = (kept, system)
         return system
