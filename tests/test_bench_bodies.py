@@ -125,7 +125,7 @@ def test_the_tolerance_sets_rtol_and_atol_and_nothing_else():
 
     study, tight = bodies_scene_table(4, 23, 0.3, True), bodies_scene_table(4, 23, 0.3, True, rtol=1e-8)
     assert (study["simulation"]["rtol"], study["simulation"]["atol"]) == (RTOL, RTOL * RTOL_TO_ATOL) == (1e-6, 1e-9)
-    assert (tight["simulation"]["rtol"], tight["simulation"]["atol"]) == (1e-8, 1e-8 * RTOL_TO_ATOL)
+    assert (tight["simulation"]["rtol"], tight["simulation"]["atol"]) == (1e-8, 1e-11)
     assert {k: v for k, v in tight["simulation"].items() if k not in ("rtol", "atol")} == \
         {k: v for k, v in study["simulation"].items() if k not in ("rtol", "atol")}
     assert tight["bodies"] == study["bodies"]
@@ -147,10 +147,15 @@ def test_the_chart_draws_a_panel_for_each_part_the_study_saved(panels):
     rows = [{"collide": _run(2.0, 30), "separate": _run(1.0, 10), "ratio": 2.0}]
     if "scaling" in panels:
         data["scaling"] = [dict(rows[0], bodies=4)]
-    if "tolerance" in panels:
-        data["tolerance"] = [dict(rows[0], rtol=r) for r in (1e-6, 1e-7)]
+    if "tolerance" in panels:  # the tighter run stopped by the wall-time cap: its point says so
+        capped = dict(_run(600.0, 5000), status="too_slow", t_reached_s=0.21)
+        data["tolerance"] = [rows[0], dict(rows[0], rtol=1e-7, collide=capped)]
+        data["tolerance"][0]["rtol"] = 1e-6
     axes = plot_bodies(data).axes
     assert len(axes) == 2 + len(panels)
     titles = [ax.get_title() for ax in axes]
     assert any("per event" in t for t in titles) == ("scaling" in panels)
     assert any("by tolerance" in t for t in titles) == ("tolerance" in panels)
+    if "tolerance" in panels:
+        labels = [text.get_text() for text in axes[-1].texts]
+        assert sum("too_slow at 0.21 s" in label for label in labels) == 1

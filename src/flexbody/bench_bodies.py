@@ -109,7 +109,7 @@ def bodies_scene_table(n_bodies: int, count: int, t_end: float, collide: bool,
     name = f"bodies_{n_bodies}x{count}" + ("_row" if row else "") + ("" if stiffness == STIFFNESS else f"_k{stiffness:g}")
     return {"name": name + ("" if only is None else f"_{only}"), "bodies": bodies,
             "simulation": {"t_end": t_end, "output_dt": 1e-2, "method": "RK45", "rtol": rtol,
-                           "atol": rtol * RTOL_TO_ATOL}}
+                           "atol": float(f"{rtol * RTOL_TO_ATOL:.12g}")}}  # 1e-11, not 1.0000000000000001e-11
 
 
 def bodies_scene(n_bodies: int, count: int, t_end: float, collide: bool, only: int | None = None,
@@ -334,7 +334,8 @@ def _plot_tolerance(ax, rows: list[dict]) -> None:
         ax.plot(rtols, [row[key]["wall_s"] for row in rows], "o-", color=colour, label=label)
     for row in rows:
         pile = row["collide"]
-        ax.annotate(f"{pile['events']} events\n{pile['max_penetration_m']:.1e} m\n{row['ratio']:.1f}x the drops",
+        stopped = "" if pile["status"] == "success" else f"\n{pile['status']} at {pile['t_reached_s']:.2f} s"
+        ax.annotate(f"{pile['events']} events\n{pile['max_penetration_m']:.1e} m\n{row['ratio']:.1f}x the drops{stopped}",
                     (row["rtol"], pile["wall_s"]), textcoords="offset points", xytext=(0, 8), ha="center", fontsize=7)
     ax.set_xscale("log")
     ax.set_yscale("log")
