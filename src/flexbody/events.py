@@ -53,8 +53,10 @@ class EventFunctions:
         self.held_mask = phases.on_ground
         self._held_rows = np.flatnonzero(self.held_mask)
         self.held = phases.held
-        # held slots' element margins, by contact (None where the segment holds no slot)
+        # held slots' element margins, by contact (None where the segment holds no slot), and
+        # the rows they are read on (found once: two passes over every contact)
         self.margins = model.held_margins if phases.on_ground[model.n_ground_contacts :].any() else None
+        self._margin_rows = self._rows_with_margins(self.held)
         # Contacts between bodies (past the grounds'): a just released one is checked more densely.
         self.between_bodies = np.arange(model.n_contacts) >= model.n_ground_contacts
         self.friction = bool(self.held_mask.any() and model.laws[:, 0].any())
@@ -75,7 +77,6 @@ class EventFunctions:
             if self.hold_slips:
                 model.slips_held(p)[:] = 0
         self._coupled: dict[int, tuple] = {}  # each held contact's block (see one, _block)
-        self._margin_rows: dict[int, tuple] = {}  # by held codes' id: (those codes, the margins' rows)
         self._forces = model.forces_function(p, self.held, phases.push)  # the segment's contact set, laid out once
 
     def renew(self, y: np.ndarray, step: float = 0.0) -> bool:
@@ -186,7 +187,8 @@ class EventFunctions:
     def __call__(self, y: np.ndarray) -> np.ndarray:
         # the held contacts' functions written over the free gaps' inf (their minimum, without
         # two more passes over every contact)
-        return self._held_functions(y, self.held_mask, self._held_rows, self.held, False, self.free_gaps(y))
+        return self._held_functions(y, self.held_mask, self._held_rows, self.held, self._margin_rows, False,
+                                    self.free_gaps(y))
 
     def held_functions(self, y: np.ndarray, among: np.ndarray | None = None) -> np.ndarray:
         """The held contacts' event functions at ``y``, ``inf`` for the others, shape (nc,):
@@ -194,24 +196,31 @@ class EventFunctions:
         (nc,), a block of contacts that couple to no other held one), theirs alone, solved as
         if no other were held."""
         if among is None:
-            return self._held_functions(y, self.held_mask, self._held_rows, self.held, False)
+            return self._held_functions(y, self.held_mask, self._held_rows, self.held, self._margin_rows, False)
         return self._held_functions(y, *self._block(among), True)
 
-    def _block(self, among: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """The held contacts of ``among`` (bool (nc,)) as a mask and as indices, and the held
-        codes with them alone held (read-only: :meth:`one` keeps them)."""
+    def _block(self, among: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, tuple | None]:
+        """The held contacts of ``among`` (bool (nc,)) as a mask and as indices, the held
+        codes with them alone held (read-only: :meth:`one` keeps them) and the rows of their
+        margins (:meth:`_rows_with_margins`)."""
         mask = self.held_mask & among
         held = np.where(mask, self.held, 0).astype(self.held.dtype)
         held.flags.writeable = False
-        return mask, np.flatnonzero(mask), held
+        return mask, np.flatnonzero(mask), held, self._rows_with_margins(held)
+
+    def _rows_with_margins(self, held: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+        """The rows whose element margins are read with the held codes ``held``
+        (:meth:`flexbody.body_contact.BodyContactModel.margin_rows`); None where the segment
+        reads no margins."""
+        return None if self.margins is None else self.model.margin_rows(held)
 
     def _held_functions(self, y: np.ndarray, mask: np.ndarray, rows: np.ndarray, held: np.ndarray,
-                        block: bool, out: np.ndarray | None = None) -> np.ndarray:
+                        margin_rows: tuple | None, block: bool, out: np.ndarray | None = None) -> np.ndarray:
         """:meth:`held_functions` of the held contacts ``mask`` (bool (nc,)), ``rows`` (their
         indices: a few of many contacts, indexed without passing over the mask again) with
-        the held codes ``held``; with ``block``, from their own rows' forces.  ``out``: an
-        array (nc,) that is ``inf`` at ``rows``, taken as the others' functions and written
-        (else they are ``inf``)."""
+        the held codes ``held`` and their margins' rows ``margin_rows``; with ``block``, from
+        their own rows' forces.  ``out``: an array (nc,) that is ``inf`` at ``rows``, taken as
+        the others' functions and written (else they are ``inf``)."""
         m = self.model
         g = np.full(m.n_contacts, np.inf) if out is None else out
         if len(rows):
@@ -219,7 +228,7 @@ class EventFunctions:
             lam = m.held_forces(y, self.p, held, self.phases.push) if block else self._forces(y)
             g[rows] = lam[rows] + self.force_tolerance[rows]
             if self.margins is not None:  # a contact held on another body's element passes onto the next
-                bounded, margins = self.margins(y, self.p, held, self._rows_with_margins(held))  # among rows
+                bounded, margins = self.margins(y, self.p, held, margin_rows)  # among rows
                 g[bounded] = np.minimum(g[bounded], margins)
             if self.friction:
                 vt, _, slack = m.friction(y, self.p, held, self.phases.push)
@@ -229,14 +238,6 @@ class EventFunctions:
                 along = np.where(self.from_rest, np.inf if m.dim != 3 else along + self.speed_tolerance, along)
                 g[sliding] = np.minimum(g[sliding], along[sliding])
         return g
-
-    def _rows_with_margins(self, held: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """:meth:`flexbody.body_contact.BodyContactModel.margin_rows` of ``held`` (the
-        segment's codes, or a block's: neither changes), found once per array."""
-        kept = self._margin_rows.get(id(held))
-        if kept is None or kept[0] is not held:  # (the array is kept with them: its id is not reused)
-            kept = self._margin_rows[id(held)] = (held, self.model.margin_rows(held))
-        return kept[1]
 
     def one(self, y: np.ndarray, c: int) -> float:
         """Event function ``c`` alone at ``y``, equal to ``self(y)[c]``: a free contact's needs
