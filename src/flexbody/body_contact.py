@@ -2654,4 +2654,3 @@ def _neighbours(elements: IntArray) -> IntArray:
             sharing = [f for f in facets[tuple(sorted(vertices[:k] + vertices[k + 1 :]))] if f != e]
             out[e, k] = sharing[0] if sharing else e
     return out
-
