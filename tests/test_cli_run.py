@@ -80,8 +80,9 @@ def test_failed_simulation_exits_nonzero_says_why_and_writes_nothing(tmp_path, m
     assert not out.exists()
 
 
-def _rings_scene(path, collide: bool, contacts: str = "") -> str:
-    """Three small rings side by side, ``collide`` as given, plus a ``[[contacts]]`` text."""
+def _rings_scene(path, collide: bool, contacts: str = "", self_contact: bool = False) -> str:
+    """Three small rings side by side, ``collide`` as given (and the first's ``self_contact``),
+    plus a ``[[contacts]]`` text."""
     bodies = "".join(f"""
 [[bodies]]
 name = "ring{k}"
@@ -93,6 +94,7 @@ stiffness = 2000.0
 damping = 0.5
 position = [{0.2 * k}, 0.1]
 collide = {"true" if collide else "false"}
+self_contact = {"true" if self_contact and k == 0 else "false"}
 """ for k in range(3))
     path.write_text(f'name = "rings"\ngravity = [0.0, -9.81]\n{bodies}{contacts}\n[simulation]\nt_end = 0.01\n')
     return str(path)
@@ -100,14 +102,19 @@ collide = {"true" if collide else "false"}
 
 def test_a_large_contact_table_of_colliding_bodies_is_noted(tmp_path, monkeypatch, capsys):
     """Bodies with collide = true whose slots exceed the threshold get a note naming their
-    count and the way to fewer ([[contacts]]); listed pairs, fewer slots or --quiet do not."""
+    count and the way to fewer ([[contacts]]) where the table is laid out whole (here: a
+    body with self-contact); a table that grows with the pairs in reach, listed pairs,
+    fewer slots or --quiet do not."""
     from flexbody import runner
     from flexbody.model import load_model
     from flexbody.scene import load_scene
 
-    scene = load_scene(_rings_scene(tmp_path / "rings.toml", True))
+    growing = load_scene(_rings_scene(tmp_path / "growing.toml", True))
+    monkeypatch.setattr(runner, "LARGE_CONTACT_TABLE", 0)
+    assert runner.contact_table_note(growing, load_model(growing)) is None
+    scene = load_scene(_rings_scene(tmp_path / "rings.toml", True, self_contact=True))
     slots = load_model(scene).n_slots
-    assert slots == 3 * 6 * 2 * 2  # each ring's 6 vertices, against 2 others, and a corner twin each
+    assert slots == 3 * 6 * 2 * 2 + 6 * 2  # each ring's 6 vertices against 2 others (one also itself), twinned
     monkeypatch.setattr(runner, "LARGE_CONTACT_TABLE", slots - 1)
     assert main(["run", str(tmp_path / "rings.toml"), "--out", str(tmp_path / "a"), "--no-figures"]) == 0
     err = capsys.readouterr().err

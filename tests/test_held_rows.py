@@ -169,6 +169,7 @@ def _states_of(table: dict, every: int) -> tuple[body_contact.BodyContactModel, 
     slots, with the held codes, pushes and elements."""
     scene = load_scene(table)
     model = load_model(scene)
+    model.grows = False  # the run keeps this model, its table whole (not one of the pairs in reach)
     seen, make = [], model.rhs_function
 
     def recording(p, held, push):  # the steps' right-hand sides

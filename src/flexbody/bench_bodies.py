@@ -138,7 +138,9 @@ def _measure(scene: Scene, repeats: int) -> dict:
             break
     s = result.stats
     candidates = getattr(model, "_candidates", None)
-    return {"particles": scene.n_particles, "contacts": int(model.n_contacts), "status": result.status,
+    # the contacts of the run's table at its end (the pairs in reach: BodyContactModel.with_pairs)
+    return {"particles": scene.n_particles, "contacts": s["contacts"], "contact_pairs": s["contact_pairs"],
+            "status": result.status,
             "message": result.message,
             "t_reached_s": float(result.t[-1]), "wall_s": statistics.median(times), "repeats": len(times),
             "rhs_evaluations": s["rhs_evaluations"], "steps": s["steps"], "events": s["events"],

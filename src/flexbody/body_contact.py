@@ -4,7 +4,11 @@
 per (particle, other body) pair that may touch (the scene's ``[[contacts]]``, ``collide``):
 every vertex of the first body's surface against the second body's surface, and the other
 way round.  The slots come after the ground contacts, so the phase machine
-(:mod:`flexbody.contact`, :mod:`flexbody.events`) runs them as it runs the grounds':
+(:mod:`flexbody.contact`, :mod:`flexbody.events`) runs them as it runs the grounds'.
+A run gives slots only to the pairs whose bodies' boxes are in reach of each other
+(:meth:`BodyContactModel.with_pairs`; the driver grows the table as pairs come near), so
+a pile's table grows with the pairs that touch, not with the square of its bodies; with
+self-contact or edge contacts the table is laid out for every pair at once.
 
 * **Free** slot: its gap is the particle's signed distance to the other body's surface
   (:func:`flexbody.surface_contact.closest_features`, over the candidates of the broad
@@ -140,6 +144,12 @@ EDGE_REACH = 0.25
 #: (:meth:`BodyContactModel.step_reach`): within ``margin`` of a surface its gap is exact,
 #: so a crossing is seen at a step's end.
 STEP_REACH = 0.5
+#: A pair of bodies gets its slots (:meth:`BodyContactModel.with_pairs`) where their boxes
+#: come within ``margin`` and ``PAIRS_AHEAD`` reach lengths of each other: a step brings no
+#: particle nearer another by more than one.  Within ``PAIRS_LATE`` reach lengths at the end
+#: of a step taken without them, the step is taken again with them (a particle may have
+#: touched within it).
+PAIRS_AHEAD, PAIRS_LATE = 4.0, 2.0
 #: A free slot's normal rate is read (:meth:`BodyContactModel.gap_rates`) within this fraction
 #: of ``margin`` of its surface only: an instant asks the rate of a touching contact (gap at
 #: most the gap tolerance, 1e-12 of the scene, or fired 1e-12 s ago), and picking the
@@ -179,8 +189,8 @@ class BodyContactModel(Model):
     coupled = True
     compiled_segments = False
 
-    def __init__(self, scene: Scene, inner: AssembledModel | GeneratedModel) -> None:
-        self.inner = inner
+    def __init__(self, scene: Scene, inner: AssembledModel | GeneratedModel, pairs: IntArray | None = None) -> None:
+        self.inner, self._scene = inner, scene
         self.backend, self.dim, self.formulation = inner.backend, inner.dim, inner.formulation
         self.nq, self.nu, self.ny, self.n_particles = inner.nq, inner.nu, inner.ny, inner.n_particles
         self.masses, self.n_grounds = scene.masses.copy(), len(scene.grounds)
@@ -190,22 +200,31 @@ class BodyContactModel(Model):
         self.elements, self.element_body = scene.surfaces()
         counts = [b.n_particles for b in scene.bodies]
         self.particle_body = np.repeat(np.arange(len(counts)), counts)
-        particles, bodies, pairs = [np.zeros(0, np.intp)], [np.zeros(0, np.intp)], [np.zeros(0, np.intp)]
+        particles, bodies, slot_pairs = [np.zeros(0, np.intp)], [np.zeros(0, np.intp)], [np.zeros(0, np.intp)]
         allowed = np.zeros((len(counts), len(counts)), bool)
-        for k, pair in enumerate(scene.contacts):
-            first, second = pair.bodies
+        #: Whether the table holds only the pairs in reach (:meth:`with_pairs`): not with
+        #: self-contact or edge contacts, whose slots and rows are laid out for the whole scene.
+        self.grows = not any(c.edges or c.bodies[0] == c.bodies[1] for c in scene.contacts)
+        #: The scene's pairs (indices into ``scene.contacts``) that have slots, ascending.
+        self.pairs = np.arange(len(scene.contacts)) if pairs is None or not self.grows else np.unique(pairs)
+        #: ... and those that have none yet.
+        self.waiting = np.setdiff1d(np.arange(len(scene.contacts)), self.pairs)
+        self._pair_bodies = np.array([c.bodies for c in scene.contacts], np.intp).reshape(-1, 2).T  # (2, pairs)
+        self._body_starts = np.cumsum([0] + [b.n_particles for b in scene.bodies[:-1]])  # a body's particles: a run
+        for k in self.pairs:
+            first, second = scene.contacts[k].bodies
             allowed[first, second] = allowed[second, first] = True
             for toucher, surface in ((first, second),) if first == second else ((first, second), (second, first)):
                 touching = np.unique(self.elements[self.element_body == toucher])
                 particles.append(touching)
                 bodies.append(np.full(len(touching), surface))
-                pairs.append(np.full(len(touching), k))
+                slot_pairs.append(np.full(len(touching), k))
         #: Slots (each touching particle against each body it may touch), then their corner
         #: twins: one in 2D (two segments make a corner), two in 3D (three faces do).
         self.n_primary = sum(len(a) for a in particles)
         self.slot_particle = np.tile(np.concatenate(particles), self.dim).astype(np.intp)
         self.slot_body = np.tile(np.concatenate(bodies), self.dim).astype(np.intp)
-        self.slot_pair = np.tile(np.concatenate(pairs), self.dim).astype(np.intp)
+        self.slot_pair = np.tile(np.concatenate(slot_pairs), self.dim).astype(np.intp)
         self.allowed = allowed
         x0 = scene.initial_positions()
         #: Then the edge contacts of the pairs with ``edges = true`` (3D, frictionless): each
@@ -214,13 +233,13 @@ class BodyContactModel(Model):
         #: first end.
         self.first_edge = len(self.slot_particle)
         listed = np.array([k for k, c in enumerate(scene.contacts) if c.edges], np.intp)  # 3D, frictionless pairs
-        pairs = [tuple(scene.contacts[k].bodies) for k in listed]
+        edge_pairs = [tuple(scene.contacts[k].bodies) for k in listed]
         flexible = {k for k, body in enumerate(scene.bodies) if not body.rigid}
         # The narrow phase runs at every gap evaluation: in C with a C model, its NumPy twin otherwise.
         self._narrow = (CompiledClosestFeatures(self.elements, self.n_particles, self.element_body)
                         if self.backend == "c" else None)
-        self._edge_slots = (EdgeSlots(self.elements, self.element_body, pairs, x0, self.backend, flexible, self._narrow)
-                            if pairs else None)
+        self._edge_slots = (EdgeSlots(self.elements, self.element_body, edge_pairs, x0, self.backend, flexible,
+                                      self._narrow) if edge_pairs else None)
         if self._edge_slots is not None:
             es = self._edge_slots
             self.slot_particle = np.concatenate([self.slot_particle, es.edges[es.own, 0]])
@@ -259,6 +278,10 @@ class BodyContactModel(Model):
         #: where that is less (a 5 mm plate flew through a block in one 5 cm step).
         self.reach_length = STEP_REACH * (thinnest_width(x0, self.elements, self.particle_body, self.element_body,
                                                          self.margin) if len(lengths) else self.margin)
+        #: Distances (m) of the pairs' boxes within which a pair gets its slots (``PAIRS_AHEAD``,
+        #: ``PAIRS_LATE``; see :meth:`pairs_in_reach`).
+        self.pairs_ahead = self.margin + PAIRS_AHEAD * self.reach_length
+        self.pairs_late = self.margin + PAIRS_LATE * self.reach_length
         own = [pair.bodies[0] for pair in scene.contacts if pair.bodies[0] == pair.bodies[1]]
         self._candidates = CandidateList(self.elements, self.particle_body, self.margin, self.margin,
                                          element_body=self.element_body, self_contact=bool(own))
@@ -303,6 +326,54 @@ class BodyContactModel(Model):
         self._frames_of: tuple[bytes, FloatArray] | None = None  # the grounds' frames at one p (_ground_frames)
         text = f"{inner.digest}|{self.slot_particle.tolist()}|{self.slot_body.tolist()}"
         self.digest = hashlib.sha256(f"bodies|{text}".encode()).hexdigest()[:16]
+
+    # ------------------------------------------------------------------ the table of pairs in reach
+    def pairs_in_reach(self, q, p, distance: float) -> IntArray:
+        """The scene's pairs (indices into ``scene.contacts``, ascending) whose bodies' boxes
+        come within ``distance`` (m) of each other at ``q`` (:meth:`pair_separations`): the
+        only ones whose particles can be nearer than that (all where the table does not grow)."""
+        among = np.arange(self._pair_bodies.shape[1])
+        return among[self.pair_separations(q, p, among) <= distance] if self.grows else among
+
+    def pair_separations(self, q, p, pairs: IntArray) -> FloatArray:
+        """How far apart (m) the boxes around the particles of the bodies of the scene's pairs
+        ``pairs`` (k,) are at ``q``: their widest gap along an axis, <= 0 where they overlap,
+        shape (k,).  A particle of one body is no nearer an element of the other."""
+        x = self._coordinates.particles(q, None, p)[0]
+        lo, hi = np.minimum.reduceat(x, self._body_starts), np.maximum.reduceat(x, self._body_starts)
+        first, second = self._pair_bodies[:, pairs]
+        return np.maximum(lo[first] - hi[second], lo[second] - hi[first]).max(axis=1, initial=-np.inf)
+
+    def with_pairs(self, pairs: IntArray) -> BodyContactModel:
+        """This model with slots for the scene's pairs ``pairs`` (indices into
+        ``scene.contacts``) alone, the state of every contact it shares with this one carried
+        over (the element a slot is held on, its margin floor, its slip direction); the same
+        equations (``digest``) and inner model.  A pile's table is then as large as the pairs
+        that touch, not the square of its bodies."""
+        made = BodyContactModel(self._scene, self.inner, pairs)
+        made.digest = self.digest
+        if hasattr(self, "made_for"):
+            made.made_for = self.made_for
+        new = made.contact_map(self)
+        kept = new >= 0
+        made._slip[new[kept]], made._slip_held[new[kept]] = self._slip[kept], self._slip_held[kept]
+        ng = self.n_ground_contacts
+        slots = new[ng:] - ng
+        made.element_of[slots[kept[ng:]]] = self.element_of[kept[ng:]]
+        made.margin_floor[slots[kept[ng:]]] = self.margin_floor[kept[ng:]]
+        made._closed, made._candidates = self._closed, self._candidates  # neither depends on the pairs
+        return made
+
+    def contact_map(self, other: BodyContactModel) -> IntArray:
+        """Where each of ``other``'s contacts (a model of the same scene with other pairs) is
+        in this one, shape (other's nc,), -1 where this one has no such contact: the grounds'
+        in place, a slot by its particle, body and corner twin."""
+        if self.first_edge != self.n_slots or other.first_edge != other.n_slots:
+            raise ValueError("edge contacts are laid out for the whole scene: their table does not grow")
+        ng = self.n_ground_contacts
+        twin, primary = np.divmod(np.arange(other.n_slots), max(other.n_primary, 1))
+        slot = self._slot_at[other.slot_particle[primary] * self._body_count + other.slot_body[primary]]
+        return np.concatenate([np.arange(ng), np.where(slot >= 0, ng + twin * self.n_primary + slot, -1)])
 
     # ------------------------------------------------------------------ the model interface
     @property

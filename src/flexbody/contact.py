@@ -87,6 +87,14 @@ class Phases:
         unarmed = (self.phase == FREE) & (gaps - self.floor <= gap_tolerance)
         self.floor[unarmed] = np.minimum(0.0, gaps[unarmed]) - gap_tolerance
 
+    def moved(self, index: np.ndarray, nc: int) -> Phases:
+        """These phases in a table of ``nc`` contacts where contact ``i`` is ``index[i]``
+        (every ``index`` >= 0, distinct); the others all free (:meth:`all_free`)."""
+        out = Phases.all_free(nc)
+        for name in ("phase", "floor", "push", "push_until", "started", "implied"):
+            getattr(out, name)[index] = getattr(self, name)
+        return out
+
     def copy(self) -> Phases:
         return Phases(self.phase.copy(), self.floor.copy(), self.push.copy(), self.push_until.copy(),
                       self.started.copy(), self.implied.copy())

@@ -392,6 +392,7 @@ class _Stop:
     touching: np.ndarray  # (nc,), nonzero: free contacts whose gap event fired
     leaving: np.ndarray  # (nc,), nonzero: held contacts whose force event fired
     fired: bool  # whether any did
+    grow: np.ndarray | None = None  # the scene's pairs that need slots from here on (_Run.grow)
 
 
 class _Run:
@@ -410,26 +411,24 @@ class _Run:
         self.p = model.parameters(scene)
         self.p.flags.writeable = False  # fixed for the run: C calls know it unchanged (runtime.SystemModel.system)
         q, u = initial_coordinates(scene, model)
+        size = self.size = float(np.abs(scene.initial_positions()).max()) if scene.n_particles else 1.0
+        self.contact_laws()
+        self.friction = bool(np.any(self.mu > 0.0))  # anywhere in the scene: in slots to come too
+        self.digest = model.digest
+        self.retaken = 0  # steps taken again with the slots of a pair that came near within them
+        near = model.pairs_in_reach(q, self.p, model.pairs_ahead) if getattr(model, "grows", False) else None
+        if near is not None and not np.array_equal(near, model.pairs):  # slots for the pairs in reach (see grow)
+            model = self.model = model.with_pairs(near)
+            self.contact_laws()
         _check_apart(scene, model, q, self.p)
         self.y = np.concatenate([q, u, [0.0, 0.0]])
         self.phases = Phases.all_free(model.n_contacts)
-        size = float(np.abs(scene.initial_positions()).max()) if scene.n_particles else 1.0
         self.gap_tolerance = 1e-12 * max(size, 1.0)
         self.max_edge_crossing, self.edge_crossing = 0.0, None  # 3D edges through faces (see track_edges)
         self.t_edges = -np.inf  # the last check of crossed edges (see track_edges)
-        # For point masses on flat grounds a contact's effective mass 1 / (J M^-1 J^T) is its particle's.
-        self.contact_masses = scene.masses[model.contacts[:, 0]]
-        self.force_tolerance = 1e-10 * self.contact_masses * max(float(np.linalg.norm(scene.gravity)), 1.0)
-        self.restitution, self.min_rebound = _rebound_laws(scene, model, size)
         self.zeno_rise = ZENO_RISE * size
         # A sliding contact slower than this has come to rest (a stop's root is ~1e-15 s wide).
         self.speed_tolerance = SPEED_TOLERANCE * np.sqrt(max(float(np.linalg.norm(scene.gravity)), 1.0) * max(size, 1.0))
-        if model.mu is not None:  # contacts between bodies: the grounds', then the pairs'
-            self.mu = model.mu.copy()
-        else:
-            self.mu = np.array([g.friction for g in scene.grounds], float)[model.contacts[:, 1]] \
-                if model.n_contacts else np.zeros(0)
-        self.friction = bool(np.any(self.mu > 0.0))
         # The thesis mode's windows with friction: their constant forces (normal and tangential)
         # and the samples' tangential ones, to split the integrated contact work (see result).
         thesis_friction = self.friction and settings.impact == "thesis"
@@ -470,6 +469,48 @@ class _Run:
             self.compiled = CompiledPath(model, self.p, self.y, self.phases, self.grid, self.Y,
                                          self.force_tolerance, self.contact_masses, self.gap_tolerance,
                                          self.restitution, self.min_rebound, self.speed_tolerance, self.mu)
+
+    def contact_laws(self) -> None:
+        """Each contact's effective mass, force tolerance, restitution, slowest rebound and
+        friction coefficient, shape (nc,) each, from the model's table."""
+        scene, model = self.scene, self.model
+        # For point masses on flat grounds a contact's effective mass 1 / (J M^-1 J^T) is its particle's.
+        self.contact_masses = scene.masses[model.contacts[:, 0]]
+        self.force_tolerance = 1e-10 * self.contact_masses * max(float(np.linalg.norm(scene.gravity)), 1.0)
+        self.restitution, self.min_rebound = _rebound_laws(scene, model, self.size)
+        if model.mu is not None:  # contacts between bodies: the grounds', then the pairs'
+            self.mu = model.mu.copy()
+        else:
+            self.mu = np.array([g.friction for g in scene.grounds], float)[model.contacts[:, 1]] \
+                if model.n_contacts else np.zeros(0)
+
+    def waiting(self, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The scene's pairs without slots yet (indices into ``scene.contacts``) and how far
+        apart their bodies' boxes are at ``y`` (m), shape (k,) each; none where the model's
+        table does not grow (:meth:`grow`)."""
+        model = self.model
+        if not getattr(model, "grows", False) or not len(model.waiting):
+            return np.zeros(0, np.intp), np.zeros(0)
+        return model.waiting, model.pair_separations(y[: model.nq], self.p, model.waiting)
+
+    def grow(self, pairs: np.ndarray) -> None:
+        """Give the scene's pairs ``pairs`` their slots from here on: the model's table grows
+        (:meth:`flexbody.body_contact.BodyContactModel.with_pairs`), and every contact's
+        phase, samples, events and counts move to its place in the new table; the new slots
+        start free, armed at their surfaces."""
+        old = self.model
+        self.model = old.with_pairs(np.union1d(old.pairs, pairs))
+        new = self.model.contact_map(old)
+        self.phases = self.phases.moved(new, self.model.n_contacts)
+        ng = old.n_ground_contacts
+        self.samples.move(new, self.model.n_contacts, new[ng:] - ng, self.model.n_slots)
+        if self.sample_slips is not None:
+            self.sample_slips = [law if law is None else (new[law[0]], *law[1:]) for law in self.sample_slips]
+        for e in self.events:
+            e.contact = int(new[e.contact])
+        self.impact_times = defaultdict(deque, {int(new[c]): v for c, v in self.impact_times.items()})
+        self.friction_times = defaultdict(deque, {int(new[c]): v for c, v in self.friction_times.items()})
+        self.contact_laws()
 
     @property
     def counters(self) -> np.ndarray:
@@ -568,7 +609,9 @@ class _Run:
         renew_slips()
         g_old = events(self.y)
         held_rows = self.held_rows()  # the segment's (its steps change no phase)
-        reach = model.step_reach if model.n_slots and s.method != "LSODA" else None  # LSODA fixes it at its start
+        # bodies that may touch (slots, or pairs waiting for theirs: see grow); LSODA fixes it at its start
+        reach = model.step_reach if (model.n_slots or len(getattr(model, "waiting", ()))) and s.method != "LSODA" \
+            else None
         retry = np.inf  # a step taken again after it moved particles too far: its bound
         try:
             while True:
@@ -611,6 +654,13 @@ class _Run:
                     solver = stepper(rhs, t_start, y_start, t_bound, **options)
                     renew_slips()
                     continue
+                waiting, apart = self.waiting(solver.y)
+                if len(waiting) and (apart <= model.pairs_late).any():
+                    # a particle may have touched a body it had no slot for: again, with them
+                    self.retaken += 1
+                    self.y[:] = y_start
+                    return _Stop(t_start, np.zeros_like(events.free), np.zeros_like(events.free), False,
+                                 waiting[apart <= model.pairs_late])
                 at_end: list[np.ndarray] = []  # the step end's event functions, once asked for
 
                 def end_functions() -> np.ndarray:
@@ -655,6 +705,11 @@ class _Run:
                 if self.progress:
                     self.progress(solver.t, s.t_end, len(self.events))
                 self.check_deadline(solver.t)
+                if len(waiting) and (apart <= model.pairs_ahead).any():
+                    # a pair came near (at the step's end; a put-back moves nothing that far): the
+                    # next segment has its slots
+                    return _Stop(solver.t, np.zeros_like(events.free), np.zeros_like(events.free), False,
+                                 waiting[apart <= model.pairs_ahead])
         except FloatingPointError as exc:
             failure = _gimbal_lock(self.scene, model, solver.y, solver.t) or ("blow_up", f"at t = {solver.t:.9g} s: {exc}")
             raise SimulationFailed(*failure) from None
@@ -1021,8 +1076,16 @@ class _Run:
             self.keep_samples(0, 1)  # its contact set is the instant's outcome (a slide starting at once)
             self.y_started = self.y.copy()
             while t < s.t_end:
+                waiting, apart = self.waiting(self.y)  # after an instant: its step's end was not checked
+                if len(waiting) and (apart <= self.model.pairs_ahead).any():
+                    self.grow(waiting[apart <= self.model.pairs_ahead])
+                    phases = self.phases
                 t_bound = min(s.t_end, float(phases.push_until.min()))  # a thesis-mode window ends a segment
                 stop = self.segment(t, t_bound)
+                if stop.grow is not None:  # from the stop, with the slots of the pairs come near
+                    self.grow(stop.grow)
+                    phases, t = self.phases, stop.t
+                    continue
                 touching, leaving = stop.touching, stop.leaving
                 if not stop.fired:
                     if stop.t >= s.t_end:
@@ -1378,7 +1441,9 @@ class _Run:
             "jacobian_evaluations": self.njev, "steps": self.steps + int(self.counters[1]),
             "rejected_steps": int(self.counters[2]), "event_rhs_evaluations": int(self.counters[3]),
             "segments": self.segments, "projections": self.projections, "max_put_back_m": self.max_put_back,
-            "steps_shortened": self.shortened,
+            "steps_shortened": self.shortened, "steps_retaken_for_pairs": self.retaken,
+            "contacts": model.n_contacts,  # the table's at the end: it grows with the pairs in reach
+            "contact_pairs": len(getattr(model, "pairs", ())), "contact_pairs_in_scene": len(self.scene.contacts),
             "events": len(ev), "impacts": len(impacts), "not_held": sum(not e.held for e in impacts),
             "liftoffs": sum(e.kind == "liftoff" for e in ev),
             "sticks": sum(e.kind == "stick" for e in ev), "slips": sum(e.kind == "slip" for e in ev),
@@ -1390,7 +1455,7 @@ class _Run:
             "energy_drift_relative": relative_drift,
             "min_held_contact_force_N": min_force,
             "warnings": warnings,
-            "model_digest": model.digest,
+            "model_digest": self.digest,
             "versions": {"flexbody": __version__, "numpy": np.__version__, "scipy": _scipy_version()},
         }
         return result

@@ -31,10 +31,12 @@ def contact_table_note(scene: Scene, model) -> str | None:
     """A note for a scene whose ``collide = true`` bodies make more than
     :data:`LARGE_CONTACT_TABLE` slots (each surface vertex has one, and a corner twin, for
     each other body it may touch: they grow with the square of the bodies, and so does the
-    work at each instant), or None."""
+    work at each instant) where its table is laid out whole (self-contact or edge contacts:
+    else a run gives slots to the pairs in reach only,
+    :meth:`flexbody.body_contact.BodyContactModel.with_pairs`), or None."""
     colliding = sum(body.collide for body in scene.bodies)
     slots = model.n_slots
-    if colliding < 3 or slots <= LARGE_CONTACT_TABLE:
+    if colliding < 3 or slots <= LARGE_CONTACT_TABLE or getattr(model, "grows", False):
         return None
     return (f"{colliding} bodies with collide = true make {slots} contact slots (each surface vertex has one, "
             "and a corner twin, for each other body it may touch); where only some of them can meet, list those "

@@ -70,6 +70,12 @@ class ContactSamples:
         self._starts: list[int] = []
         self._stops: list[int] = []
         self._records: list[dict[str, _Sparse]] = []
+        # the table each run was kept in (its indices), and each later table's place of the
+        # contacts and slots of the one before (see move): runs kept before a move are read
+        # through them at dense(), so a move costs nothing however many runs came before
+        self._table_of: list[int] = []
+        self._moves: list[tuple[np.ndarray, np.ndarray]] = []
+        self._to_now: dict[int, tuple[np.ndarray, np.ndarray]] = {}
 
     def keep(self, start: int, stop: int, held: np.ndarray, push: np.ndarray, tangential: np.ndarray | None = None,
              elements: np.ndarray | None = None) -> None:
@@ -84,7 +90,7 @@ class ContactSamples:
             raise ValueError(f"samples {start}:{stop} kept inside samples kept up to {self._stops[-1]}: "
                              "keep them in order")
         while self._starts and self._starts[-1] >= start:
-            self._starts.pop(), self._stops.pop(), self._records.pop()
+            self._starts.pop(), self._stops.pop(), self._records.pop(), self._table_of.pop()
         if self._stops and self._stops[-1] > start:
             self._stops[-1] = start
         record = {"held": _Sparse.of(held, 0), "push": _Sparse.of(push, 0.0)}
@@ -93,8 +99,28 @@ class ContactSamples:
         if self.n_slots:
             record["elements"] = _Sparse.of(elements, -1)
         self._records.append(record)
+        self._table_of.append(len(self._moves))
         self._starts.append(start)
         self._stops.append(stop)
+
+    def move(self, index: np.ndarray, n_contacts: int, slot_index: np.ndarray, n_slots: int) -> None:
+        """The contacts move to a table of ``n_contacts`` (``n_slots`` slots): contact ``i`` to
+        ``index[i]``, slot ``j`` to ``slot_index[j]`` (each >= 0, distinct); the new ones
+        read their fill in the samples kept so far (free, no element)."""
+        self._moves.append((np.asarray(index, np.intp), np.asarray(slot_index, np.intp)))
+        self._to_now.clear()
+        self.n_contacts, self.n_slots = n_contacts, n_slots
+
+    def _now(self, table: int) -> tuple[np.ndarray, np.ndarray] | None:
+        """Where the contacts and slots of table ``table`` are in the present one (None: it is)."""
+        if table == len(self._moves):
+            return None
+        if table not in self._to_now:
+            index, slot_index = self._moves[table]
+            for later, later_slots in self._moves[table + 1 :]:
+                index, slot_index = later[index], later_slots[slot_index]
+            self._to_now[table] = index, slot_index
+        return self._to_now[table]
 
     def dense(self, rows: slice) -> SampleContacts:
         """The samples ``rows`` (a slice with start and stop, of kept samples) as dense arrays: ``held`` (m, nc)
@@ -107,8 +133,10 @@ class ContactSamples:
         first, last = bisect.bisect_right(self._stops, rows.start), bisect.bisect_left(self._starts, rows.stop)
         for i in range(first, last):  # the runs that overlap rows
             a, b = max(self._starts[i], rows.start) - rows.start, min(self._stops[i], rows.stop) - rows.start
+            now = self._now(self._table_of[i])
             for name, kept in self._records[i].items():
-                out[name][a:b, kept.at] = kept.values  # (k,) or (k, dim): broadcast over the samples
+                at = kept.at if now is None else (now[1] if name == "elements" else now[0])[kept.at]
+                out[name][a:b, at] = kept.values  # (k,) or (k, dim): broadcast over the samples
         return SampleContacts(**out)
 
     def chunks(self, n: int) -> Iterator[slice]:
