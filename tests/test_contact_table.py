@@ -12,6 +12,8 @@ end; the same events to the event tolerance where a step is taken again.
 from __future__ import annotations
 
 import copy
+import tomllib
+from importlib import resources
 
 import numpy as np
 import pytest
@@ -129,6 +131,35 @@ def test_a_rigid_plate_dropped_from_afar_onto_a_rigid_block_gets_its_slots_on_th
     grown, whole, growths = run_both(table)
     assert growths == [[0]]
     assert (grown.positions[-1, 4:, 1] > 0.08 - 1e-9).all()  # the plate rests on the block's top
+    assert_same_run(grown, whole)
+
+
+def test_a_sphere_dropped_onto_another_gets_its_slots_on_the_way():
+    """3D: a sphere dropped 0.5 m onto another resting on the ground gets its pair's slots
+    in flight and lands, bounces and rests on it as on the whole table."""
+    spheres = [{"name": f"s{k}", "shape": "sphere", "count": 30, "radius": 0.1, "center": True, "mass_total": 0.5,
+                "stiffness": 2000.0, "damping": 0.5, "damper": "relative",
+                "position": [0.03 * k, 0.0, 0.1 + 0.6 * k], "collide": True} for k in range(2)]
+    table = {"name": "spheres", "bodies": spheres, "gravity": [0.0, 0.0, -9.81],
+             "grounds": [{"point": [0.0, 0.0, 0.0], "normal": [0.0, 0.0, 1.0]}],
+             "simulation": {"t_end": 0.45, "output_dt": 0.005, "method": "RK45", "rtol": 1e-6, "atol": 1e-9}}
+    grown, whole, growths = run_both(table)
+    assert growths == [[0]]
+    assert (grown.events_surface >= 0).sum() > 100  # it lands on the other and rests there
+    assert_same_run(grown, whole)
+
+
+@pytest.mark.slow
+def test_a_disc_dropped_from_higher_onto_the_seesaw_gets_its_slots_on_the_way():
+    """Rigid frames beside a flexible disc (flexbody.mixed): the seesaw's disc, dropped from
+    0.23 m higher, gets its pair with the plank in flight (the wedge's and the plank's has
+    them from the start) and tips the plank as on the whole table (7 s)."""
+    table = tomllib.loads((resources.files("flexbody") / "scenes" / "seesaw.toml").read_text())
+    table["bodies"][2]["position"] = [-0.42, 0.75]
+    table["simulation"]["t_end"] = 0.4
+    grown, whole, growths = run_both(table)
+    assert growths == [[1]] and grown.stats["contact_pairs"] == 2
+    assert (grown.events_surface >= 0).sum() > 20
     assert_same_run(grown, whole)
 
 
