@@ -211,11 +211,14 @@ class BodyContactModel(Model):
         self.waiting = np.setdiff1d(np.arange(len(scene.contacts)), self.pairs)
         self._pair_bodies = np.array([c.bodies for c in scene.contacts], np.intp).reshape(-1, 2).T  # (2, pairs)
         self._body_starts = np.cumsum([0] + [b.n_particles for b in scene.bodies[:-1]])  # a body's particles: a run
+        on_surface: dict[int, IntArray] = {}  # a body's surface particles, found once
         for k in self.pairs:
             first, second = scene.contacts[k].bodies
             allowed[first, second] = allowed[second, first] = True
             for toucher, surface in ((first, second),) if first == second else ((first, second), (second, first)):
-                touching = np.unique(self.elements[self.element_body == toucher])
+                if toucher not in on_surface:
+                    on_surface[toucher] = np.unique(self.elements[self.element_body == toucher])
+                touching = on_surface[toucher]
                 particles.append(touching)
                 bodies.append(np.full(len(touching), surface))
                 slot_pairs.append(np.full(len(touching), k))
