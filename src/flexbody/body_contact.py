@@ -87,6 +87,7 @@ slows its Newton iterations, not its answer.
 
 from __future__ import annotations
 
+import copy
 import ctypes
 import dataclasses
 import hashlib
@@ -200,65 +201,25 @@ class BodyContactModel(Model):
         self.elements, self.element_body = scene.surfaces()
         counts = [b.n_particles for b in scene.bodies]
         self.particle_body = np.repeat(np.arange(len(counts)), counts)
-        particles, bodies, slot_pairs = [np.zeros(0, np.intp)], [np.zeros(0, np.intp)], [np.zeros(0, np.intp)]
-        allowed = np.zeros((len(counts), len(counts)), bool)
         #: Whether the table holds only the pairs in reach (:meth:`with_pairs`): not with
         #: self-contact or edge contacts, whose slots and rows are laid out for the whole scene.
         self.grows = not any(c.edges or c.bodies[0] == c.bodies[1] for c in scene.contacts)
-        #: The scene's pairs (indices into ``scene.contacts``) that have slots, ascending.
-        self.pairs = np.arange(len(scene.contacts)) if pairs is None or not self.grows else np.unique(pairs)
-        #: ... and those that have none yet.
-        self.waiting = np.setdiff1d(np.arange(len(scene.contacts)), self.pairs)
         self._pair_bodies = np.array([c.bodies for c in scene.contacts], np.intp).reshape(-1, 2).T  # (2, pairs)
-        self._body_starts = np.cumsum([0] + [b.n_particles for b in scene.bodies[:-1]])  # a body's particles: a run
-        on_surface: dict[int, IntArray] = {}  # a body's surface particles, found once
-        for k in self.pairs:
-            first, second = scene.contacts[k].bodies
-            allowed[first, second] = allowed[second, first] = True
-            for toucher, surface in ((first, second),) if first == second else ((first, second), (second, first)):
-                if toucher not in on_surface:
-                    on_surface[toucher] = np.unique(self.elements[self.element_body == toucher])
-                touching = on_surface[toucher]
-                particles.append(touching)
-                bodies.append(np.full(len(touching), surface))
-                slot_pairs.append(np.full(len(touching), k))
-        #: Slots (each touching particle against each body it may touch), then their corner
-        #: twins: one in 2D (two segments make a corner), two in 3D (three faces do).
-        self.n_primary = sum(len(a) for a in particles)
-        self.slot_particle = np.tile(np.concatenate(particles), self.dim).astype(np.intp)
-        self.slot_body = np.tile(np.concatenate(bodies), self.dim).astype(np.intp)
-        self.slot_pair = np.tile(np.concatenate(slot_pairs), self.dim).astype(np.intp)
-        self.allowed = allowed
+        self._body_starts = np.cumsum([0] + counts[:-1])  # a body's particles are a run
+        # each body's surface particles, once (a pair's slots are its bodies' vertices)
+        self._on_surface = [np.unique(self.elements[self.element_body == b]) for b in range(len(counts))]
         x0 = scene.initial_positions()
-        #: Then the edge contacts of the pairs with ``edges = true`` (3D, frictionless): each
-        #: surface edge that may touch of a pair's first body against the second body's edges,
-        #: ``EdgeSlots.PER_EDGE`` times, from slot ``first_edge`` on; their particle is the edge's
-        #: first end.
-        self.first_edge = len(self.slot_particle)
-        listed = np.array([k for k, c in enumerate(scene.contacts) if c.edges], np.intp)  # 3D, frictionless pairs
-        edge_pairs = [tuple(scene.contacts[k].bodies) for k in listed]
+        #: The edge contacts of the pairs with ``edges = true`` (3D, frictionless) come after
+        #: the slots and their twins (see :meth:`_lay_out`).
+        self._edge_pairs = np.array([k for k, c in enumerate(scene.contacts) if c.edges], np.intp)
         flexible = {k for k, body in enumerate(scene.bodies) if not body.rigid}
         # The narrow phase runs at every gap evaluation: in C with a C model, its NumPy twin otherwise.
         self._narrow = (CompiledClosestFeatures(self.elements, self.n_particles, self.element_body)
                         if self.backend == "c" else None)
-        self._edge_slots = (EdgeSlots(self.elements, self.element_body, edge_pairs, x0, self.backend, flexible,
-                                      self._narrow) if edge_pairs else None)
-        if self._edge_slots is not None:
-            es = self._edge_slots
-            self.slot_particle = np.concatenate([self.slot_particle, es.edges[es.own, 0]])
-            self.slot_body = np.concatenate([self.slot_body, es.body])
-            # es.pair counts the pairs with edges; the laws are the scene's contacts'
-            self.slot_pair = np.concatenate([self.slot_pair, listed[es.pair]])
-        self.n_slots = len(self.slot_particle)
-        self.n_contacts = self.n_ground_contacts + self.n_slots
-        self.contacts = np.vstack([inner.contacts, np.column_stack([self.slot_particle,
-                                                                    self.n_grounds + self.slot_body])])
+        self._edge_slots = (EdgeSlots(self.elements, self.element_body,
+                                      [tuple(scene.contacts[k].bodies) for k in self._edge_pairs], x0, self.backend,
+                                      flexible, self._narrow) if len(self._edge_pairs) else None)
         self._body_count = len(counts)
-        # each (particle, other body)'s slot (slots, not twins), -1 where it has none: a lookup
-        # per candidate pair, not a search (a pile's sweeps ask for thousands at each check)
-        self._slot_at = np.full(self.n_particles * self._body_count, -1, np.intp)
-        self._slot_at[(self.slot_particle * self._body_count + self.slot_body)[: self.n_primary]] = \
-            np.arange(self.n_primary)
         # particle i's elements: _incident_flat[_incident_start[i] : _incident_start[i + 1]]
         self._incident_start, self._incident_flat = vertex_elements(self.elements, self.n_particles)
         self._body_elements = [np.flatnonzero(self.element_body == b) for b in range(len(counts))]
@@ -291,15 +252,74 @@ class BodyContactModel(Model):
         #: The self-contact neighbourhoods (:mod:`flexbody.own_surface`), or None without self-contact.
         self.own = (OwnSurface(scene, self.elements, self.element_body, self.particle_body, own, self.margin,
                                self._incident_start, self._incident_flat) if own else None)
-        # each slot's element while constrained; an edge row's edge and side (EdgeSlots.encode):
-        # so held_on and the driver's samples restore an edge row's side with its edge
-        self.element_of = np.full(self.n_slots, -1, np.intp)
         # Free slots' gaps on a step's dense output in C (an impact's instant, a step's
         # samples): on the particles' own coordinates (no rigid frame), where a slot's gap
         # is its body's surface's nearest element (no self-contact).
         self._dense_gaps = (CompiledDenseGaps(self._narrow, self.element_body, self.n_particles, self._body_count)
                             if self._narrow is not None and isinstance(self._coordinates, _ParticleCoordinates)
                             and self.own is None else None)
+        ground_laws = [[g.friction, g.restitution] for g in scene.grounds]
+        pair_laws = [[c.friction, c.restitution] for c in scene.contacts]
+        #: Contact laws (mu, e): the grounds', then the pairs'.
+        self.laws = np.array(ground_laws + pair_laws, float).reshape(-1, 2)
+        self._ground_mu = np.array(ground_laws, float).reshape(-1, 2)[inner.contacts[:, 1], 0]
+        self._pair_mu = np.array(pair_laws, float).reshape(-1, 2)[:, 0]
+        self._ground_friction = bool((self._ground_mu > 0.0).any())
+        self._element = ElementKernels(self.dim, self.backend)
+        # held rows on particles, solved in C with a C model (see _solve and _frictional_rows)
+        self._held_rows = (CompiledHeldRows(self.masses, self.dim)
+                           if self.backend == "c" and isinstance(self._coordinates, _ParticleCoordinates) else None)
+        self._frames_of: tuple[bytes, FloatArray] | None = None  # the grounds' frames at one p (_ground_frames)
+        self._lay_out(pairs)
+
+    def _lay_out(self, pairs: IntArray | None) -> None:
+        """The table of contacts for the scene's pairs ``pairs`` (None: all), with every
+        contact free and nothing kept: all that depends on which pairs have slots."""
+        scene, n_pairs = self._scene, self._pair_bodies.shape[1]
+        #: The scene's pairs (indices into ``scene.contacts``) that have slots, ascending.
+        self.pairs = np.arange(n_pairs) if pairs is None or not self.grows else np.unique(np.asarray(pairs, np.intp))
+        #: ... and those that have none yet.
+        self.waiting = np.setdiff1d(np.arange(n_pairs), self.pairs)
+        particles, bodies, slot_pairs = [np.zeros(0, np.intp)], [np.zeros(0, np.intp)], [np.zeros(0, np.intp)]
+        allowed = np.zeros((self._body_count, self._body_count), bool)
+        for k in self.pairs:
+            first, second = scene.contacts[k].bodies
+            allowed[first, second] = allowed[second, first] = True
+            for toucher, surface in ((first, second),) if first == second else ((first, second), (second, first)):
+                touching = self._on_surface[toucher]
+                particles.append(touching)
+                bodies.append(np.full(len(touching), surface))
+                slot_pairs.append(np.full(len(touching), k))
+        #: Slots (each touching particle against each body it may touch), then their corner
+        #: twins: one in 2D (two segments make a corner), two in 3D (three faces do).
+        self.n_primary = sum(len(a) for a in particles)
+        self.slot_particle = np.tile(np.concatenate(particles), self.dim).astype(np.intp)
+        self.slot_body = np.tile(np.concatenate(bodies), self.dim).astype(np.intp)
+        self.slot_pair = np.tile(np.concatenate(slot_pairs), self.dim).astype(np.intp)
+        self.allowed = allowed
+        #: Then the edge contacts of the pairs with ``edges = true`` (3D, frictionless): each
+        #: surface edge that may touch of a pair's first body against the second body's edges,
+        #: ``EdgeSlots.PER_EDGE`` times, from slot ``first_edge`` on; their particle is the edge's
+        #: first end.
+        self.first_edge = len(self.slot_particle)
+        if self._edge_slots is not None:
+            es = self._edge_slots
+            self.slot_particle = np.concatenate([self.slot_particle, es.edges[es.own, 0]])
+            self.slot_body = np.concatenate([self.slot_body, es.body])
+            # es.pair counts the pairs with edges; the laws are the scene's contacts'
+            self.slot_pair = np.concatenate([self.slot_pair, self._edge_pairs[es.pair]])
+        self.n_slots = len(self.slot_particle)
+        self.n_contacts = self.n_ground_contacts + self.n_slots
+        self.contacts = np.vstack([self.inner.contacts, np.column_stack([self.slot_particle,
+                                                                         self.n_grounds + self.slot_body])])
+        # each (particle, other body)'s slot (slots, not twins), -1 where it has none: a lookup
+        # per candidate pair, not a search (a pile's sweeps ask for thousands at each check)
+        self._slot_at = np.full(self.n_particles * self._body_count, -1, np.intp)
+        self._slot_at[(self.slot_particle * self._body_count + self.slot_body)[: self.n_primary]] = \
+            np.arange(self.n_primary)
+        # each slot's element while constrained; an edge row's edge and side (EdgeSlots.encode):
+        # so held_on and the driver's samples restore an edge row's side with its edge
+        self.element_of = np.full(self.n_slots, -1, np.intp)
         #: A particle can pass through another body's convex corner (2D; 3D: edge or vertex)
         #: between a step's event checks, however short the step (:meth:`corner_cuts`).
         self.corners = self.n_primary > 0
@@ -307,13 +327,8 @@ class BodyContactModel(Model):
         # (m, <= 0): below 0 where a hand-over left it already past the boundary (a particle
         # a hair inside a concave corner), so that passing back over it is still found.
         self.margin_floor = np.zeros(self.n_slots)
-        ground_laws = [[g.friction, g.restitution] for g in scene.grounds]
-        pair_laws = [[c.friction, c.restitution] for c in scene.contacts]
-        #: Contact laws (mu, e): the grounds', then the pairs'; ``mu`` (nc,) each contact's.
-        self.laws = np.array(ground_laws + pair_laws, float).reshape(-1, 2)
-        self.mu = np.concatenate([np.array(ground_laws, float).reshape(-1, 2)[inner.contacts[:, 1], 0],
-                                  np.array(pair_laws, float).reshape(-1, 2)[self.slot_pair, 0]])
-        self._ground_friction = bool((self.mu[: self.n_ground_contacts] > 0.0).any())
+        #: ``mu`` (nc,): each contact's friction coefficient (``laws``).
+        self.mu = np.concatenate([self._ground_mu, self._pair_mu[self.slot_pair]])
         self._slip = np.zeros((self.n_contacts, self.dim))
         self._slip_held = np.zeros(self.n_contacts, np.intc)  # 3D: where a slip keeps its step start's direction
         self._frictional = bool((self.mu > 0.0).any())  # else the slip directions change no answer
@@ -322,12 +337,7 @@ class BodyContactModel(Model):
         self._edges_swept: list[tuple] = []  # (fingerprint, (positions, edges held), every edge row's gap; the same)
         self._layouts: dict[tuple, _Layout] = {}  # held rows -> where their terms go (see _rows)
         self._allowed_pairs: tuple[IntArray, IntArray] | None = None  # (kept pairs, the allowed ones; see _allowed_kept)
-        self._element = ElementKernels(self.dim, self.backend)
-        # held rows on particles, solved in C with a C model (see _solve and _frictional_rows)
-        self._held_rows = (CompiledHeldRows(self.masses, self.dim)
-                           if self.backend == "c" and isinstance(self._coordinates, _ParticleCoordinates) else None)
-        self._frames_of: tuple[bytes, FloatArray] | None = None  # the grounds' frames at one p (_ground_frames)
-        text = f"{inner.digest}|{self.slot_particle.tolist()}|{self.slot_body.tolist()}"
+        text = f"{self.inner.digest}|{self.slot_particle.tolist()}|{self.slot_body.tolist()}"
         self.digest = hashlib.sha256(f"bodies|{text}".encode()).hexdigest()[:16]
 
     # ------------------------------------------------------------------ the table of pairs in reach
@@ -351,12 +361,13 @@ class BodyContactModel(Model):
         """This model with slots for the scene's pairs ``pairs`` (indices into
         ``scene.contacts``) alone, the state of every contact it shares with this one carried
         over (the element a slot is held on, its margin floor, its slip direction); the same
-        equations (``digest``) and inner model.  A pile's table is then as large as the pairs
-        that touch, not the square of its bodies."""
-        made = BodyContactModel(self._scene, self.inner, pairs)
+        equations (``digest``), inner model and all else that does not depend on the pairs
+        (the surfaces, the broad phase, the compiled kernels: shared, so a new table costs
+        ~2 ms).  A pile's table is then as large as the pairs that touch, not the square of
+        its bodies."""
+        made = copy.copy(self)  # what does not depend on the pairs is shared (the surfaces, the broad phase)
+        made._lay_out(pairs)
         made.digest = self.digest
-        if hasattr(self, "made_for"):
-            made.made_for = self.made_for
         new = made.contact_map(self)
         kept = new >= 0
         made._slip[new[kept]], made._slip_held[new[kept]] = self._slip[kept], self._slip_held[kept]
@@ -364,7 +375,6 @@ class BodyContactModel(Model):
         slots = new[ng:] - ng
         made.element_of[slots[kept[ng:]]] = self.element_of[kept[ng:]]
         made.margin_floor[slots[kept[ng:]]] = self.margin_floor[kept[ng:]]
-        made._closed, made._candidates = self._closed, self._candidates  # neither depends on the pairs
         return made
 
     def contact_map(self, other: BodyContactModel) -> IntArray:
