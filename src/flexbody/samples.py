@@ -115,11 +115,12 @@ class ContactSamples:
         """Where the contacts and slots of table ``table`` are in the present one (None: it is)."""
         if table == len(self._moves):
             return None
-        if table not in self._to_now:
-            index, slot_index = self._moves[table]
-            for later, later_slots in self._moves[table + 1 :]:
-                index, slot_index = later[index], later_slots[slot_index]
-            self._to_now[table] = index, slot_index
+        if not self._to_now:  # every table's at once, the newest first: a table's places are its next's, moved
+            index = slot_index = None
+            for k in range(len(self._moves) - 1, -1, -1):
+                moved, moved_slots = self._moves[k]
+                index, slot_index = (moved, moved_slots) if index is None else (index[moved], slot_index[moved_slots])
+                self._to_now[k] = index, slot_index
         return self._to_now[table]
 
     def dense(self, rows: slice) -> SampleContacts:
