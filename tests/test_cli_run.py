@@ -112,6 +112,10 @@ def test_a_large_contact_table_of_colliding_bodies_is_noted(tmp_path, monkeypatc
     growing = load_scene(_rings_scene(tmp_path / "growing.toml", True))
     monkeypatch.setattr(runner, "LARGE_CONTACT_TABLE", 0)
     assert runner.contact_table_note(growing, load_model(growing)) is None
+    assert main(["run", str(tmp_path / "growing.toml"), "--out", str(tmp_path / "g"), "--no-figures", "--quiet"]) == 0
+    out, err = capsys.readouterr()
+    # neighbours 0.1 m apart are in reach, the outer two (0.3 m) are not
+    assert "contacts between bodies: 2 of the scene's 3 pairs had slots" in out and "note:" not in err
     scene = load_scene(_rings_scene(tmp_path / "rings.toml", True, self_contact=True))
     slots = load_model(scene).n_slots
     assert slots == 3 * 6 * 2 * 2 + 6 * 2  # each ring's 6 vertices against 2 others (one also itself), twinned

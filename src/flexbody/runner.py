@@ -102,7 +102,10 @@ def run_command(args: argparse.Namespace) -> int:
            if s.get("sticks") or s.get("slips") or s.get("friction_work_J") else "") + "; "
         f"max penetration {s['max_penetration_m']:.2g} m; energy drift {s['energy_drift_J']:.2g} J "
         f"({s['energy_drift_relative']:.2g} of E0)\n"
-        f"  wrote {out}/result.npz, summary.json" + (", figures and drop.gif" if not args.no_figures else "")
+        + (f"  contacts between bodies: {s['contact_pairs']} of the scene's {s['contact_pairs_in_scene']} pairs had "
+           f"slots (those that came within reach; {s['contacts']} contacts at the end)\n"
+           if s.get("contact_pairs_in_scene") else "")
+        + f"  wrote {out}/result.npz, summary.json" + (", figures and drop.gif" if not args.no_figures else "")
         + (", vtk/run.pvd (ParaView)" if args.vtk else "")
     )
     for warning in s["warnings"]:
