@@ -484,14 +484,15 @@ class _Run:
             self.mu = np.array([g.friction for g in scene.grounds], float)[model.contacts[:, 1]] \
                 if model.n_contacts else np.zeros(0)
 
-    def waiting(self, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The scene's pairs without slots yet (indices into ``scene.contacts``) and how far
-        apart their bodies' boxes are at ``y`` (m), shape (k,) each; none where the model's
-        table does not grow (:meth:`grow`)."""
+    def pairs_near(self, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The scene's pairs without slots yet (indices into ``scene.contacts``) whose bodies'
+        boxes lie within the model's ``pairs_late`` and within its ``pairs_ahead`` of each
+        other at ``y``, shape (k,) and (j,); none where the table does not grow (:meth:`grow`)."""
         model = self.model
         if not getattr(model, "grows", False) or not len(model.waiting):
-            return np.zeros(0, np.intp), np.zeros(0)
-        return model.waiting, model.pair_separations(y[: model.nq], self.p, model.waiting)
+            return np.zeros(0, np.intp), np.zeros(0, np.intp)
+        apart = model.pair_separations(y[: model.nq], self.p, model.waiting)
+        return model.waiting[apart <= model.pairs_late], model.waiting[apart <= model.pairs_ahead]
 
     def grow(self, pairs: np.ndarray) -> None:
         """Give the scene's pairs ``pairs`` their slots from here on: the model's table grows
@@ -654,13 +655,11 @@ class _Run:
                     solver = stepper(rhs, t_start, y_start, t_bound, **options)
                     renew_slips()
                     continue
-                waiting, apart = self.waiting(solver.y)
-                if len(waiting) and (apart <= model.pairs_late).any():
-                    # a particle may have touched a body it had no slot for: again, with them
+                late, ahead = self.pairs_near(solver.y)
+                if len(late):  # a particle may have touched a body it had no slot for: again, with them
                     self.retaken += 1
                     self.y[:] = y_start
-                    return _Stop(t_start, np.zeros_like(events.free), np.zeros_like(events.free), False,
-                                 waiting[apart <= model.pairs_late])
+                    return _Stop(t_start, np.zeros_like(events.free), np.zeros_like(events.free), False, late)
                 at_end: list[np.ndarray] = []  # the step end's event functions, once asked for
 
                 def end_functions() -> np.ndarray:
@@ -705,11 +704,9 @@ class _Run:
                 if self.progress:
                     self.progress(solver.t, s.t_end, len(self.events))
                 self.check_deadline(solver.t)
-                if len(waiting) and (apart <= model.pairs_ahead).any():
-                    # a pair came near (at the step's end; a put-back moves nothing that far): the
-                    # next segment has its slots
-                    return _Stop(solver.t, np.zeros_like(events.free), np.zeros_like(events.free), False,
-                                 waiting[apart <= model.pairs_ahead])
+                if len(ahead):  # a pair came near (at the step's end; a put-back moves nothing that far):
+                    # the next segment has its slots
+                    return _Stop(solver.t, np.zeros_like(events.free), np.zeros_like(events.free), False, ahead)
         except FloatingPointError as exc:
             failure = _gimbal_lock(self.scene, model, solver.y, solver.t) or ("blow_up", f"at t = {solver.t:.9g} s: {exc}")
             raise SimulationFailed(*failure) from None
@@ -1076,9 +1073,9 @@ class _Run:
             self.keep_samples(0, 1)  # its contact set is the instant's outcome (a slide starting at once)
             self.y_started = self.y.copy()
             while t < s.t_end:
-                waiting, apart = self.waiting(self.y)  # after an instant: its step's end was not checked
-                if len(waiting) and (apart <= self.model.pairs_ahead).any():
-                    self.grow(waiting[apart <= self.model.pairs_ahead])
+                ahead = self.pairs_near(self.y)[1]  # after an instant: its step's end was not checked
+                if len(ahead):
+                    self.grow(ahead)
                     phases = self.phases
                 t_bound = min(s.t_end, float(phases.push_until.min()))  # a thesis-mode window ends a segment
                 stop = self.segment(t, t_bound)
