@@ -106,6 +106,37 @@ def test_rows_sharing_particles_match_the_dense_contact_solve(dim):
         assert lam[-1] == 0.0  # the repeated slot: dropped, its twin carries it
 
 
+@pytest.mark.parametrize("dim", [2, 3])
+def test_rows_laid_out_once_give_the_calls_numbers_bit_for_bit(dim):
+    """``laid_out`` (a segment's right-hand side: its rows checked once) against the call
+    with every argument, on random rows sharing particles, read from a whole state
+    (positions, velocities, then more entries); then its refusals."""
+    rng = np.random.default_rng(11 + dim)
+    n = 30
+    masses = rng.uniform(0.05, 2.0, n)
+    rows = held_rows(masses, dim)
+    slots = np.array([rng.choice(n, dim + 1, replace=False) for _ in range(10)])
+    grounds = rng.choice(n, 4, replace=False)
+    normals = rng.normal(size=(4, dim))
+    normals /= np.linalg.norm(normals, axis=1)[:, None]
+    laid_out = rows.laid_out(grounds, normals, slots)
+    for trial in range(5):
+        state = rng.normal(size=2 * n * dim + 3)
+        acc = rng.normal(size=n * dim)
+        expected_acc = acc.copy()
+        expected = rows(state[: n * dim].reshape(n, dim), state[n * dim : 2 * n * dim].reshape(n, dim), expected_acc,
+                        grounds, normals, slots)
+        got = laid_out(state, acc)
+        np.testing.assert_array_equal(got, expected)
+        np.testing.assert_array_equal(acc, expected_acc)
+    with pytest.raises(ValueError, match="acc must be"):
+        laid_out(state, np.zeros(n * dim - 1))
+    with pytest.raises(ValueError, match="positions and velocities"):
+        laid_out(state[: 2 * n * dim - 1], acc)
+    with pytest.raises(ValueError, match="slot_points must be particle indices"):
+        rows.laid_out(grounds, normals, np.array([[0, 1, n] + [2] * (dim - 2)]))
+
+
 def test_nearly_dependent_rows_are_dropped_against_every_rows_largest_entry():
     """A particle of 1 kg on two grounds 7e-6 rad apart beside one of 10 g on a ground: the
     pair's second pivot, (7e-6)^2 of the heavy block's scale, lies below 1e-12 of the light
@@ -138,10 +169,10 @@ def test_bad_arrays_are_refused_before_c_reads_them():
 def test_where_c_hands_back_the_model_answers_by_numpy(monkeypatch):
     """Every user of the C rows falls back to NumPy's contact_solve where C hands back (a
     pivot below the drop threshold): the same numbers as the NumPy path, bit for bit."""
-    from flexbody.held_rows import CompiledHeldRows
+    from flexbody.held_rows import LaidOutRows
 
     model, states = _states_of(_box_on_wedge(), every=40)
-    monkeypatch.setattr(CompiledHeldRows, "__call__", lambda *args: None)
+    monkeypatch.setattr(LaidOutRows, "__call__", lambda *args: None)  # the model's rows, laid out per contact set
     compiled = model._held_rows
     for y, p, held, push, elements in states:
         model.element_of[:] = elements

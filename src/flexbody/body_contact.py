@@ -106,7 +106,7 @@ from .contact import Phases
 from .contact_problems import least_squares
 from .dynamics import contact_solve
 from .edge_contact import EdgeSlots, EdgeTerms
-from .held_rows import CompiledHeldRows
+from .held_rows import CompiledHeldRows, LaidOutRows
 from .mixed import MixedModel
 from .model import GeneratedModel, Model
 from .own_surface import OwnSurface
@@ -518,6 +518,9 @@ class BodyContactModel(Model):
         if len(slots):
             x = self._coordinates.particles(q, None, p)[0]
             self._constrain_elements(slots, x)
+            if self.first_edge == self.n_slots:  # no edge contacts: every slot a particle's (asked at every step)
+                out[rows >= ng] = self._element.gaps(x, self._slot_points(slots).T)
+                return out
             edge, gaps = slots >= self.first_edge, np.empty(len(slots))
             if (~edge).any():
                 gaps[~edge] = self._element.gaps(x, self._slot_points(slots[~edge]).T)  # _row_terms' gap
@@ -560,7 +563,7 @@ class BodyContactModel(Model):
             if not frozen.current(self.element_of):
                 return general(t, y)
             ydot = inner(t, y)
-            if frozen.solve(self._held_rows, np.asarray(y, float), ydot[nq : nq + nu]) is None:
+            if frozen.solve(y, ydot[nq : nq + nu]) is None:
                 return general(t, y)  # a pivot below the drop threshold: contact_solve's fallback
             return ydot
 
@@ -580,7 +583,7 @@ class BodyContactModel(Model):
                 return self.rhs(y, p, held, push)[1]
             lam = np.zeros(self.n_contacts)
             ydot, lam[:ng] = self.inner.rhs(y, p, frozen.fast, push[:ng])
-            force = frozen.solve(self._held_rows, np.asarray(y, float), ydot[nq : nq + nu]) if len(frozen.slots) \
+            force = frozen.solve(y, ydot[nq : nq + nu]) if len(frozen.slots) \
                 else np.zeros(0)
             if force is None:
                 return self.rhs(y, p, held, push)[1]
@@ -608,8 +611,9 @@ class BodyContactModel(Model):
         fast = np.array(held[:ng], np.intc)
         fast[grounds] = 0
         normals = self._coordinates.ground_normals(p)[self.inner.contacts[grounds, 1]]
-        return _FrozenRows(slots, self.element_of[slots].copy(), fast, np.concatenate([grounds, ng + slots]),
-                           self._slot_points(slots), self.inner.contacts[grounds, 0], normals, self.nq, self.dim)
+        points, at = self._slot_points(slots), self.inner.contacts[grounds, 0]
+        return _FrozenRows(slots, self.element_of[slots].copy(), fast, np.concatenate([grounds, ng + slots]), points,
+                           at, normals, None if self._held_rows is None else self._held_rows.laid_out(at, normals, points))
 
     def per_particle(self, y, p, phases: Phases, seeds: np.ndarray, gap_tolerance: float) -> bool:
         """Whether the instant of the contacts ``seeds`` (bool (nc,)) is the inner model's
@@ -651,7 +655,7 @@ class BodyContactModel(Model):
         y = np.asarray(y, float)
         moved = np.unique(np.concatenate([frozen.at, frozen.points.ravel()]))
         acc = self.inner.free_accelerations(y, p, np.asarray(push, float)[: self.n_ground_contacts], moved)
-        force = frozen.solve(self._held_rows, y, acc)
+        force = frozen.solve(y, acc)
         if force is None:  # a pivot below the drop threshold: contact_solve's fallback
             return self.rhs(y, p, held, push)[1]
         lam = np.zeros(self.n_contacts)
@@ -723,7 +727,7 @@ class BodyContactModel(Model):
         sliding = (mu > 0.0) & (codes == SLIDING)
         none = np.zeros((k, m))
         if self._held_rows is not None and not (mu > 0.0).any() and not (held_slots >= self.first_edge).any():
-            force = self._laid_out(p, held, held_slots, ground_rows).solve(self._held_rows, y, acc)
+            force = self._laid_out(p, held, held_slots, ground_rows).solve(y, acc)
             if force is not None:  # else a pivot fell below the drop threshold: contact_solve's fallback below
                 lam[rows] = force
                 return _Solved(ydot, lam, fast, rows, none, none, np.zeros((k, m, self.dim)), stick)
@@ -1811,8 +1815,9 @@ class BodyContactModel(Model):
         edge_owner = np.repeat(owner, self.dim - 1)
         edges = x[elements[others]] - x[w[edge_owner]]
         falling = ~(np.einsum("kd,kd->k", edges, normal[edge_owner]) >= -AT_VERTEX * np.linalg.norm(edges, axis=1))
-        outward = np.zeros((len(w), self.dim))
-        np.add.at(outward, owner, (segment_normals if self.dim == 2 else triangle_normals)(x, elements))
+        normals = (segment_normals if self.dim == 2 else triangle_normals)(x, elements)
+        # summed per vertex in the order of its elements, as np.add.at would (bincount: a tenth of its cost)
+        outward = np.column_stack([np.bincount(owner, normals[:, k], minlength=len(w)) for k in range(self.dim)])
         return (np.bincount(edge_owner[falling], minlength=len(w)) == 0) & (np.einsum("kd,kd->k", outward, normal) < 0.0)
 
     def _closest(self, x, slots: IntArray | None = None, read: bool = True):
@@ -1928,7 +1933,7 @@ class BodyContactModel(Model):
         (:meth:`_surface_contacts`), if at hand: a slot within ``margin`` has its closest
         feature over the whole surface there (what is not a candidate is farther)."""
         slots = np.asarray(slots, np.intp)
-        if (slots >= self.first_edge).any():
+        if self.first_edge != self.n_slots and (slots >= self.first_edge).any():
             self._constrain_edges(slots[slots >= self.first_edge], x)
             slots = slots[slots < self.first_edge]
         missing = slots[self.element_of[slots] < 0]
@@ -1950,7 +1955,6 @@ class BodyContactModel(Model):
         self.element_of[missing[on_face]] = contact.element[rows[on_face]]
         if on_face.all():
             return
-        normals = (segment_normals if self.dim == 2 else triangle_normals)(x, self.elements)
         at_rim, rows = missing[~on_face].tolist(), rows[~on_face].tolist()
         candidates = []  # each slot's elements of its body that hold its closest feature
         for slot, r in zip(at_rim, rows):
@@ -1966,11 +1970,14 @@ class BodyContactModel(Model):
         # for all the slots' candidates
         every = np.concatenate(candidates)
         counts = [len(a) for a in candidates]
-        apart = np.split(self._beside(np.repeat(self.slot_particle[at_rim], counts), normals[every], x),
-                         np.cumsum(counts)[:-1])
-        for slot, r, around, beside in zip(at_rim, rows, candidates, apart):
-            around = around[beside] if beside.any() else around
-            self.element_of[slot] = around[np.argmax(normals[around] @ contact.normal[r])]
+        ends = np.cumsum(counts)[:-1]
+        # the candidates' normals alone (each element's own: the same numbers as of all of them)
+        normals = np.split((segment_normals if self.dim == 2 else triangle_normals)(x, self.elements[every]), ends)
+        apart = np.split(self._beside(np.repeat(self.slot_particle[at_rim], counts), np.concatenate(normals), x), ends)
+        for slot, r, around, facing, beside in zip(at_rim, rows, candidates, normals, apart):
+            if beside.any():
+                around, facing = around[beside], facing[beside]
+            self.element_of[slot] = around[np.argmax(facing @ contact.normal[r])]
 
     def _rows_of(self, slot_rows: IntArray, found: np.ndarray) -> IntArray:
         """Each primary slot's row among closest features whose slots are ``slot_rows`` (k,),
@@ -1997,6 +2004,8 @@ class BodyContactModel(Model):
         """The particles each constrained slot moves, shape (k, 1 + dim): its own, then its
         element's; an edge contact's, its edge's two ends, then the other edge's."""
         slots = np.asarray(slots, np.intp)
+        if self.first_edge == self.n_slots:  # no edge contacts (asked ~20 times an instant: no masks)
+            return np.concatenate([self.slot_particle[slots][:, None], self.elements[self.element_of[slots]]], axis=1)
         edge = slots >= self.first_edge
         particle = slots[~edge]  # (concatenate: column_stack's checks cost a pile 1 %)
         points = np.concatenate([self.slot_particle[particle][:, None], self.elements[self.element_of[particle]]], axis=1)
@@ -2013,7 +2022,7 @@ class BodyContactModel(Model):
         (the element kernels) or an edge against the edge it is held on (the edge kernels)."""
         slots = np.asarray(slots, np.intp)
         edge = slots >= self.first_edge
-        if not edge.any():  # particles alone (every scene without edge contacts)
+        if self.first_edge == self.n_slots or not edge.any():  # particles alone (every scene without edge contacts)
             terms = self._element_terms(slots, x, v)
             return RowTerms(terms.gap, np.column_stack([np.ones(len(slots)), -terms.weights]), terms.normal,
                             terms.rate, terms.bias, terms.slip_bias)
@@ -2162,6 +2171,7 @@ class BodyContactModel(Model):
         sorted_rows, sorted_at = rows[order], at[order]
         m = (self.dim if tangents else 1) * k
         pairs, index = [], []
+        distinct = True  # no two terms on one particle in one row: each pair of terms on a particle differs in row
         for offset in range(len(sorted_at)):
             same = np.flatnonzero(sorted_at[offset:] == sorted_at[: len(sorted_at) - offset])
             if not same.size:
@@ -2169,9 +2179,9 @@ class BodyContactModel(Model):
             a, b = sorted_rows[same], sorted_rows[same + offset]
             pairs.append((same, same + offset, offset > 0))
             index += [a * m + b] + ([b * m + a] if offset else [])
+            distinct = distinct and (offset == 0 or not (a == b).any())
         masses = self.masses[particles[sorted_at]][:, None] if isinstance(self._coordinates, _ParticleCoordinates) \
             else None
-        distinct = len(np.unique(rows * len(particles) + at)) == len(rows)
         return _Layout(particles, rows, at, order, masses, pairs, np.concatenate(index), distinct)
 
     @staticmethod
@@ -2193,8 +2203,9 @@ class _FrozenRows(NamedTuple):
     """The coupled rows of one contact set, as :meth:`BodyContactModel._solve` finds them:
     the held ``slots`` (k_s,) with their ``elements`` then, the inner model's codes
     ``fast`` (ng,) with the coupled ground rows cleared, every coupled row ``rows`` (ground
-    rows, then slots; contact indices), the slots' points (k_s, 1 + dim), and the ground
-    rows' particles ``at`` and ``normals`` (k_g, dim)."""
+    rows, then slots; contact indices), the slots' points (k_s, 1 + dim), the ground
+    rows' particles ``at`` and ``normals`` (k_g, dim), and these rows laid out for the C
+    rows (:meth:`flexbody.held_rows.CompiledHeldRows.laid_out`; None without them)."""
 
     slots: IntArray
     elements: IntArray
@@ -2203,18 +2214,16 @@ class _FrozenRows(NamedTuple):
     points: IntArray
     at: IntArray
     normals: FloatArray
-    nq: int
-    dim: int
+    compiled: LaidOutRows | None
 
     def current(self, element_of: IntArray) -> bool:
         """Whether the held slots are still on these elements."""
-        return np.array_equal(element_of[self.slots], self.elements)
+        return bool((element_of[self.slots] == self.elements).all())  # (np.array_equal's checks: 2 µs a call)
 
-    def solve(self, held_rows: CompiledHeldRows, y: FloatArray, acc: FloatArray) -> FloatArray | None:
-        """The rows' forces at state ``y``, their accelerations added to ``acc`` (see
-        :class:`flexbody.held_rows.CompiledHeldRows`)."""
-        nq, d = self.nq, self.dim  # on particles the velocities follow the positions, nu = nq
-        return held_rows(y[:nq].reshape(-1, d), y[nq : 2 * nq].reshape(-1, d), acc, self.at, self.normals, self.points)
+    def solve(self, y: FloatArray, acc: FloatArray) -> FloatArray | None:
+        """The rows' forces at state ``y`` (on particles: positions, then velocities), their
+        accelerations added to ``acc`` (see :class:`flexbody.held_rows.LaidOutRows`)."""
+        return self.compiled(y, acc)
 
 
 class _Layout(NamedTuple):
