@@ -211,18 +211,20 @@ APART = {
 }
 
 
-@pytest.mark.parametrize("instants", ["per_particle", "lcp"])
-def test_contacts_that_never_touch_another_body_give_the_ground_only_answer(instants, monkeypatch):
+@pytest.mark.parametrize("instants, friction", [("per_particle", 0.0), ("per_particle", 0.4), ("lcp", 0.0)])
+def test_contacts_that_never_touch_another_body_give_the_ground_only_answer(instants, friction, monkeypatch):
     """Two rings far apart that may touch: every contact is with the ground, decoupled, and
     the body-contact model gives the same events and motion as the assembled model's
     per-particle closed form: its instants through the LCPs (``lcp``), and solved per
     particle where they decouple (``per_particle``, the default: then every number is the
-    ground-only run's, its right-hand side being the inner model's too)."""
+    ground-only run's, its right-hand side being the inner model's too), also where the
+    rings' pair has friction (no slot takes part in a ground's instant: the friction
+    between bodies decides nothing there)."""
     if instants == "lcp":
         monkeypatch.setattr(BodyContactModel, "per_particle", lambda *args: False)
     table = APART
     alone = flexbody.simulate(flexbody.load_scene(table), method="RK45")
-    together = flexbody.simulate(_scene(table, restitution=0.0))
+    together = flexbody.simulate(_scene(table, restitution=0.0, friction=friction))
     assert alone.status == together.status == "success"
     assert len(alone.events_time) == len(together.events_time) > 5
     np.testing.assert_array_equal(alone.events_kind, together.events_kind)
@@ -259,6 +261,13 @@ def test_an_instant_is_solved_per_particle_only_where_nothing_couples_it():
     reach = free.copy()  # a free slot whose gap (margin: nothing near) is within the tolerance of its floor
     reach.floor[ng + 5] = model.gaps(y[: model.nq], p)[ng + 5] - 0.5e-9
     assert not model.per_particle(y, p, reach, ground, 1e-9)
+    # friction between the rings takes no part in a ground's instant (a growing table without
+    # their pair's slots solves it the same way); friction on the ground does
+    for table, alone in ((APART, True), ({**APART, "grounds": [{"point": [0.0, 0.0], "normal": [0.0, 1.0],
+                                                                 "friction": 0.4}]}, False)):
+        rough = _scene(table, restitution=0.0, friction=0.4)
+        rough_model = load_model(rough)
+        assert rough_model.per_particle(y, rough_model.parameters(rough), free, ground, 1e-9) is alone
 
 
 def test_a_bouncy_ground_keeps_the_coupled_instants(monkeypatch):

@@ -117,20 +117,58 @@ def test_a_pile_gives_slots_to_the_pairs_that_come_near_only():
     assert_same_run(grown, whole)
 
 
+def plate_on_block() -> dict:
+    """A rigid plate dropped 0.3 m onto a rigid block resting on the ground."""
+    return {"name": "plate_on_block", "gravity": [0.0, -9.81],
+            "grounds": [{"point": [0.0, 0.0], "normal": [0.0, 1.0]}],
+            "bodies": [{"name": "block", "shape": "polygon", "rigid": True, "mass": 0.1, "position": [0.0, 0.0],
+                        "vertices": [[-0.06, 0.0], [0.06, 0.0], [0.06, 0.08], [-0.06, 0.08]]},
+                       {"name": "plate", "shape": "polygon", "rigid": True, "mass": 0.1, "position": [0.01, 0.38],
+                        "vertices": [[-0.1, 0.0], [0.1, 0.0], [0.1, 0.02], [-0.1, 0.02]]}],
+            "contacts": [{"bodies": ["plate", "block"]}],
+            "simulation": {"t_end": 0.4, "output_dt": 1e-3}}
+
+
 def test_a_rigid_plate_dropped_from_afar_onto_a_rigid_block_gets_its_slots_on_the_way():
     """Rigid bodies (the floating formulation's frames): a plate dropped 0.3 m onto a block
     resting on the ground gets its pair's slots in flight and lands as on the whole table."""
-    table = {"name": "plate_on_block", "gravity": [0.0, -9.81],
-             "grounds": [{"point": [0.0, 0.0], "normal": [0.0, 1.0]}],
-             "bodies": [{"name": "block", "shape": "polygon", "rigid": True, "mass": 0.1, "position": [0.0, 0.0],
-                         "vertices": [[-0.06, 0.0], [0.06, 0.0], [0.06, 0.08], [-0.06, 0.08]]},
-                        {"name": "plate", "shape": "polygon", "rigid": True, "mass": 0.1, "position": [0.01, 0.38],
-                         "vertices": [[-0.1, 0.0], [0.1, 0.0], [0.1, 0.02], [-0.1, 0.02]]}],
-             "contacts": [{"bodies": ["plate", "block"]}],
-             "simulation": {"t_end": 0.4, "output_dt": 1e-3}}
-    grown, whole, growths = run_both(table)
+    grown, whole, growths = run_both(plate_on_block())
     assert growths == [[0]]
     assert (grown.positions[-1, 4:, 1] > 0.08 - 1e-9).all()  # the plate rests on the block's top
+    assert_same_run(grown, whole)
+
+
+def test_a_segments_step_bound_goes_on_past_the_stop_where_pairs_get_slots(monkeypatch):
+    """A step of the segment in which the plate falls is taken again shorter (the block's
+    held contacts sank: forced here, once in each run, halfway to the pair's growth), which
+    bounds the segment's later steps.  The stop where the pair gets its slots is no event:
+    the next segment keeps that bound, and the run is the whole table's bit for bit (where
+    that stop dropped it, the steps after it were longer and the landing differed)."""
+    stops = []
+    segment = driver._Run.segment
+
+    def spy(run, t0, t_bound):
+        stop = segment(run, t0, t_bound)
+        stops.append((stop.t, stop.grow is not None))
+        return stop
+
+    monkeypatch.setattr(driver._Run, "segment", spy)
+    flexbody.simulate(load_scene(plate_on_block()))
+    (t_growth,) = [t for t, grew in stops if grew]
+    assert not [t for t, grew in stops if 0.5 * t_growth <= t < t_growth]  # one segment from halfway to it
+    sank, forced = driver._Run.sank, []
+
+    def sinks_once(run, drift, dense, t_start, t_end, rows=None):
+        if t_start > 0.5 * t_growth and not getattr(run, "forced", False):
+            run.forced = True
+            forced.append(t_start)
+            return True
+        return sank(run, drift, dense, t_start, t_end, rows)
+
+    monkeypatch.setattr(driver._Run, "sank", sinks_once)
+    grown, whole, growths = run_both(plate_on_block())
+    assert growths == [[0]]
+    assert len(forced) == 2 and forced[0] == forced[1] < t_growth  # the same step in both runs
     assert_same_run(grown, whole)
 
 

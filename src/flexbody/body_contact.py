@@ -617,18 +617,20 @@ class BodyContactModel(Model):
 
     def per_particle(self, y, p, phases: Phases, seeds: np.ndarray, gap_tolerance: float) -> bool:
         """Whether the instant of the contacts ``seeds`` (bool (nc,)) is the inner model's
-        alone, solved per particle (:func:`flexbody.contact.resolve` on it): on particles
-        without friction, on plastic grounds, with no slot held, every seed a ground contact
+        alone, solved per particle (:func:`flexbody.contact.resolve` on it): on particles,
+        on frictionless, plastic grounds, with no slot held, every seed a ground contact
         and no free slot within ``gap_tolerance`` of its floor (a touch the instant would
         find).  Its ``J M^-1 J^T`` is then diagonal by particle, the coupled LCP's answer the
         same; with e > 0 it would not be: the LCP's Zeno threshold of a rebound counts the
         contact's own pull (:func:`flexbody.coupled.coupled_impact`), the per-particle one
         gravity's alone.  The inner path also sets an impacting particle found up to the gap
         tolerance below a ground onto it (``settle``), as in a scene whose bodies do not
-        touch."""
+        touch.  Friction between bodies does not enter such an instant (no slot takes part):
+        it decides nothing here, so a table with or without its pairs' slots solves the
+        instant the same way (a growing table, :meth:`with_pairs`, is bit for bit the whole
+        one's)."""
         ng = self.n_ground_contacts
-        if not isinstance(self._coordinates, _ParticleCoordinates) or self._frictional \
-                or (self.laws[: self.n_grounds, 1] > 0.0).any() \
+        if not isinstance(self._coordinates, _ParticleCoordinates) or (self.laws[: self.n_grounds] > 0.0).any() \
                 or np.asarray(seeds)[ng:].any() or phases.on_ground[ng:].any():
             return False
         x = self._coordinates.particles(y[: self.nq], None, p)[0]

@@ -455,6 +455,10 @@ class _Run:
         # particle moved too far relative to another (BodyContactModel.step_reach)
         self.nfev = self.njev = self.steps = self.segments = 0
         self.h_next = 0.0  # the step an explicit stepper proposed where the last segment ended (s)
+        # A segment's bound on its steps (a step that sank was taken again shorter: the rest
+        # of the segment keeps that bound), carried over a stop that only gave pairs their
+        # slots, which is no event: the run goes on as without that stop (s; None: none).
+        self.step_cap: float | None = None
         self.segment_log: list | None = None  # set to [] to log (RHS evaluations, y0, held, push) per segment
         self.min_gap = np.inf  # lowest gap of a free contact (an impact missed between event checks)
         self.min_held_gap = np.inf  # ... and of a held one (its constraint drifted)
@@ -585,6 +589,8 @@ class _Run:
                 options["jac"] = lambda t, y: _dense(jacobian(t, y))
         elif self.h_next > 0.0:  # as the compiled path: a restart does not guess the step size again
             options["first_step"] = min(self.h_next, t_bound - t0)
+        if self.step_cap is not None:  # the segment before ended where pairs got their slots: its bound goes on
+            options["max_step"], self.step_cap = self.step_cap, None
         import scipy.integrate
 
         # a free contact between bodies picks its element at its next instant
@@ -659,6 +665,7 @@ class _Run:
                 if len(late):  # a particle may have touched a body it had no slot for: again, with them
                     self.retaken += 1
                     self.y[:] = y_start
+                    self.step_cap = options.get("max_step")
                     return _Stop(t_start, np.zeros_like(events.free), np.zeros_like(events.free), False, late)
                 at_end: list[np.ndarray] = []  # the step end's event functions, once asked for
 
@@ -706,6 +713,7 @@ class _Run:
                 self.check_deadline(solver.t)
                 if len(ahead):  # a pair came near (at the step's end; a put-back moves nothing that far):
                     # the next segment has its slots
+                    self.step_cap = options.get("max_step")
                     return _Stop(solver.t, np.zeros_like(events.free), np.zeros_like(events.free), False, ahead)
         except FloatingPointError as exc:
             failure = _gimbal_lock(self.scene, model, solver.y, solver.t) or ("blow_up", f"at t = {solver.t:.9g} s: {exc}")
