@@ -519,13 +519,13 @@ class BodyContactModel(Model):
             x = self._coordinates.particles(q, None, p)[0]
             self._constrain_elements(slots, x)
             if self.first_edge == self.n_slots:  # no edge contacts: every slot a particle's (asked at every step)
-                out[rows >= ng] = self._element.gaps(x, self._slot_points(slots).T)
-                return out
-            edge, gaps = slots >= self.first_edge, np.empty(len(slots))
-            if (~edge).any():
-                gaps[~edge] = self._element.gaps(x, self._slot_points(slots[~edge]).T)  # _row_terms' gap
-            if edge.any():  # the gap kernel alone (this is asked at every step: drift)
-                gaps[edge] = self._edge_slots.gaps(x, slots[edge] - self.first_edge, self.element_of[slots[edge]])
+                gaps = self._element.gaps(x, self._slot_points(slots).T)
+            else:
+                edge, gaps = slots >= self.first_edge, np.empty(len(slots))
+                if (~edge).any():
+                    gaps[~edge] = self._element.gaps(x, self._slot_points(slots[~edge]).T)  # _row_terms' gap
+                if edge.any():  # the gap kernel alone (this is asked at every step: drift)
+                    gaps[edge] = self._edge_slots.gaps(x, slots[edge] - self.first_edge, self.element_of[slots[edge]])
             out[rows >= ng] = gaps
         return out
 
@@ -2006,12 +2006,11 @@ class BodyContactModel(Model):
         """The particles each constrained slot moves, shape (k, 1 + dim): its own, then its
         element's; an edge contact's, its edge's two ends, then the other edge's."""
         slots = np.asarray(slots, np.intp)
-        if self.first_edge == self.n_slots:  # no edge contacts (asked ~20 times an instant: no masks)
-            return np.concatenate([self.slot_particle[slots][:, None], self.elements[self.element_of[slots]]], axis=1)
-        edge = slots >= self.first_edge
-        particle = slots[~edge]  # (concatenate: column_stack's checks cost a pile 1 %)
+        # no masks where there are no edge contacts (asked ~20 times an instant)
+        edge = slots >= self.first_edge if self.first_edge < self.n_slots else None
+        particle = slots if edge is None else slots[~edge]  # (concatenate: column_stack's checks cost a pile 1 %)
         points = np.concatenate([self.slot_particle[particle][:, None], self.elements[self.element_of[particle]]], axis=1)
-        if not edge.any():
+        if edge is None or not edge.any():
             return points
         out = np.empty((len(slots), 1 + self.dim), np.intp)
         out[~edge] = points
@@ -2024,7 +2023,7 @@ class BodyContactModel(Model):
         (the element kernels) or an edge against the edge it is held on (the edge kernels)."""
         slots = np.asarray(slots, np.intp)
         edge = slots >= self.first_edge
-        if self.first_edge == self.n_slots or not edge.any():  # particles alone (every scene without edge contacts)
+        if not edge.any():  # particles alone (every scene without edge contacts)
             terms = self._element_terms(slots, x, v)
             return RowTerms(terms.gap, np.column_stack([np.ones(len(slots)), -terms.weights]), terms.normal,
                             terms.rate, terms.bias, terms.slip_bias)

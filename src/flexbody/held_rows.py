@@ -77,16 +77,8 @@ class CompiledHeldRows:
             falls below ``-REDUNDANT`` of the largest diagonal entry (the caller solves with
             :func:`flexbody.dynamics.contact_solve`, whose pivoted fallback copes).
         """
-        x, v, ground_particles, ground_normals, slot_points = self._checked(x, v, ground_particles, ground_normals,
-                                                                         slot_points, frames=False)
-        self._check_acc(acc)
-        lam = np.empty(len(ground_particles) + len(slot_points))
-        status = self._call(self.dim, len(x), x.ctypes.data, v.ctypes.data, self._inverse_mass,
-                            len(ground_particles), ground_particles.ctypes.data, ground_normals.ctypes.data,
-                            len(slot_points), slot_points.ctypes.data, acc.ctypes.data, lam.ctypes.data)
-        if status < 0:
-            raise MemoryError(f"cannot allocate the held rows' work buffers ({len(lam)} rows)")
-        return None if status else lam
+        x, v, *rows = self._checked(x, v, ground_particles, ground_normals, slot_points, frames=False)
+        return LaidOutRows(self, *rows).solve(x.ctypes.data, v.ctypes.data, acc)
 
     def laid_out(self, ground_particles: IntArray, ground_normals: FloatArray, slot_points: IntArray) -> LaidOutRows:
         """:meth:`__call__` for these rows alone (:class:`LaidOutRows`): checked once, as a
@@ -249,17 +241,22 @@ class LaidOutRows:
         -------
         lam : ndarray, shape (k_g + k_s,) or None
         """
-        rows = self._rows
-        nq = rows.n * rows.dim
+        nq = self._rows.n * self._rows.dim
         state = np.ascontiguousarray(state, float)
         if state.shape[0] < 2 * nq:
             raise ValueError(f"the state must hold the {2 * nq} positions and velocities first; got shape {state.shape}")
+        at = state.ctypes.data
+        return self.solve(at, at + nq * state.itemsize, acc)
+
+    def solve(self, x: int, v: int, acc: FloatArray) -> FloatArray | None:
+        """As :meth:`__call__`, the positions and velocities (n, dim) each given by the
+        address of their C-contiguous float64 entries (kept alive by the caller)."""
+        rows = self._rows
         rows._check_acc(acc)
         lam = np.empty(self.n_rows)
-        at = state.ctypes.data
         k_g, ground_particles, ground_normals, k_s, slot_points = self._arguments
-        status = rows._call(rows.dim, rows.n, at, at + nq * state.itemsize, rows._inverse_mass, k_g, ground_particles,
-                            ground_normals, k_s, slot_points, acc.ctypes.data, lam.ctypes.data)
+        status = rows._call(rows.dim, rows.n, x, v, rows._inverse_mass, k_g, ground_particles, ground_normals, k_s,
+                            slot_points, acc.ctypes.data, lam.ctypes.data)
         if status < 0:
             raise MemoryError(f"cannot allocate the held rows' work buffers ({len(lam)} rows)")
         return None if status else lam
