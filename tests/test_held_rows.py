@@ -488,3 +488,55 @@ def test_a_segments_functions_follow_a_held_slot_handed_to_another_element():
     np.testing.assert_array_equal(forces(y), lam)
     model.element_of[slot] = element
     assert not np.array_equal(f(0.0, y), ydot)  # the element matters: the test can fail
+
+
+def _seesaw() -> dict:
+    """The bundled seesaw (rigid wedge and plank, a flexible disc; friction everywhere) to
+    0.3 s: the disc lands on the plank's end and rests there."""
+    import tomllib
+    from pathlib import Path
+
+    table = tomllib.loads((Path(flexbody.__file__).parent / "scenes" / "seesaw.toml").read_text())
+    table["simulation"]["t_end"] = 0.3
+    return table
+
+
+def test_the_kept_answers_are_each_states_own():
+    """The coupled dynamics keeps its last few answers by state (a step's end is asked after
+    its midpoint, at the state of the stepper's last stage): asked again at an earlier
+    state, between others, each answer is a fresh solve's there, bit for bit, and one whose
+    slip directions, held codes or elements changed since is solved again (rigid frames and
+    friction: the NumPy rows)."""
+    model, states = _states_of(_seesaw(), every=15)
+    assert len(states) > 8 and model._frictional
+    solves, solve = [0], model._solve
+
+    def counted(*args):
+        solves[0] += 1
+        return solve(*args)
+
+    model._solve = counted
+    for k in range(len(states) - 2):
+        for i in (k, k + 1, k, k + 2, k + 1, k):  # each asked again after others
+            y, p, held, push, elements = states[i]
+            model.element_of[:] = elements
+            ydot, lam = model.rhs(y, p, held, push)
+            fresh = solve(y, p, held, push)
+            np.testing.assert_array_equal(ydot, fresh.ydot)
+            np.testing.assert_array_equal(lam, fresh.lam)
+    assert solves[0] == len(states)  # the states asked again were answered from those kept
+    # a state with a sliding contact, its friction along one slip direction, then the other
+    y, p, held, push, elements = [s for s in states if (np.asarray(s[2]) == body_contact.SLIDING).any()][-1]
+    model.element_of[:] = elements
+    sliding = np.flatnonzero(np.asarray(held) == body_contact.SLIDING)
+    answers = []
+    for direction in ([1.0, 0.0], [-1.0, 0.0]):
+        model._slip[sliding] = direction
+        answers.append(model.rhs(y, p, held, push))
+        np.testing.assert_array_equal(answers[-1][0], solve(y, p, held, push).ydot)
+    assert not np.array_equal(answers[0][1], answers[1][1])  # the slips matter: the test can fail
+    fewer = np.array(held)
+    fewer[sliding[0]] = 0
+    np.testing.assert_array_equal(model.rhs(y, p, fewer, push)[1], solve(y, p, fewer, push).lam)
+    assert not np.array_equal(answers[1][1], solve(y, p, fewer, push).lam)
+    assert solves[0] == len(states) + 3

@@ -160,6 +160,9 @@ RATED_REACH = 1e-6
 SWEEPS_KEPT = 8
 #: Layouts of held rows kept (:meth:`BodyContactModel._layout`).
 LAYOUTS_KEPT = 8
+#: Answers of the coupled dynamics kept, by the states they were solved at
+#: (:meth:`BodyContactModel._dynamics`).
+ANSWERS_KEPT = 3
 #: A vertex within this fraction of its face's size of the line where two held faces' planes
 #: meet lies on it (and planes whose unit normals' cross product is shorter meet nowhere definite).
 EDGE_LINE = 1e-6
@@ -332,7 +335,7 @@ class BodyContactModel(Model):
         self._slip = np.zeros((self.n_contacts, self.dim))
         self._slip_held = np.zeros(self.n_contacts, np.intc)  # 3D: where a slip keeps its step start's direction
         self._frictional = bool((self.mu > 0.0).any())  # else the slip directions change no answer
-        self._last: tuple[tuple[np.ndarray, ...], _Solved] | None = None  # the last state's answer (see _dynamics)
+        self._answers: list[tuple[tuple[np.ndarray, ...], _Solved]] = []  # the last states' answers (see _dynamics)
         self._swept: list[tuple] = []  # (fingerprint, (positions,), the whole surface sweep; see _kept_at)
         self._edges_swept: list[tuple] = []  # (fingerprint, (positions, edges held), every edge row's gap; the same)
         self._layouts: dict[tuple, _Layout] = {}  # held rows -> where their terms go (see _rows)
@@ -694,15 +697,20 @@ class BodyContactModel(Model):
     def _dynamics(self, y, p, held, push) -> _Solved:
         """The right-hand side and contact forces at ``y``: the inner model's alone where no
         contact couples, else its free accelerations plus the coupled rows' forces.  The last
-        answer is kept: the event functions ask for the forces and then the friction of the
-        same state (a third of a stack's evaluations)."""
+        few answers are kept: the event functions ask for the forces and then the friction of
+        the same state (a third of a stack's evaluations), and those at a step's end are asked
+        after its midpoint's, for the state of the stepper's last stage (a tenth more of a
+        seesaw's), as is the friction that renews the slip directions there."""
         y = np.asarray(y, float)
         held, push = np.asarray(held, np.intc), np.asarray(push, float)
         key = (y, np.asarray(p), held, push, self.element_of) + ((self._slip, self._slip_held) if self._frictional else ())
-        if self._last is not None and all(map(np.array_equal, self._last[0], key)):
-            return self._last[1]
+        for kept, solved in reversed(self._answers):  # the newest first
+            if all(map(np.array_equal, kept, key)):
+                return solved
         solved = self._solve(y, p, held, push)
-        self._last = (tuple(a.copy() for a in key), solved)
+        if len(self._answers) == ANSWERS_KEPT:
+            del self._answers[0]
+        self._answers.append((tuple(a.copy() for a in key), solved))
         return solved
 
     def _solve(self, y, p, held, push) -> _Solved:
