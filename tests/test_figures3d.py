@@ -232,3 +232,40 @@ def test_every_3d_figure_draws_a_run_without_contact_and_a_body_without_links():
         assert Image.open(io.BytesIO(files["drop.gif"])).n_frames == 3  # 0, 0.04, 0.08 s
     title = figures3d.figure_contact_force(result).axes[0].get_title()
     assert "no particle touched the ground" in title
+
+
+def _two_cubes(gap: float = 0.05) -> SimulationResult:
+    """The falling cube and a copy of it ``gap`` beside it, 1 cm higher: two bodies, the
+    second's impact 1 cm of fall later."""
+    result, _ = falling_cube(t_end=0.5)
+    other = result.positions + np.array([SIDE + gap, 0.0, 0.01])
+    arrays = result.arrays()
+    return SimulationResult(**{**arrays, "positions": np.concatenate([result.positions, other], axis=1),
+                               "velocities": np.concatenate([result.velocities] * 2, axis=1),
+                               "contact_force": np.concatenate([result.contact_force] * 2, axis=1),
+                               "masses": np.concatenate([result.masses] * 2),
+                               "links": np.concatenate([result.links, result.links + 8])})
+
+
+def test_several_bodies_are_drawn_a_panel_per_time_from_the_first_impact_to_the_end():
+    """Bodies that meet move less than their size: drawn over each other they would hide it,
+    so each time gets its panel (the first sample, the first impact, the largest force, the
+    last); one body is still drawn in one view."""
+    result = _two_cubes()
+    assert figures3d.body_count(result) == 2 and figures3d.body_count(falling_cube()[0]) == 1
+    chosen = figures3d.strip_indices(result)
+    assert chosen == sorted(set(chosen)) and len(chosen) == 4
+    assert chosen[0] == 0 and chosen[-1] == len(result.t) - 1 and figures.first_impact_index(result) in chosen
+    fig = figures3d.figure_snapshots(result)
+    assert [ax.get_title() for ax in fig.axes] == [f"t = {result.t[i]:.4g} s" for i in chosen]
+    assert "the bodies at 4 times" in fig._suptitle.get_text()
+    assert len(figures3d.figure_snapshots(falling_cube()[0]).axes) == 1
+
+
+def test_the_lowest_gap_zoom_says_when_nothing_came_near_a_ground():
+    result, grounds = falling_cube(height=0.4, t_end=0.1)  # 0.4 - g 0.1^2 / 2 = 0.35 m above it at the end
+    bottom = figures3d.figure_lowest_gap(result, grounds).axes[1]
+    (note,) = [t.get_text() for t in bottom.texts]
+    assert note == f"no particle came within 15 mm of a ground (nearest {_lowest_gap(result, grounds):.3g} m)"
+    landed, grounds = falling_cube(t_end=0.5)
+    assert not figures3d.figure_lowest_gap(landed, grounds).axes[1].texts

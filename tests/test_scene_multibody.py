@@ -382,6 +382,13 @@ MISTAKES = [
      "`bodies[0].surface` = (none: explicit particles)", "explicit particles have none unless given"),
     (scene_table(dict(ring("a", 0.5, self_contact=True), count=2)), "`bodies[0].surface` = (from shape = 'ring')",
      "body 'a' may touch itself"),
+    # a given surface is closed and outward even where its body touches nothing (yet)
+    (scene_table(body(name="a", **SQUARE, surface=[[0, 1], [1, 2], [2, 3]]), body(name="b", **SQUARE, position=[0, 1])),
+     "`bodies[0].surface` = [[0, 1], [1, 2], [2, 3]]",
+     "is not closed: particle 0 starts 1 segment(s) and ends 0"),
+    # names
+    (scene_table(ring("a", 0.5), ring("b", 1.0), ring("a", 1.5)), "`bodies[2].name` = 'a'",
+     "body names must be unique (bodies[0] has it too)"),
 ]
 
 
@@ -414,6 +421,15 @@ def test_an_open_surface_mesh_cannot_collide(tmp_path):
 def test_a_body_mistake_does_not_hide_a_contacts_mistake():
     problems = problems_of(_two_rings([{"bodies": ["a", "ghost"]}], rigid="yes"))
     assert len(problems) == 2 and "`bodies[0].rigid`" in problems[0] and "`contacts[0].bodies`" in problems[1]
+
+
+def test_a_repeated_body_name_is_told_beside_the_contact_it_breaks():
+    """Two bodies named 'a' and a contact naming 'b' (the second one's name before a typo):
+    both mistakes, each at its own field."""
+    problems = problems_of(dict(scene_table(ring("a", 0.5), ring("a", 1.0)), contacts=[{"bodies": ["a", "b"]}]))
+    assert len(problems) == 2, problems
+    assert problems[0].startswith("`bodies[1].name` = 'a': body names must be unique")
+    assert problems[1].startswith("`contacts[0].bodies` = ['a', 'b']: names no body of the scene: ['b']")
 
 
 def _toml(tmp_path, text: str):
@@ -506,4 +522,20 @@ def test_bodies_that_start_inside_each_other_are_refused(tmp_path, capsys):
     assert main(["run", str(path), "--out", str(out), "--no-figures", "--quiet"]) == 2
     err = capsys.readouterr().err
     assert "starts inside body 'block'" in err and "Traceback" not in err
+    assert f"scene {path} has 1 problem(s):\n  - `bodies[0].position` = [0.0, 0.25]: body 'ball' starts inside" in err
     assert not out.exists()
+
+
+def test_bodies_inside_each_other_are_one_problem_at_the_first_ones_position():
+    """A square block and a ring each with particles inside the other (a corner of the block
+    through the ring's side, the ring's particles in the block): one problem for the pair,
+    in the scene's format (its source, the field), naming both ways."""
+    table = _two_rings(contacts=[{"bodies": ["a", "b"]}])
+    table["bodies"][1] = body(name="b", **SQUARE, position=[0.06, 0.36], surface=[[0, 1], [1, 2], [2, 3], [3, 0]])
+    with pytest.raises(SceneError) as info:
+        flexbody.simulate(flexbody.load_scene(table))
+    (problem,) = info.value.problems
+    assert problem.startswith("`bodies[0].position` = [0.0, 0.5]: body 'a' starts inside body 'b': its particles [")
+    assert ", and body 'b' starts inside body 'a': its particles [" in problem
+    assert problem.endswith("bodies that may touch must start apart (or touching)")
+    assert str(info.value).startswith("scene <mapping> has 1 problem(s):")

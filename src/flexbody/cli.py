@@ -51,7 +51,7 @@ def _parser() -> argparse.ArgumentParser:
     run.add_argument("--out", required=True, metavar="DIR",
                      help="output folder (new, empty, or an earlier result, which is replaced)")
     run.add_argument("--no-figures", action="store_true", help="skip the figures and the animation")
-    run.add_argument("--method", choices=METHODS, help="integration method: dopri5 or dop853 (compiled C; default dopri5) or a SciPy solve_ivp method")
+    run.add_argument("--method", choices=METHODS, help="integration method: dopri5 or dop853 (compiled C) or a SciPy solve_ivp method; default dopri5 where the compiled loop runs the scene (grounds only, C backend), else RK45 (the same Dormand-Prince pair: bodies that may touch each other, rigid bodies beside flexible ones, a rigid body on a rough ground)")
     run.add_argument("--rtol", type=float, metavar="X", help="relative tolerance, in [1e-14, 1)")
     run.add_argument("--atol", type=float, metavar="X", help="absolute tolerance, in (0, 1)")
     run.add_argument("--backend", choices=BACKENDS, help="c (compiled, default) or numpy")

@@ -294,14 +294,16 @@ def _body_contact_problems(scene: Scene, values: dict) -> list[str]:
 
 
 def _check_apart(scene: Scene, model: Model, q: np.ndarray, p: np.ndarray) -> None:
-    """Refuse bodies that may touch each other but start inside one another.
+    """Refuse bodies that may touch each other but start inside one another (checked on the
+    built model, so after the scene's fields are valid).
 
     Raises
     ------
-    flexbody.errors.InputError
-        Naming each pair, its particles inside the other body's surface and how deep.
+    flexbody.scene.SceneError
+        One problem per pair of bodies, at the position of the first: the particles of each
+        inside the other's surface and how deep, or the edges that cross.
     """
-    from .errors import InputError  # here, as in _settings: the validation's only users
+    from .scene import SceneError  # here, as in _settings: the validation's only users
 
     if not model.n_slots:
         return
@@ -309,22 +311,27 @@ def _check_apart(scene: Scene, model: Model, q: np.ndarray, p: np.ndarray) -> No
     gaps = model.gaps(q, p)[model.n_ground_contacts :]
     inside = gaps < -1e-9 * size
     inside[model.first_edge :] = False  # edges crossed, not particles inside: crossed_edges below names them
+    names = [b.name for b in scene.bodies]
+    rule = "bodies that may touch must start apart (or touching)"
+
+    def at(body: int) -> str:
+        return f"`bodies[{body}].position` = {list(scene.bodies[body].position)}"
+
     if not inside.any():  # EDGE_DEPTH gap tolerances (1e-12 of the size) deep, as in a run
         crossed = model.crossed_edges(np.concatenate([q, np.zeros(model.nu + 2)]), p, EDGE_DEPTH * 1e-12 * size)
         if crossed is not None:  # no particle inside, and yet two surfaces cross
             _, first, second, how = crossed
-            raise InputError(f"invalid scene:\n  - bodies {scene.bodies[first].name!r} and {scene.bodies[second].name!r}"
-                             f" start crossed {_CROSSED[model.dim]} ({scene.bodies[first].name!r}: {how}); bodies that "
-                             "may touch must start apart (or touching)")
+            raise SceneError(scene.source, [f"{at(first)}: bodies {names[first]!r} and {names[second]!r} start crossed "
+                                            f"{_CROSSED[model.dim]} ({names[first]!r}: {how}); {rule}"])
         return
-    names = [b.name for b in scene.bodies]
-    problems = []
+    pairs: dict[tuple[int, int], list[str]] = {}  # each pair of bodies once, whichever is inside which
     for toucher in sorted(set(zip(model.particle_body[model.slot_particle[inside]], model.slot_body[inside]))):
         rows = inside & (model.particle_body[model.slot_particle] == toucher[0]) & (model.slot_body == toucher[1])
-        problems.append(f"  - body {names[toucher[0]]!r} starts inside body {names[toucher[1]]!r}: its particles "
-                        f"{model.slot_particle[rows].tolist()} (scene numbering) are up to {-gaps[rows].min():.3g} m "
-                        "inside its surface; bodies that may touch must start apart (or touching)")
-    raise InputError("invalid scene:\n" + "\n".join(problems))
+        pairs.setdefault(tuple(sorted(toucher)), []).append(
+            f"body {names[toucher[0]]!r} starts inside body {names[toucher[1]]!r}: its particles "
+            f"{model.slot_particle[rows].tolist()} (scene numbering) are up to {-gaps[rows].min():.3g} m inside its "
+            "surface")
+    raise SceneError(scene.source, [f"{at(pair[0])}: {', and '.join(found)}; {rule}" for pair, found in pairs.items()])
 
 
 def _scipy_only(method: str, why: str) -> str:

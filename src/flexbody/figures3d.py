@@ -30,6 +30,8 @@ from .result import SimulationResult
 #: Camera of every 3D view: elevation and azimuth (degrees), and the perspective's focal length
 #: (1 is a 90° field of view; larger is flatter).
 ELEVATION, AZIMUTH, FOCAL_LENGTH = 18.0, -60.0, 2.0
+#: The lowest-gap figure's zoom: this far above the ground (mm).
+NEAR_GROUND_MM = 15.0
 
 
 @dataclass(frozen=True)
@@ -177,8 +179,54 @@ def snapshot_indices(result: SimulationResult, most: int = 5) -> list[int]:
     return sorted(kept)
 
 
+def body_count(result: SimulationResult) -> int:
+    """How many bodies the run has: the connected components of its particles and links
+    (a rigid body's are drawn linked too)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    n, links = len(result.masses), np.asarray(result.links, np.intp).reshape(-1, 2)
+    graph = coo_matrix((np.ones(len(links)), (links[:, 0], links[:, 1])), shape=(n, n))
+    return int(connected_components(graph, directed=False)[0])
+
+
+def strip_indices(result: SimulationResult, most: int = 4) -> list[int]:
+    """The samples of :func:`figure_snapshots` for several bodies, in time order: the first,
+    the first impact, the largest contact force and the last, then samples evenly spaced in
+    time, ``most`` distinct ones at most."""
+    last = len(result.t) - 1
+    hit = figures.first_impact_index(result)
+    force = result.contact_force.sum(axis=1)
+    candidates = [0, *([hit] if hit is not None else []), *([int(np.argmax(force))] if force.max() > 0 else []), last]
+    candidates += [int(i) for i in np.linspace(0, last, 2 * most + 1).round()]
+    kept: list[int] = []
+    for i in candidates:
+        if i not in kept and len(kept) < most:
+            kept.append(i)
+    return sorted(kept)
+
+
+def _film_strip(result: SimulationResult, grounds: Sequence | None) -> Figure:
+    """Several bodies at a few times, one panel each (drawn over each other they would hide
+    what happens between them: bodies meeting move less than their size)."""
+    lo, hi = view_box(result.positions)
+    frames = strip_indices(result)
+    fig = Figure(figsize=(9.0, 7.6), dpi=PNG_DPI)
+    rects = [(0.0, 0.47, 0.5, 0.44), (0.5, 0.47, 0.5, 0.44), (0.0, 0.0, 0.5, 0.44), (0.5, 0.0, 0.5, 0.44)]
+    for i, rect in zip(frames, rects):
+        ax = _view_axes(fig, lo, hi, grounds, rect=rect)
+        _draw_body(ax, result.positions[i], result.links, result.contact_force[i])
+        ax.set_title(f"t = {result.t[i]:.4g} s", fontsize=9)
+    fig.suptitle(f"{result.stats.get('scene', 'run')}: the bodies at {len(frames)} time{'s' * (len(frames) != 1)}; "
+                 "red particles are in contact (a ground or another body)", fontsize=10)
+    return fig
+
+
 def figure_snapshots(result: SimulationResult, grounds: Sequence | None = None) -> Figure:
-    """The body in perspective at a few times (later ones darker), on its grounds."""
+    """The body in perspective at a few times (later ones darker), on its grounds; several
+    bodies in a panel per time (:func:`strip_indices`)."""
+    if body_count(result) > 1:
+        return _film_strip(result, grounds)
     lo, hi = view_box(result.positions)
     fig = Figure(figsize=(6.4, 6.0), dpi=PNG_DPI)
     ax = _view_axes(fig, lo, hi, grounds, rect=(0.0, 0.0, 1.0, 0.9))
@@ -212,7 +260,11 @@ def figure_lowest_gap(result: SimulationResult, grounds: Sequence | None = None)
     top.set_ylabel("gap along the normal (m)")
     top.set_title("Lowest point above the ground, along the nearest ground's normal", fontsize=10)
     bottom.plot(result.t, lowest * 1e3, color=BODY_COLOUR, lw=0.9)
-    bottom.set_ylim(min(-1.0, 1.1e3 * float(lowest.min())), 15.0)
+    bottom.set_ylim(min(-1.0, 1.1e3 * float(lowest.min())), NEAR_GROUND_MM)
+    if lowest.min() * 1e3 > NEAR_GROUND_MM:  # an empty zoom would look like a plotting failure
+        bottom.text(0.5, 0.5, f"no particle came within {NEAR_GROUND_MM:g} mm of a ground "
+                    f"(nearest {lowest.min():.3g} m)", transform=bottom.transAxes, ha="center", va="center",
+                    fontsize=9)
     bottom.set_ylabel("lowest gap near the ground (mm)")
     bottom.set_xlabel("t (s)")
     bottom.set_title(penetration_text(result, grounds), fontsize=9)

@@ -466,6 +466,7 @@ def _build(data: dict[str, Any], source: str, default_name: str, folder: Path | 
             body = _body(TableReader(table, f"bodies[{b}]", problems, BODY_KEYS), dim, folder)
             if body is not None:
                 bodies.append(body)
+    _check_unique_names(raw_bodies, problems)
     listed = _listed_contacts(top.raw("contacts", None), raw_bodies, problems, dim)
     simulation = _simulation(TableReader(top.raw("simulation", None), "simulation", problems, SIMULATION_KEYS))
     top.finish()
@@ -474,9 +475,6 @@ def _build(data: dict[str, Any], source: str, default_name: str, folder: Path | 
         top.fail("bodies", f"{total} particles", f"a scene may have at most {MAX_PARTICLES} particles")
     if not problems:
         _check_above_ground(bodies, grounds, problems)
-        names = [b.name for b in bodies]
-        for dup in sorted({n for n in names if names.count(n) > 1}):
-            problems.add("bodies[].name", dup, "body names must be unique")
     contacts = _contact_pairs(bodies, listed or [])
     if not problems:
         _check_contact_surfaces(bodies, raw_bodies, contacts, problems)
@@ -1108,22 +1106,37 @@ def _contact_pairs(bodies: list[Body], listed: list[BodyContact]) -> list[BodyCo
     return pairs
 
 
+def _check_unique_names(raw_bodies: Any, problems: Problems) -> None:
+    """No two bodies share a name (contacts, results and figures name them), each repeat
+    reported at its own index, whatever else is wrong."""
+    first: dict[str, int] = {}
+    for b, table in enumerate(raw_bodies if isinstance(raw_bodies, list) else []):
+        name = table.get("name") if isinstance(table, dict) else None
+        if not isinstance(name, str):
+            continue
+        if name in first:
+            problems.add(f"bodies[{b}].name", name, f"body names must be unique (bodies[{first[name]}] has it too)")
+        first.setdefault(name, b)
+
+
 def _check_contact_surfaces(bodies: list[Body], raw_bodies: list, contacts: list[BodyContact],
                             problems: Problems) -> None:
-    """Every body that may touch one has a closed, outward surface (a gap's sign needs an inside)."""
+    """Every body that may touch one has a closed, outward surface (a gap's sign needs an
+    inside), and so has every surface given explicitly, whether or not its body may touch."""
     partners: dict[int, list[str]] = {}
     for c in contacts:
         a, b = c.bodies
         partners.setdefault(a, []).append(repr(bodies[b].name) if a != b else "itself")
         if a != b:
             partners.setdefault(b, []).append(repr(bodies[a].name))
-    for b in sorted(partners):
+    for b in sorted(set(partners) | {b for b, table in enumerate(raw_bodies) if "surface" in table}):
         body = bodies[b]
         given = "surface" in raw_bodies[b]
         shape = raw_bodies[b].get("shape")
         value: Any = body.surface.tolist() if given else Words(
             f"(from shape = {shape!r})" if shape else "(none: explicit particles)")
-        touches = f"body {body.name!r} may touch {', '.join(partners[b])}, which needs a closed surface"
+        touches = (f"body {body.name!r} may touch {', '.join(partners[b])}, which needs a closed surface" if b in partners
+                   else f"body {body.name!r} gives a surface, which must be closed (its contacts with other bodies use it)")
         fix = "" if given else f"; give `surface = {_SURFACE_EXAMPLE[body.dim]}` (outward)"
         if len(body.surface) == 0:
             if shape in SPATIAL_SHAPES or (shape and body.dim == 2):

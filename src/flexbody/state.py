@@ -6,7 +6,8 @@ import numpy as np
 
 from .errors import InputError
 from .model import Model
-from .scene import Scene
+from ._fields import Problems
+from .scene import Scene, SceneError
 
 #: A 3D floating body may not start with T's middle angle closer than this to +-90 deg (the
 #: gimbal lock of its X-Y-Z angles, where the mass matrix is singular), in degrees.
@@ -49,7 +50,7 @@ def initial_coordinates(scene: Scene, model: Model) -> tuple[np.ndarray, np.ndar
         gauge = body["gauge"]
         xb, vb = x[first : first + n], v[first : first + n]
         if body.get("rigid") and n > 1:
-            _check_rigid_motion(xb, vb, scene.bodies[k].name)
+            _check_rigid_motion(xb, vb, scene, k)
         if len(gauge) == 3 and n > 1:
             qb, ub = (_rigid_3d(xb, vb, gauge) if body.get("rigid")  # T alone: its particles are fixed in it
                       else _floating_3d(xb, vb, gauge, scene.bodies[k].name))
@@ -86,8 +87,14 @@ def initial_coordinates(scene: Scene, model: Model) -> tuple[np.ndarray, np.ndar
     return np.array(q), np.array(u)
 
 
-def _check_rigid_motion(x: np.ndarray, v: np.ndarray, name: str) -> None:
-    """A rigid body's initial velocities must be a rigid motion ``v_i = v_c + w x r_i``."""
+def _check_rigid_motion(x: np.ndarray, v: np.ndarray, scene: Scene, body: int) -> None:
+    """A rigid body's initial velocities must be a rigid motion ``v_i = v_c + w x r_i``.
+
+    Raises
+    ------
+    flexbody.scene.SceneError
+        At the body's ``particle_velocities``, saying how far off they are.
+    """
     r = x - x.mean(axis=0)
     dv = v - v.mean(axis=0)
     if x.shape[1] == 2:  # least squares w: dv_i = w (-r_y, r_x)
@@ -100,9 +107,11 @@ def _check_rigid_motion(x: np.ndarray, v: np.ndarray, name: str) -> None:
         residual = dv - np.cross(w, r)
     scale = max(float(np.abs(v).max()), float(np.abs(dv).max()), 1e-12)
     if np.abs(residual).max() > 1e-9 * scale:
-        raise InputError(f"body {name!r}: rigid = true, but its initial particle velocities are not a rigid motion "
-                         f"(off by up to {np.abs(residual).max():.3g} m/s); give it only `velocity` and "
-                         "`angular_velocity`, not `particle_velocities`")
+        problems = Problems()
+        problems.add(f"bodies[{body}].particle_velocities", scene.bodies[body].particle_velocities.tolist(),
+                     f"body {scene.bodies[body].name!r} is rigid, and these are not a rigid motion (off by up to "
+                     f"{np.abs(residual).max():.3g} m/s); give it only `velocity` and `angular_velocity`")
+        raise SceneError(scene.source, problems.items)
 
 
 def rigid_parameters(scene: Scene, topology) -> dict[str, float]:
