@@ -539,3 +539,35 @@ def test_bodies_inside_each_other_are_one_problem_at_the_first_ones_position():
     assert ", and body 'b' starts inside body 'a': its particles [" in problem
     assert problem.endswith("bodies that may touch must start apart (or touching)")
     assert str(info.value).startswith("scene <mapping> has 1 problem(s):")
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_a_body_wholly_inside_another_is_refused_however_deep(dim):
+    """A small ring (sphere) placed in the middle of a large rigid block (box), farther from
+    its faces than the contact margin, where every gap reads the margin: found by winding
+    numbers, with its depth (the distance to the block's nearest face)."""
+    if dim == 2:
+        block = {"name": "block", "shape": "polygon", "rigid": True, "mass": 1.0, "position": [0.0, 0.0],
+                 "vertices": [[-0.5, 0.0], [0.5, 0.0], [0.5, 0.4], [-0.5, 0.4]]}
+        small = {"name": "small", "shape": "ring", "count": 12, "radius": 0.05, "mass": 0.01, "stiffness": 1000.0,
+                 "damping": 0.1, "position": [0.0, 0.2]}
+        gravity = [0.0, -9.81]
+    else:
+        block = {"name": "block", "shape": "box", "rigid": True, "count": [2, 2, 2], "size": [1.0, 1.0, 0.4],
+                 "mass_total": 1.0, "position": [0.0, 0.0, 0.2]}
+        small = {"name": "small", "shape": "sphere", "count": 20, "radius": 0.05, "mass_total": 0.1,
+                 "stiffness": 1000.0, "damping": 0.1, "position": [0.0, 0.0, 0.2]}
+        gravity = [0.0, 0.0, -9.81]
+    table = {"name": "inside", "gravity": gravity, "bodies": [block, small],
+             "contacts": [{"bodies": ["block", "small"]}], "simulation": {"t_end": 0.01}}
+    with pytest.raises(SceneError) as info:
+        flexbody.simulate(flexbody.load_scene(table))
+    (problem,) = info.value.problems
+    assert problem.startswith("`bodies[0].position` = ") and "body 'small' starts inside body 'block'" in problem
+    depth = float(problem.split("are up to ")[1].split(" m inside")[0])
+    scene = flexbody.load_scene(table)
+    x, box = scene.bodies[1].initial_positions(), scene.bodies[0].initial_positions()
+    nearest_face = np.minimum(x - box.min(axis=0), box.max(axis=0) - x).min(axis=1)  # each particle's (k,)
+    assert depth == float(f"{nearest_face.max():.3g}")  # its particle farthest from every face (three digits)
+    small["position"][-1] = 0.4 + 0.05 + 1e-3  # the same body 1 mm above the block: accepted
+    assert flexbody.simulate(flexbody.load_scene(table)).status == "success"

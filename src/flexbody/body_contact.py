@@ -431,6 +431,35 @@ class BodyContactModel(Model):
         x = self._coordinates.particles(q, None, p)[0]
         return np.concatenate([self.inner.gaps(q, p), self._surface_gaps(x)[0]])
 
+    def deep_inside(self, q, p) -> tuple[IntArray, FloatArray]:
+        """The primary slots whose particle lies inside the other body's closed surface, by
+        its winding number, however deep, and how far (m) from that surface, (k,) each.  A
+        gap reads ``margin`` beyond the margin (the broad phase looks no farther), so a body
+        placed wholly inside another reads apart from it: what a scene's start is checked
+        with (a run's steps never carry a particle that far: ``step_reach``)."""
+        x = self._coordinates.particles(q, None, p)[0]
+        primary = np.arange(self.n_primary)
+        others = primary[self.slot_body[primary] != self.particle_body[self.slot_particle[primary]]]
+        found, depths = [], []
+        for body in np.unique(self.slot_body[others]):
+            elements = self._body_elements[body]
+            corners = x[self.elements[elements].ravel()]
+            slots = others[self.slot_body[others] == body]
+            near = slots[((x[self.slot_particle[slots]] >= corners.min(axis=0))
+                          & (x[self.slot_particle[slots]] <= corners.max(axis=0))).all(axis=1)]  # in its box
+            for chunk in np.array_split(near, max(1, -(-len(near) // 256))):  # (k, m, d, d) at a time
+                inside = chunk[winding_numbers(x, self.elements[elements], self.slot_particle[chunk]) >= 0.5]
+                if not len(inside):
+                    continue
+                particles = self.slot_particle[inside]
+                contact = self._closest_features(x, np.column_stack([np.repeat(particles, len(elements)),
+                                                                     np.tile(elements, len(particles))]), read=False)
+                distance = np.full(len(x), np.inf)
+                np.minimum.at(distance, contact.particle, np.abs(contact.gap))
+                found.append(inside)
+                depths.append(distance[particles])
+        return (np.concatenate(found), np.concatenate(depths)) if found else (np.zeros(0, np.intp), np.zeros(0))
+
     def point_gaps(self, q, p, gaps: FloatArray) -> FloatArray:
         """As :meth:`flexbody.model.Model.point_gaps`: an edge row read crossed by more than
         ``AT_VERTEX`` of ``margin`` (its lines' distance along their common normal) reads

@@ -311,6 +311,11 @@ def _check_apart(scene: Scene, model: Model, q: np.ndarray, p: np.ndarray) -> No
     gaps = model.gaps(q, p)[model.n_ground_contacts :]
     inside = gaps < -1e-9 * size
     inside[model.first_edge :] = False  # edges crossed, not particles inside: crossed_edges below names them
+    depth = -gaps
+    deep, how_deep = model.deep_inside(q, p)  # beyond the margin too (a gap reads `margin` there)
+    deep, how_deep = deep[how_deep > 1e-9 * size], how_deep[how_deep > 1e-9 * size]  # not a touch's rounding
+    inside[deep] = True
+    depth[deep] = np.maximum(depth[deep], how_deep)
     names = [b.name for b in scene.bodies]
     rule = "bodies that may touch must start apart (or touching)"
 
@@ -329,7 +334,7 @@ def _check_apart(scene: Scene, model: Model, q: np.ndarray, p: np.ndarray) -> No
         rows = inside & (model.particle_body[model.slot_particle] == toucher[0]) & (model.slot_body == toucher[1])
         pairs.setdefault(tuple(sorted(toucher)), []).append(
             f"body {names[toucher[0]]!r} starts inside body {names[toucher[1]]!r}: its particles "
-            f"{model.slot_particle[rows].tolist()} (scene numbering) are up to {-gaps[rows].min():.3g} m inside its "
+            f"{model.slot_particle[rows].tolist()} (scene numbering) are up to {depth[rows].max():.3g} m inside its "
             "surface")
     raise SceneError(scene.source, [f"{at(pair[0])}: {', and '.join(found)}; {rule}" for pair, found in pairs.items()])
 
