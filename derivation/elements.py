@@ -49,7 +49,8 @@ Elements
     to edge, no vertex on a face): the signed distance ``n . (a - c)`` of their lines along
     their common unit normal ``n = side (b - a) x (d - c) / |...|``, the closest points'
     parameters s, t, and the Jacobian ``[(1 - s) n, s n, -(1 - t) n, -t n]``; its
-    ``_velocity`` twin as the surface kernels' (see :func:`edge_kernels`).
+    ``_velocity`` twin as the surface kernels' (see :func:`edge_kernels`), and its ``_slip``
+    twin for friction between the edges, as the triangle's.
 
 Every kernel is a :class:`Kernel`: named inputs (flat arrays of given sizes) and named
 outputs (SymPy matrices of those inputs only).
@@ -345,6 +346,14 @@ def edge_kernels() -> list[Kernel]:
                 - (1 - t) * _frame_vector(N, V["c"]) - t * _frame_vector(N, V["d"]))
     tangential = relative - relative.dot(normal) * normal
     positions = [(k, X[k]) for k in "abcd"] + [("side", [side])]
+    # Coulomb friction between the edges: the slip rates of the first edge's material point at
+    # the contact relative to the second's, along t1 = (b - a) / |b - a| and t2 = n x t1 (both
+    # perpendicular to n, which is perpendicular to b - a), linear in the velocities with the
+    # Jacobian [(1 - s) t, s t, -(1 - t) t, -t t], and their accelerations' velocity terms, as
+    # the triangle's slip kernel gives them for a particle on a face
+    tangents = [u / sp.sqrt(u.dot(u))]
+    tangents.append(normal.cross(tangents[0]))
+    slip = sp.Matrix([relative.dot(e) for e in tangents])
     return [
         Kernel("edge_3d", "Edge a -> b of one body against edge c -> d of another: the signed distance "
                "n . (a - c) of their lines (m, < 0 crossed), n = side (b - a) x (d - c) / |(b - a) x (d - c)|, "
@@ -358,6 +367,13 @@ def edge_kernels() -> list[Kernel]:
                positions + [(f"v{k}", V[k]) for k in "abcd"],
                {"gap_rate": rate, "tangential_velocity": sp.Matrix([tangential.dot(e) for e in (N.x, N.y, N.z)]),
                 "gap_bias": rate.jacobian(coordinates) * velocities}),
+        Kernel("edge_3d_slip", "Slip rates (m/s) of edge a -> b against edge c -> d: the velocity of the first "
+               "edge's material point at the contact relative to the second's along the unit tangents "
+               "t1 = (b - a) / |b - a| and t2 = n x t1, their accelerations' velocity terms (m/s^2), "
+               "d2 s / dt2 - J_t a, and t1, t2.",
+               positions + [(f"v{k}", V[k]) for k in "abcd"],
+               {"slip_rate": slip, "slip_bias": slip.jacobian(coordinates) * velocities,
+                "tangents": sp.Matrix([t.dot(e) for t in tangents for e in (N.x, N.y, N.z)])}),
     ]
 
 

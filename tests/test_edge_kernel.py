@@ -1,4 +1,4 @@
-"""The edge-against-edge kernels of 3D bodies (``edge_3d``, ``edge_3d_velocity``).
+"""The edge-against-edge kernels of 3D bodies (``edge_3d``, ``edge_3d_velocity``, ``edge_3d_slip``).
 
 References: closed forms (two crossed edges a known distance apart, the closest points of
 two lines from their own minimisation), central differences of the gap (the Jacobian and
@@ -99,6 +99,34 @@ def test_gap_rate_and_bias_are_the_gaps_time_derivatives(rng):
         np.testing.assert_allclose(tangential, relative - (relative @ n) * n, atol=1e-12)
 
 
+def test_slip_rates_are_the_contact_points_relative_velocity_along_the_edges_tangents(rng):
+    """``edge_3d_slip``: t1 along a -> b and t2 = n x t1 are orthonormal and normal to n; the
+    slip rates are the closest points' relative velocity (material points, s and t held)
+    along them; and ``J_t a + slip_bias`` is the time derivative of the slip rates along a
+    curved random motion of the ends (central differences)."""
+    for _ in range(20):
+        q0, v0, acc = rng.normal(size=(3, 4, 3))
+        side = np.array([1.0 if rng.random() < 0.5 else -1.0])
+
+        def slip_terms(q, v):  # rates (2,), bias (2,), tangents (6,)
+            return tuple(np.ravel(z) for z in K.edge_3d_slip(*q, side, *v))
+
+        def slip(t, q0=q0, v0=v0, acc=acc):
+            return slip_terms(q0 + v0 * t + acc * t**2 / 2, v0 + acc * t)[0]
+
+        rate, bias, tangents = slip_terms(q0, v0)
+        t1, t2 = np.ravel(tangents)[:3], np.ravel(tangents)[3:]
+        _, (s, t), n, _ = edge(*q0, side[0])
+        np.testing.assert_allclose(t1, (q0[1] - q0[0]) / np.linalg.norm(q0[1] - q0[0]), atol=1e-12)
+        np.testing.assert_allclose(t2, np.cross(n, t1), atol=1e-12)
+        assert abs(t1 @ n) < 1e-12 and abs(t2 @ n) < 1e-12
+        relative = (1 - s) * v0[0] + s * v0[1] - (1 - t) * v0[2] - t * v0[3]
+        np.testing.assert_allclose(rate, [relative @ t1, relative @ t2], rtol=1e-12, atol=1e-12)
+        along_acc = slip_terms(q0, acc)[0]  # J_t a: the rates are linear in the velocities
+        h = 1e-5
+        np.testing.assert_allclose(along_acc + bias, (slip(h) - slip(-h)) / (2 * h), rtol=1e-6, atol=1e-6)
+
+
 def test_kernels_equal_their_sympy_expressions(rng):
     """The generated NumPy kernels evaluate the SymPy outputs of derivation.elements."""
     pytest.importorskip("sympy")
@@ -122,7 +150,8 @@ def test_c_kernels_equal_numpy_kernels(rng):
 
     lib, m = runtime.library(), 7
     for name, inputs, widths in (("edge_3d", [3] * 4 + [1], [1, 2, 3, 12]),
-                                 ("edge_3d_velocity", [3] * 4 + [1] + [3] * 4, [1, 3, 1])):
+                                 ("edge_3d_velocity", [3] * 4 + [1] + [3] * 4, [1, 3, 1]),
+                                 ("edge_3d_slip", [3] * 4 + [1] + [3] * 4, [2, 2, 6])):
         args = [rng.normal(size=(m, size)) for size in inputs]
         args[4] = np.where(rng.random((m, 1)) < 0.5, -1.0, 1.0)
         outs = [np.empty((m, w)) for w in widths]
@@ -145,7 +174,9 @@ def test_the_edge_kernels_of_either_backend_give_the_same_arrays(rng):
     side = np.where(rng.random((1, m)) < 0.5, -1.0, 1.0)
     rates = [rng.normal(size=(3, m)) for _ in range(4)]
     c, numpy = EdgeKernels("c"), EdgeKernels("numpy")
-    for got, want in zip(c.edge_3d(*ends, side) + c.edge_3d_velocity(*ends, side, *rates),
-                         numpy.edge_3d(*ends, side) + numpy.edge_3d_velocity(*ends, side, *rates)):
+    for got, want in zip(c.edge_3d(*ends, side) + c.edge_3d_velocity(*ends, side, *rates)
+                         + c.edge_3d_slip(*ends, side, *rates),
+                         numpy.edge_3d(*ends, side) + numpy.edge_3d_velocity(*ends, side, *rates)
+                         + numpy.edge_3d_slip(*ends, side, *rates)):
         assert got.shape == np.shape(want)
         np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-13)

@@ -155,3 +155,9 @@ void fb_kb_edge_3d_velocity(long n_elements, const double *a, const double *b, c
     for (long e = 0; e < n_elements; ++e)
         fb_k_edge_3d_velocity(a + e * 3, b + e * 3, c + e * 3, d + e * 3, side + e * 1, va + e * 3, vb + e * 3, vc + e * 3, vd + e * 3, gap_rate + e * 1, tangential_velocity + e * 3, gap_bias + e * 1);
 }
+
+void fb_kb_edge_3d_slip(long n_elements, const double *a, const double *b, const double *c, const double *d, const double *side, const double *va, const double *vb, const double *vc, const double *vd, double *slip_rate, double *slip_bias, double *tangents)
+{
+    for (long e = 0; e < n_elements; ++e)
+        fb_k_edge_3d_slip(a + e * 3, b + e * 3, c + e * 3, d + e * 3, side + e * 1, va + e * 3, vb + e * 3, vc + e * 3, vd + e * 3, slip_rate + e * 2, slip_bias + e * 2, tangents + e * 6);
+}

@@ -212,7 +212,7 @@ class BodyContactModel(Model):
         # each body's surface particles, once (a pair's slots are its bodies' vertices)
         self._on_surface = [np.unique(self.elements[self.element_body == b]) for b in range(len(counts))]
         x0 = scene.initial_positions()
-        #: The edge contacts of the pairs with ``edges = true`` (3D, frictionless) come after
+        #: The edge contacts of the pairs with ``edges = true`` (3D) come after
         #: the slots and their twins (see :meth:`_lay_out`).
         self._edge_pairs = np.array([k for k, c in enumerate(scene.contacts) if c.edges], np.intp)
         flexible = {k for k, body in enumerate(scene.bodies) if not body.rigid}
@@ -300,7 +300,7 @@ class BodyContactModel(Model):
         self.slot_body = np.tile(np.concatenate(bodies), self.dim).astype(np.intp)
         self.slot_pair = np.tile(np.concatenate(slot_pairs), self.dim).astype(np.intp)
         self.allowed = allowed
-        #: Then the edge contacts of the pairs with ``edges = true`` (3D, frictionless): each
+        #: Then the edge contacts of the pairs with ``edges = true`` (3D): each
         #: surface edge that may touch of a pair's first body against the second body's edges,
         #: ``EdgeSlots.PER_EDGE`` times, from slot ``first_edge`` on; their particle is the edge's
         #: first end.
@@ -2147,12 +2147,16 @@ class BodyContactModel(Model):
             if tangents and d == 2:
                 slip_bias[k_g:, 0] = terms.slip_bias
             elif tangents:
-                # an edge row is frictionless (the scene's rule): no tangent rows (zero), which the
-                # solves leave out (no friction, so neither sticking nor sliding)
-                on = np.flatnonzero(np.asarray(slots) < self.first_edge)
+                # a particle's along its triangle's tangents, an edge row's along its own edge's
+                slots = np.asarray(slots, np.intp)
+                on, edge = np.flatnonzero(slots < self.first_edge), np.flatnonzero(slots >= self.first_edge)
                 element_axes = np.zeros((len(slots), 2, d))
-                slip_bias[k_g + on], element_axes[on] = self._element.slip_terms(
-                    x, v, self._slot_points(np.asarray(slots)[on]).T)
+                if len(on):
+                    slip_bias[k_g + on], element_axes[on] = self._element.slip_terms(
+                        x, v, self._slot_points(slots[on]).T)
+                if len(edge):
+                    slip_bias[k_g + edge], element_axes[edge] = self._edge_slots.slip_terms(
+                        x, v, slots[edge] - self.first_edge, self.element_of[slots[edge]])
                 axes = np.concatenate([axes, element_axes])
         if not tangents:
             directions = [normals]

@@ -142,7 +142,7 @@ class EdgeKernels:
     The two agree to rounding (tested)."""
 
     #: Each output's size per pair, in the kernels' order.
-    SIZES = {"edge_3d": (1, 2, 3, 12), "edge_3d_velocity": (1, 3, 1)}
+    SIZES = {"edge_3d": (1, 2, 3, 12), "edge_3d_velocity": (1, 3, 1), "edge_3d_slip": (2, 2, 6)}
 
     def __init__(self, backend: str = "numpy") -> None:
         from .assembly import _kernels_module
@@ -173,6 +173,13 @@ class EdgeKernels:
         if self._c is None:
             return self.numpy.edge_3d_velocity(a, b, c, d, side, va, vb, vc, vd)
         return self._run("edge_3d_velocity", (a, b, c, d, side, va, vb, vc, vd))
+
+    def edge_3d_slip(self, a, b, c, d, side, va, vb, vc, vd) -> tuple[FloatArray, ...]:
+        """Slip rates (2, k) along t1 = (b - a) / |b - a| and t2 = n x t1, their accelerations'
+        velocity terms (2, k) and t1, t2 (6, k): friction between the edges."""
+        if self._c is None:
+            return self.numpy.edge_3d_slip(a, b, c, d, side, va, vb, vc, vd)
+        return self._run("edge_3d_slip", (a, b, c, d, side, va, vb, vc, vd))
 
     def _run(self, name: str, inputs) -> tuple[FloatArray, ...]:
         """The compiled kernel ``name`` on ``inputs`` (each (size, k)): its outputs (size, k)."""
@@ -759,6 +766,17 @@ class EdgeSlots:
         coefficients = np.column_stack([1.0 - s, s, -(1.0 - t), -t])
         margin = _inside_edges(x, points[:, :2], points[:, 2:], s, t)
         return EdgeTerms(gap[0], coefficients, normal.T, rate[0], bias[0], margin)
+
+
+    def slip_terms(self, x: FloatArray, v: FloatArray, rows: IntArray, codes: IntArray) -> tuple[FloatArray, FloatArray]:
+        """``rows`` (k,) against the edges and sides of their ``codes`` (k,): the velocity terms
+        (k, 2) of the slip rates' accelerations along t1 = (b - a) / |b - a| and t2 = n x t1
+        of the row's own edge a -> b, and those tangents (k, 2, 3) (the ``edge_3d_slip``
+        kernel; only friction asks for them)."""
+        points = self.points(rows, codes)
+        *ends, sides = self._ends(x, points, codes)
+        _, bias, tangents = self.kernels.edge_3d_slip(*ends, sides, *(v[points[:, j]].T for j in range(4)))
+        return bias.T, tangents.T.reshape(-1, 2, 3)
 
 
 def _subset(found: EdgeContact, keep: np.ndarray) -> EdgeContact:

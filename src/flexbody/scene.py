@@ -26,7 +26,7 @@ refuses, naming the bodies)::
     bodies = ["ball", "floor"]   # two body names (the same twice: needs self_contact = true)
     friction = 0.0         # Coulomb mu >= 0, default 0
     restitution = 0.0      # Newton e in [0, 1], default 0
-    edges = false          # default; true (3D, this pair's friction 0): edges touch edges too
+    edges = false          # default; true (3D): edges touch edges too
 
 Pairs that touch: each ``[[contacts]]`` entry (each pair once), then every pair of bodies
 with ``collide = true`` and every body with ``self_contact = true`` not listed there, with
@@ -259,8 +259,8 @@ class BodyContact:
     restitution : float
         Newton's e between the two, in [0, 1]; default 0 (plastic).
     edges : bool
-        Whether their surfaces' edges touch each other too (3D, this pair frictionless;
-        other pairs and the grounds may have friction: :class:`flexbody.edge_contact.EdgeSlots`);
+        Whether their surfaces' edges touch each other too (3D, with the pair's friction
+        and restitution: :class:`flexbody.edge_contact.EdgeSlots`);
         default False: only a particle of one touches the other's surface, and edges that
         meet pass through each other (measured).
     """
@@ -1052,10 +1052,6 @@ def _listed_contacts(raw: Any, raw_bodies: Any, problems: Problems, dim: int) ->
         if edges and dim != 3:
             r.fail("edges", edges, "applies to 3D bodies only (edges of triangle surfaces; a 2D boundary's "
                    "segments meet at particles)")
-            edges = None
-        elif edges and friction:  # edge rows have no tangent rows; other pairs' and grounds' rows keep theirs
-            r.fail("edges", edges, f"needs friction = 0 on this pair, not {friction:g} (edge contacts are "
-                   "frictionless so far; other pairs and the grounds may have friction)")
             edges = None
         r.finish()
         indices = _contact_bodies(r, pair, names, self_contact)
