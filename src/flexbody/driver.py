@@ -1319,7 +1319,7 @@ class _Run:
                    "went unseen); a tighter --rtol or more particles on the bodies make it rarer"
                    if self.model.dim == 2 else
                    "two edges meeting are a contact only between bodies whose [[contacts]] entry has edges = true "
-                   f"(3D, without friction; at most {EdgeSlots.PER_EDGE} edges of the second body under one edge of "
+                   f"(3D; at most {EdgeSlots.PER_EDGE} edges of the second body under one edge of "
                    "the first at once), so here edges passed through each other unseen; finer surfaces make it rarer "
                    "(a vertex meets a face first more often)")
             out.append(f"bodies {first!r} and {second!r} crossed {_CROSSED[self.model.dim]} {when} ({first!r}: {how}), "
