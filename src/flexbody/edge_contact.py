@@ -767,7 +767,6 @@ class EdgeSlots:
         margin = _inside_edges(x, points[:, :2], points[:, 2:], s, t)
         return EdgeTerms(gap[0], coefficients, normal.T, rate[0], bias[0], margin)
 
-
     def slip_terms(self, x: FloatArray, v: FloatArray, rows: IntArray, codes: IntArray) -> tuple[FloatArray, FloatArray]:
         """``rows`` (k,) against the edges and sides of their ``codes`` (k,): the velocity terms
         (k, 2) of the slip rates' accelerations along t1 = (b - a) / |b - a| and t2 = n x t1
