@@ -733,8 +733,10 @@ class BodyContactModel(Model):
         y = np.asarray(y, float)
         held, push = np.asarray(held, np.intc), np.asarray(push, float)
         key = (y, np.asarray(p), held, push, self.element_of) + ((self._slip, self._slip_held) if self._frictional else ())
+        probe = (0, len(y) // 2, len(y) - 3)  # coordinates that differ between most states: a cheap first test
         for kept, solved in reversed(self._answers):  # the newest first
-            if all(map(np.array_equal, kept, key)):
+            if len(kept[0]) == len(y) and all(kept[0][i] == y[i] for i in probe) \
+                    and all(map(np.array_equal, kept, key)):
                 return solved
         solved = self._solve(y, p, held, push)
         if len(self._answers) == ANSWERS_KEPT:
