@@ -717,3 +717,34 @@ def test_a_bar_sliding_crosswise_on_a_bar_on_a_rough_ground_stops_and_the_lower_
     (stick,) = set(r.events_time[r.events_kind == "stick"])
     assert stick == pytest.approx(t1 + (v0 - mu * np.sqrt(2 * G * DROP)) / (mu * G), abs=1e-5)
     assert np.abs(r.velocities[r.t > stick + 1e-3, 8:]).max() < 1e-12  # stuck
+
+
+def test_a_fuzzed_rough_stack_sticks_and_slides_on_its_edge_rows(monkeypatch):
+    """A fuzz's scene (tests/reference/fuzz_rough_edges_crossed_stack.json, stop 58: a
+    flexible box dropped tilted onto a rigid one, friction 0.5 between them with edge
+    contacts, a frictionless ground): its edge rows stick and slide, nothing crosses and
+    nothing is inside anything by 1e-9 m (measured 1.3e-11 m), the ledger closes to 1e-6
+    (8.0e-8), and the horizontal momentum, which only the bodies' own contacts act on,
+    stays 0 (1.4e-11 kg m/s)."""
+    from flexbody import driver
+    from flexbody.contact import HELD, SLIDING
+
+    phases = {HELD: set(), SLIDING: set()}  # edge rows with friction found sticking, sliding after an instant
+    resolve_at = driver._Run.resolve_at
+
+    def watched(run, t, touching, leaving):
+        events = resolve_at(run, t, touching, leaving)
+        model = run.model
+        edge = np.arange(model.n_contacts) >= model.n_ground_contacts + model.first_edge
+        for phase in phases:
+            phases[phase] |= set(np.flatnonzero(edge & (run.phases.phase == phase) & (model.mu > 0.0)).tolist())
+        return events
+
+    monkeypatch.setattr(driver._Run, "resolve_at", watched)
+    r = flexbody.simulate(flexbody.load_scene(reference_table("fuzz_rough_edges_crossed_stack")))
+    assert r.status == "success", r.message
+    assert phases[HELD] and phases[SLIDING]
+    assert r.stats["max_edge_crossing_m"] == 0.0 and r.stats["max_penetration_m"] < 1e-9
+    assert r.stats["energy_drift_relative"] < 1e-6
+    momentum = np.einsum("tnd,n->td", r.velocities, r.masses)[:, :2]
+    np.testing.assert_allclose(momentum, 0.0, atol=1e-9)
