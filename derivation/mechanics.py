@@ -84,10 +84,12 @@ def _parameters(top: Topology) -> tuple[list[sp.Symbol], dict[str, str]]:
     for i in range(n):
         p.append(sp.Symbol(f"m{i}", positive=True))
         text[f"m{i}"] = f"mass of particle {i} (kg)"
+    drawn = {l_ for l_, rigid in enumerate(b.rigid for b in top.bodies for _ in b.links) if rigid}
     for prefix, meaning in (("k", "stiffness (N/m)"), ("c", "damping (N s/m)"), ("L", "rest length (m)")):
         for l_ in range(nl):
             p.append(sp.Symbol(f"{prefix}{l_}", real=True))
-            text[f"{prefix}{l_}"] = f"{meaning} of link {l_}"
+            text[f"{prefix}{l_}"] = f"{meaning} of link {l_}" + (", unused (a rigid body's link: it only draws the body)"
+                                                                 if l_ in drawn else "")
     for axis in "xyz"[: top.dim]:
         p.append(sp.Symbol(f"g_{axis}", real=True))
         text[f"g_{axis}"] = f"gravity, {axis} component (m/s^2)"

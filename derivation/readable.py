@@ -200,6 +200,10 @@ def readable(model: SymbolicModel) -> ReadableEquations:
     # Links, in their body's frame: P = r_i - r_j and the partial velocities are both body-fixed.
     link, first = 0, 0
     for b, body in enumerate(top.bodies):
+        if body.rigid:  # fixed in T: its links only draw it (no load, as in derivation.mechanics)
+            link += len(body.links)
+            first += body.n_particles
+            continue
         for a, c_ in body.links:
             i, j = first + a, first + c_
             P, dv = (X_b[i] - X_b[j]).applyfunc(sp.expand), (V_b[j] - V_b[i]).applyfunc(sp.expand)

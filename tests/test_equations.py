@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 
@@ -212,6 +214,25 @@ def test_readable_equations_equal_kanes_symbolically(formulation, damper):
                             damper=damper))
     model = derive(scene.topology(), formulation)
     assert check_identity(model, readable(model)) == 0.0
+
+
+@pytest.mark.parametrize("damper", ["relative", "axial"])
+def test_readable_equations_of_a_rigid_body_beside_a_flexible_one_equal_kanes(damper):
+    """A rigid triangle (its links only draw it: no spring, no damper in Kane's equations)
+    beside a flexible bar: the readable rows carry no named term of the rigid body's links
+    (they carried its dampers' torques, -c omega r^2 in the angle's row, that no run has) and
+    equal Kane's symbolically."""
+    from derivation.mechanics import derive
+    from derivation.readable import check_identity, readable
+
+    scene = make_scene(body(name="tri", shape="polygon", vertices=[[-0.1, 0.0], [0.1, 0.0], [0.0, 0.1]], rigid=True,
+                            particles=None, links=None, stiffness=None, damping=None, damper=None, mass=0.1),
+                       body(name="bar", particles=[[0.3, 0.0], [0.5, 0.0]], links=[[0, 1]], damper=damper))
+    assert len(scene.bodies[0].links) == 3  # links 0, 1 and 2; the bar's is link 3
+    model = derive(scene.topology(), "floating")
+    eqs = readable(model)
+    assert check_identity(model, eqs) == 0.0
+    assert {re.search(r"\d+", str(s)).group() for s in eqs.terms} == {"3"}
 
 
 def test_readable_equations_of_a_ring_equal_kanes_at_random_states():
