@@ -1176,15 +1176,24 @@ class _Run:
                 how = (f"{in_a_row} in a row, none held, {unending} of them no slower than {CASCADE_FALL:g} of the "
                        "one before" if unending > bound else f"held and released again {sum(held)} times")
                 e_here = float(self.restitution[e.contact])
+                advice = ("tighten --rtol/--atol, or add damping so the body settles; if its impacts come in a burst "
+                          "that ends (a pile settling, its contacts taking turns), raise the bound: "
+                          f"simulation.chatter_impacts (--chatter-impacts), now {bound}")
                 if unending > bound and e_here >= CASCADE_FALL:  # an elastic rattle: no cascade ends it
                     how += f"; e = {e_here:g} at this contact takes too little of each rebound for it to die out"
+                elif unending > bound and e_here > 0.0 and e.contact < self.model.n_ground_contacts:
+                    # a flexible body's particle pushed back by its neighbours at once: a rebound is plastic
+                    # only below the speed that would rise ZENO_RISE against gravity alone (_rebound_laws)
+                    how += (f"; with e = {e_here:g} every rebound faster than {self.min_rebound[e.contact]:.2g} m/s "
+                            "(the speed that rises 1e-9 of the scene against gravity) leaves, and the body's "
+                            "springs push the particle back at once, so its bounces keep pace with the body's "
+                            "vibration (a lattice disc landing with e >= 0.7)")
+                    advice = "lower this ground's restitution (tolerances and damping do not end such bounces)"
                 raise SimulationFailed(
                     "chattering",
                     f"particle {particle} impacted {len(recent)} times within {CHATTER_WINDOW * 1e3:g} ms up to "
                     f"t = {t:.9g} s at normal speeds up to {speed:.3g} m/s (an accumulation of impacts: {how}); "
-                    "tighten --rtol/--atol, or add damping so the body settles; if its impacts come in a burst "
-                    "that ends (a pile settling, its contacts taking turns), raise the bound: simulation."
-                    f"chatter_impacts (--chatter-impacts), now {bound}.",
+                    f"{advice}.",
                 )
 
     def check_folds(self, t: float, new_events: list[Event],
