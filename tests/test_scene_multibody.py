@@ -526,7 +526,7 @@ def test_bodies_that_start_inside_each_other_are_refused(tmp_path, capsys):
     assert not out.exists()
 
 
-def test_bodies_inside_each_other_are_one_problem_at_the_first_ones_position():
+def test_bodies_inside_each_other_are_one_problem_at_the_position_of_one_inside():
     """A square block and a ring each with particles inside the other (a corner of the block
     through the ring's side, the ring's particles in the block): one problem for the pair,
     in the scene's format (its source, the field), naming both ways."""
@@ -563,7 +563,7 @@ def test_a_body_wholly_inside_another_is_refused_however_deep(dim):
     with pytest.raises(SceneError) as info:
         flexbody.simulate(flexbody.load_scene(table))
     (problem,) = info.value.problems
-    assert problem.startswith("`bodies[0].position` = ") and "body 'small' starts inside body 'block'" in problem
+    assert problem.startswith("`bodies[1].position` = ") and "body 'small' starts inside body 'block'" in problem
     depth = float(problem.split("are up to ")[1].split(" m inside")[0])
     scene = flexbody.load_scene(table)
     x, box = scene.bodies[1].initial_positions(), scene.bodies[0].initial_positions()

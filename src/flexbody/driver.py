@@ -300,8 +300,9 @@ def _check_apart(scene: Scene, model: Model, q: np.ndarray, p: np.ndarray) -> No
     Raises
     ------
     flexbody.scene.SceneError
-        One problem per pair of bodies, at the position of the first: the particles of each
-        inside the other's surface and how deep, or the edges that cross.
+        One problem per pair of bodies, at the position of a body whose particles are inside
+        the other: the particles of each inside the other's surface and how deep, or the
+        edges that cross.
     """
     from .scene import SceneError  # here, as in _settings: the validation's only users
 
@@ -329,14 +330,14 @@ def _check_apart(scene: Scene, model: Model, q: np.ndarray, p: np.ndarray) -> No
             raise SceneError(scene.source, [f"{at(first)}: bodies {names[first]!r} and {names[second]!r} start crossed "
                                             f"{_CROSSED[model.dim]} ({names[first]!r}: {how}); {rule}"])
         return
-    pairs: dict[tuple[int, int], list[str]] = {}  # each pair of bodies once, whichever is inside which
+    pairs: dict[tuple[int, int], list] = {}  # each pair of bodies once, whichever is inside which
     for toucher in sorted(set(zip(model.particle_body[model.slot_particle[inside]], model.slot_body[inside]))):
         rows = inside & (model.particle_body[model.slot_particle] == toucher[0]) & (model.slot_body == toucher[1])
-        pairs.setdefault(tuple(sorted(toucher)), []).append(
-            f"body {names[toucher[0]]!r} starts inside body {names[toucher[1]]!r}: its particles "
-            f"{model.slot_particle[rows].tolist()} (scene numbering) are up to {depth[rows].max():.3g} m inside its "
-            "surface")
-    raise SceneError(scene.source, [f"{at(pair[0])}: {', and '.join(found)}; {rule}" for pair, found in pairs.items()])
+        found = pairs.setdefault(tuple(sorted(toucher)), [int(toucher[0])])  # at the position of a body inside
+        found.append(f"body {names[toucher[0]]!r} starts inside body {names[toucher[1]]!r}: its particles "
+                     f"{model.slot_particle[rows].tolist()} (scene numbering) are up to {depth[rows].max():.3g} m "
+                     "inside its surface")
+    raise SceneError(scene.source, [f"{at(inner)}: {', and '.join(found)}; {rule}" for inner, *found in pairs.values()])
 
 
 def _scipy_only(method: str, why: str) -> str:
