@@ -309,6 +309,11 @@ def test_rows_equal_single_runs_failed_runs_are_rows_and_the_cluster_is_shut_dow
     # The folder holds a sweep now: a second one there is refused, nothing changes.
     with pytest.raises(SweepError, match="already holds a sweep"):
         sweep(tiny(tmp_path), {"bodies.b.stiffness": stiffness}, out, workers=1, progress=False)
+    # Nor does a sweep go into a folder of other files (tmp_path holds the scenes): nothing written there.
+    before = sorted(p.name for p in tmp_path.iterdir())
+    with pytest.raises(SweepError, match="holds other files"):
+        sweep(tiny(tmp_path), {"bodies.b.stiffness": stiffness}, tmp_path, workers=1, progress=False)
+    assert sorted(p.name for p in tmp_path.iterdir()) == before
 
 
 def test_the_cluster_is_shut_down_when_the_sweep_fails(tmp_path, monkeypatch):

@@ -799,6 +799,9 @@ def _check_out(out: Path | None, resume: bool, base: dict, record: dict, columns
         if info_path.exists() or (out / "sweep.csv").exists():
             raise SweepError(f"`--out` = {str(out)!r}: already holds a sweep; add --resume to finish it, "
                              "or choose another folder")
+        if out.is_dir() and any(out.iterdir()):  # as `flexbody run` refuses: its tables and figures would mix in
+            raise SweepError(f"`--out` = {str(out)!r}: holds other files; a sweep writes sweep.csv, sweep.parquet, "
+                             "sweep.json and its figures there, so name a new or empty folder")
         return []
     if not info_path.exists():
         raise SweepError(f"`--resume`: {str(out)!r} holds no sweep.json (nothing to resume)")
