@@ -80,7 +80,7 @@ def _parser() -> argparse.ArgumentParser:
         "export", help="write a run's result for other programs: a VTK time series for ParaView",
         description="Read DIR/result.npz (written by flexbody run) and write DIR/vtk/: run.pvd (open it in "
                     "ParaView) and frames/frame_*.vtu with the particles, the links as lines, and point data "
-                    "velocity, contact_force, phase (1 held by the ground, 0 free) and mass.  An existing DIR/vtk "
+                    "velocity, contact_force, phase (1 held, by a ground or another body; 0 free) and mass.  An existing DIR/vtk "
                     "is replaced whole, in one step.",
     )  # fmt: skip
     export.add_argument("dir", metavar="DIR", help="a run's folder (flexbody run SCENE --out DIR)")
