@@ -131,3 +131,14 @@ def test_a_large_contact_table_of_colliding_bodies_is_noted(tmp_path, monkeypatc
     listed = load_scene(_rings_scene(tmp_path / "listed.toml", False,
                                      '\n[[contacts]]\nbodies = ["ring0", "ring1"]\n'))
     assert runner.contact_table_note(listed, load_model(listed)) is None
+
+
+def test_a_formulation_asked_for_and_not_run_is_noted(tmp_path, capsys):
+    """A scene of rigid bodies alone runs on its frames T whichever formulation is asked for
+    (a helper asked for particles and was not told)."""
+    assert main(["run", "rigid_bar", "--formulation", "particles", "--out", str(tmp_path / "a"), "--no-figures"]) == 0
+    assert "note: `--formulation particles`: a scene of rigid bodies alone runs on their frames T" \
+        in capsys.readouterr().err
+    assert json.loads((tmp_path / "a" / "summary.json").read_text())["formulation"] == "floating"
+    assert main(["run", "rigid_bar", "--formulation", "floating", "--out", str(tmp_path / "b"), "--no-figures"]) == 0
+    assert "note:" not in capsys.readouterr().err

@@ -65,9 +65,13 @@ def run_command(args: argparse.Namespace) -> int:
                      impact=args.impact, impact_dt=args.impact_dt, chatter_impacts=args.chatter_impacts)
     settings = _settings(scene, overrides)  # every option checked before deriving or compiling
     model = load_model(scene, backend=settings.backend, formulation=settings.formulation)
-    note = contact_table_note(scene, model)
-    if note and not args.quiet:
-        print(f"note: {note}", file=sys.stderr)
+    notes = [contact_table_note(scene, model)]
+    if args.formulation and settings.formulation != args.formulation:  # asked for, and not what runs
+        notes.append(f"`--formulation {args.formulation}`: a scene of rigid bodies alone runs on their frames T, "
+                     f"derived whole ({settings.formulation})")
+    for note in notes:
+        if note and not args.quiet:
+            print(f"note: {note}", file=sys.stderr)
     bar = None if args.quiet else ProgressBar()
     with _interrupt_kills():  # the wall-time budget is checked by the driver and inside the C integrator
         result = simulate(scene, model=model, **overrides, max_wall_time=max_wall_time, progress=bar)
