@@ -227,9 +227,10 @@ def test_max_events_stops_with_status_and_message(ball):
 
 @pytest.mark.parametrize("backend, method", [("numpy", "RK45")] + ([("c", "dopri5")] if "c" in BACKENDS else []))
 def test_max_wall_time_stops_a_real_run_with_status_too_slow(ball, backend, method):
-    """max_wall_time = 0: the deadline has passed at the first check (after a SciPy step, or after
-    the compiled path's first segment); the arrays keep what was computed until then."""
-    r = flexbody.simulate(ball, backend=backend, method=method, max_wall_time=0.0)
+    """max_wall_time = 1e-9 s (0 is refused: no run could keep it): the deadline has passed at
+    the first check (after a SciPy step, or after the compiled path's first segment); the
+    arrays keep what was computed until then."""
+    r = flexbody.simulate(ball, backend=backend, method=method, max_wall_time=1e-9)
     assert r.status == "too_slow" and not r.success
     assert "max_wall_time" in r.message
     assert r.stats["t_reached"] < 2.0 and len(r.t) < 2001

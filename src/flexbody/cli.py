@@ -119,12 +119,12 @@ def _parser() -> argparse.ArgumentParser:
                                        "(sweep), friction: work-precision on the incline (friction_wp) and the mu x e map "
                                        "(friction_map), bodies that touch each other (bodies), Lemke's method in C against NumPy (lcp), "
                                        "held contacts with friction in C against NumPy (held_friction); "
-                                       "JSON and PNG in --out.")
+                                       "each writes its numbers as JSON in --out, and its charts as PNG where it draws any.")
     bench.add_argument("--study", choices=("wp", "stability", "resolution", "mujoco", "mujoco3d", "run", "scale", "sweep",
                                            "friction_wp", "friction_map", "bodies", "lcp", "held_friction"),
                        action="append",
                        help="which study (repeatable; default: all; mujoco and mujoco3d need flexbody[mujoco])")
-    bench.add_argument("--out", default="bench", metavar="DIR", help="output folder")
+    bench.add_argument("--out", default="bench", metavar="DIR", help="output folder (default: bench/ in the current folder)")
     bench.add_argument("--repeats", type=int, default=5, help="timing repeats (median is reported)")
     bench.add_argument("--quick", action="store_true", help="fewer cases and repeats (about a minute)")
     return parser

@@ -12,6 +12,7 @@ and the guards stay here, whichever path integrates.
 from __future__ import annotations
 
 import numbers
+import os
 import time
 from collections import defaultdict, deque
 from collections.abc import Callable
@@ -243,10 +244,12 @@ def _settings(scene: Scene, overrides: dict) -> SimulationSettings:
                         f"{values['backend']!r} use a SciPy method ({', '.join(METHODS[len(COMPILED_METHODS):])})")
     if values["method"] not in METHODS:
         problems.append(f"`method` = {shown(values['method'])}: must be one of {list(METHODS)}")
-    if not 1e-14 <= values["rtol"] < 1:  # nan fails every comparison
-        problems.append(f"`rtol` = {values['rtol']!r}: must be in [1e-14, 1)")
-    if not 0 < values["atol"] < 1:
-        problems.append(f"`atol` = {values['atol']!r}: must be in (0, 1)")
+    for key, inside, rule in (("rtol", lambda x: 1e-14 <= x < 1, "[1e-14, 1)"), ("atol", lambda x: 0 < x < 1, "(0, 1)")):
+        value = values[key]  # a string would not compare (a bare TypeError); nan fails every comparison
+        if not isinstance(value, numbers.Real) or isinstance(value, bool):
+            problems.append(f"`{key}` = {shown(value)}: must be a number in {rule}")
+        elif not inside(value):
+            problems.append(f"`{key}` = {value!r}: must be in {rule}")
     bound = values["chatter_impacts"]
     if not isinstance(bound, numbers.Integral) or isinstance(bound, bool) or bound < 1:
         problems.append(f"`chatter_impacts` = {shown(bound)}: must be an integer >= 1 (impacts of one particle "
@@ -1516,11 +1519,19 @@ def simulate(
     method, rtol, atol, t_end, output_dt, backend, formulation, impact, impact_dt, chatter_impacts
         Override the scene's ``[simulation]`` settings.
     max_events : int
-        Stop with status ``max_events`` after this many events.
+        Stop with status ``max_events`` after this many events (>= 1).
     max_wall_time : float
-        Stop with status ``too_slow`` after this many seconds (checked between steps).
+        Stop with status ``too_slow`` after this many seconds (> 0; inf: no limit; checked
+        between steps).
     progress : callable, optional
-        ``progress(t, t_end, n_events)``, called after every step.
+        ``progress(t, t_end, n_events)``, called after each stretch of steps between events
+        (SciPy's steppers, or the compiled loop, which runs such a stretch whole) and at the end.
+
+    Raises
+    ------
+    flexbody.errors.InputError
+        A bad scene or option (naming it, its value and the rule), or a ``model`` loaded for
+        another scene, backend or formulation than the one asked for; nothing is run.
 
     Returns
     -------
@@ -1528,16 +1539,26 @@ def simulate(
         ``status`` says whether it reached ``t_end``; if not, ``message`` says why and
         what to change, and the arrays hold what was computed until then.
     """
+    from .errors import InputError, shown
+
+    if not isinstance(scene, (Scene, str, os.PathLike)):
+        raise InputError(f"`scene` = {shown(scene)}: must be a Scene, a scene file's path or a bundled scene's name")
     if not isinstance(scene, Scene):
         scene = load_scene(scene)
+    _check_run_options(max_events, max_wall_time, progress)
+    if model is not None:  # the model decides what it is; an option asking for another is a mistake
+        for name, value in (("backend", backend), ("formulation", formulation)):
+            own = model.formulation if name == "formulation" else model.backend
+            if value is not None and (resolved_formulation(scene, value) if name == "formulation" else value) != own:
+                raise InputError(f"`{name}` = {shown(value)}: the model given is {name} {own!r}; load one with "
+                                 f"load_model(scene, {name}={value!r}), or leave {name} out")
+        backend, formulation = model.backend, model.formulation
     settings = _settings(scene, dict(method=method, rtol=rtol, atol=atol, t_end=t_end, output_dt=output_dt,
                                      backend=backend, formulation=formulation, impact=impact, impact_dt=impact_dt,
                                      chatter_impacts=chatter_impacts))
     if model is None:
         model = load_model(scene, backend=settings.backend, formulation=settings.formulation)
     elif getattr(model, "made_for", None) is not None and model.made_for != (this := made_for(scene)):
-        from .errors import InputError
-
         differ = [name for name, a, b in zip(MADE_FOR, model.made_for, this) if a != b]
         raise InputError(f"`model`: loaded for a scene with other {', '.join(differ)} than {scene.name!r}, which it "
                          "keeps from when it was made; load_model(scene) makes this scene's")
@@ -1548,6 +1569,24 @@ def simulate(
         status, message = run.run()
         wall = time.perf_counter() - start
         return run.result(status, message, wall)
+
+
+def _check_run_options(max_events, max_wall_time, progress) -> None:
+    """:func:`simulate`'s run limits and progress callback, checked before any work.
+
+    Raises
+    ------
+    flexbody.errors.InputError
+        Naming the option, its value and the rule.
+    """
+    from .errors import InputError, shown
+
+    if not isinstance(max_events, numbers.Integral) or isinstance(max_events, bool) or max_events < 1:
+        raise InputError(f"`max_events` = {shown(max_events)}: must be an integer >= 1")
+    if not isinstance(max_wall_time, numbers.Real) or isinstance(max_wall_time, bool) or not max_wall_time > 0:
+        raise InputError(f"`max_wall_time` = {shown(max_wall_time)}: must be a number of seconds > 0 (inf: no limit)")
+    if progress is not None and not callable(progress):
+        raise InputError(f"`progress` = {shown(progress)}: must be a callable progress(t, t_end, n_events), or None")
 
 
 @contextmanager

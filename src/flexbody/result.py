@@ -32,23 +32,27 @@ STATUSES = {
 }
 
 
-@dataclass
+@dataclass(eq=False)  # identity: arrays have no single truth value (compare them with numpy)
 class SimulationResult:
     """Everything a run produced.
 
     Attributes
     ----------
     t : ndarray, shape (nt,)
-    positions, velocities : ndarray, shape (nt, n, 2)
-        Particles in N.
+    positions, velocities : ndarray, shape (nt, n, dim)
+        Particles in N (dim = 2 or 3).
     contact_force : ndarray, shape (nt, n)
-        Normal constraint force on each particle (N, >= 0; summed over grounds).
+        Normal constraint force on each particle (N, >= 0), summed over its contacts: with
+        the grounds, and where it touches another body's surface (or an edge contact's
+        edge of it: there (1 - s) and s of the force on its two ends).  The reaction on the
+        surface touched is not in it.
     kinetic, spring, gravity, damping_work, impact_loss : ndarray, shape (nt,)
         The energy ledger (J), with ``friction_work``: their sum stays at its initial value.
         ``impact_loss`` holds what impulses took, normal and tangential.
     events_time, events_particle, events_kind, events_held : ndarray, shape (ne,)
-        Each impact or lift-off; ``events_held`` is False for an impacted particle that
-        leaves at once because holding it would need a pulling force.
+        Each impact, lift-off, stick or slip (``events_kind``: ``"impact"``,
+        ``"liftoff"``, ``"stick"``, ``"slip"``); ``events_held`` is False for an impacted
+        particle that leaves at once because holding it would need a pulling force.
     events_surface : ndarray of int, shape (ne,)
         What each event's particle touches: the index of the body whose surface it is (in
         the scene's bodies; its own for a self-contact), or -1 for a ground.
@@ -56,7 +60,8 @@ class SimulationResult:
     links : ndarray of int, shape (n_links, 2)
         Particle pairs joined by a spring and damper (for drawing the body).
     friction_force : ndarray, shape (nt, n, dim)
-        Tangential contact force on each particle (N; summed over grounds; 0 without friction).
+        Tangential contact force on each particle (N; summed over its contacts, as
+        ``contact_force``; 0 without friction).
     friction_work : ndarray, shape (nt,)
         Energy dissipated by sliding friction so far (J, >= 0, non-decreasing).
     status : str

@@ -40,6 +40,7 @@ needs a closed, outward surface (:mod:`flexbody.surface`): a gap's sign needs an
 from __future__ import annotations
 
 import math
+import os
 import re
 import tomllib
 import warnings
@@ -66,7 +67,7 @@ from .choices import (  # noqa: F401  (re-exported: the choices are part of the 
     SHAPES,
     SPATIAL_SHAPES,
 )
-from .errors import InputError
+from .errors import InputError, shown
 from .surface import closure_problem, degenerate, empty, signed_measure
 from .topology import BodyTopology, Topology, gauge_particles
 
@@ -412,13 +413,28 @@ def resolve_scene_path(name_or_path: str | Path) -> Path:
     )
 
 
+def _plain(table: Any) -> Any:
+    """A scene table built in Python with NumPy values as TOML would give it: arrays as
+    lists, NumPy scalars as Python numbers and booleans, tuples as lists (mappings copied)."""
+    if isinstance(table, Mapping):
+        return {key: _plain(value) for key, value in table.items()}
+    if isinstance(table, np.ndarray):
+        return table.tolist()
+    if isinstance(table, np.generic):
+        return table.item()
+    if isinstance(table, (list, tuple)):
+        return [_plain(value) for value in table]
+    return table
+
+
 def load_scene(source: str | Path | Mapping[str, Any]) -> Scene:
     """Load and validate a scene.
 
     Parameters
     ----------
     source : path, bundled scene name, or mapping
-        A TOML file, the name of a bundled scene (``"thesis_ball"``), or the parsed table.
+        A TOML file, the name of a bundled scene (``"thesis_ball"``), or the parsed table
+        (NumPy arrays and scalars in it are read as the lists and numbers TOML would give).
 
     Raises
     ------
@@ -427,9 +443,12 @@ def load_scene(source: str | Path | Mapping[str, Any]) -> Scene:
     """
     if isinstance(source, Mapping):
         try:
-            return _build(dict(source), "<mapping>", default_name="scene")
+            return _build(_plain(source), "<mapping>", default_name="scene")
         except RecursionError:
             raise SceneError("<mapping>", ["nested too deeply (arrays or tables inside each other)"]) from None
+    if not isinstance(source, (str, os.PathLike)):
+        raise SceneError(repr(source)[:60], [f"`source` = {shown(source)}: must be a scene file's path, a bundled "
+                                             "scene's name or a mapping of its tables"])
     path = resolve_scene_path(source)
     try:
         data = tomllib.loads(path.read_text(encoding="utf-8"))
