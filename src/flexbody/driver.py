@@ -40,6 +40,7 @@ from .scene import (
     IMPACT_MODES,
     METHODS,
     Scene,
+    SceneError,
     SimulationSettings,
     load_scene,
 )
@@ -307,8 +308,6 @@ def _check_apart(scene: Scene, model: Model, q: np.ndarray, p: np.ndarray) -> No
         the other: the particles of each inside the other's surface and how deep, or the
         edges that cross.
     """
-    from .scene import SceneError  # here, as in _settings: the validation's only users
-
     if not model.n_slots:
         return
     size = max(1.0, float(np.abs(scene.initial_positions()).max()))
@@ -1547,9 +1546,11 @@ def simulate(
         scene = load_scene(scene)
     _check_run_options(max_events, max_wall_time, progress)
     if model is not None:  # the model decides what it is; an option asking for another is a mistake
-        for name, value in (("backend", backend), ("formulation", formulation)):
-            own = model.formulation if name == "formulation" else model.backend
-            if value is not None and (resolved_formulation(scene, value) if name == "formulation" else value) != own:
+        # (a scene of rigid bodies alone runs on its frames T whichever formulation is asked)
+        asked = {"backend": backend, "formulation": None if formulation is None else resolved_formulation(scene, formulation)}
+        for name, value in asked.items():
+            own = getattr(model, name)
+            if value is not None and value != own:
                 raise InputError(f"`{name}` = {shown(value)}: the model given is {name} {own!r}; load one with "
                                  f"load_model(scene, {name}={value!r}), or leave {name} out")
         backend, formulation = model.backend, model.formulation

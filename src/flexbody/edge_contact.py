@@ -754,12 +754,18 @@ class EdgeSlots:
         at = [points[:, j] if samples is None else (samples, points[:, j]) for j in range(4)]
         return [x[j].T for j in at] + [np.asarray(self.decode(codes)[1], float)[None, :]]
 
+    def _moving_ends(self, x: FloatArray, v: FloatArray, rows: IntArray, codes: IntArray
+                     ) -> tuple[IntArray, list[FloatArray], FloatArray, list[FloatArray]]:
+        """The velocity kernels' inputs for ``rows`` against ``codes``: the points (k, 4), the
+        four ends (3, k) each, the sides (1, k) and the ends' velocities (3, k) each."""
+        points = self.points(rows, codes)
+        *ends, sides = self._ends(x, points, codes)
+        return points, ends, sides, [v[points[:, j]].T for j in range(4)]
+
     def terms(self, x: FloatArray, v: FloatArray, rows: IntArray, codes: IntArray) -> EdgeTerms:
         """``rows`` (k,) against the edges and sides of their ``codes`` (k,, :meth:`encode`)."""
         kernels = self.kernels
-        points = self.points(rows, codes)
-        *ends, sides = self._ends(x, points, codes)
-        rates = [v[points[:, j]].T for j in range(4)]
+        points, ends, sides, rates = self._moving_ends(x, v, rows, codes)
         gap, parameters, normal, _ = kernels.edge_3d(*ends, sides)
         rate, _, bias = kernels.edge_3d_velocity(*ends, sides, *rates)
         s, t = parameters
@@ -772,9 +778,8 @@ class EdgeSlots:
         (k, 2) of the slip rates' accelerations along t1 = (b - a) / |b - a| and t2 = n x t1
         of the row's own edge a -> b, and those tangents (k, 2, 3) (the ``edge_3d_slip``
         kernel; only friction asks for them)."""
-        points = self.points(rows, codes)
-        *ends, sides = self._ends(x, points, codes)
-        _, bias, tangents = self.kernels.edge_3d_slip(*ends, sides, *(v[points[:, j]].T for j in range(4)))
+        _, ends, sides, rates = self._moving_ends(x, v, rows, codes)
+        _, bias, tangents = self.kernels.edge_3d_slip(*ends, sides, *rates)
         return bias.T, tangents.T.reshape(-1, 2, 3)
 
 
