@@ -142,3 +142,18 @@ def test_a_formulation_asked_for_and_not_run_is_noted(tmp_path, capsys):
     assert json.loads((tmp_path / "a" / "summary.json").read_text())["formulation"] == "floating"
     assert main(["run", "rigid_bar", "--formulation", "floating", "--out", str(tmp_path / "b"), "--no-figures"]) == 0
     assert "note:" not in capsys.readouterr().err
+
+
+def test_the_progress_line_goes_to_standard_error_as_it_is_when_the_run_starts(monkeypatch):
+    """The bar's stream was bound when flexbody.progress was first imported: imported inside
+    a test that captured standard error, every later run wrote to that capture, closed by
+    then ("I/O operation on closed file": test_cli_run failed after test_scene_multibody)."""
+    import io
+
+    from flexbody.progress import ProgressBar
+
+    now = io.StringIO()
+    monkeypatch.setattr(sys, "stderr", now)
+    bar = ProgressBar()
+    bar(1.0, 1.0, 3)
+    assert "100.0%" in now.getvalue() and "events 3" in now.getvalue()

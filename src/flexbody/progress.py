@@ -11,9 +11,10 @@ class ProgressBar:
     """``bar(t, t_end, n_events)``: redraws at most every 0.2 s on a terminal; elsewhere
     (a log, CI) prints a line at every tenth of the run."""
 
-    def __init__(self, stream: TextIO = sys.stderr, width: int = 30) -> None:
-        self.stream, self.width = stream, width
-        self.tty = stream.isatty()
+    def __init__(self, stream: TextIO | None = None, width: int = 30) -> None:
+        # standard error as it is now, not as it was at import (a test's capture, since closed)
+        self.stream, self.width = sys.stderr if stream is None else stream, width
+        self.tty = self.stream.isatty()
         self.start = time.perf_counter()
         self.last_draw = 0.0
         self.last_tenth = -1
